@@ -1,0 +1,1 @@
+"""bathy: the open survey pipeline for airborne bathymetric lidar."""

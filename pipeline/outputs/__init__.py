@@ -1,0 +1,1 @@
+"""Writers of the files people use: figures, JSON budgets, point clouds, grids."""

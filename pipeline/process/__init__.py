@@ -1,0 +1,1 @@
+"""Inverse model: measured data only. Never imports `terrain` or reads truth files."""

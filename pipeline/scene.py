@@ -1,0 +1,224 @@
+"""Scene files: TOML → validated, frozen settings, and the plan of stages a scene needs.
+
+A scene file is the pipeline's serialisable spec: ``bathy run SCENE`` and
+``pipeline.run.run_scene(load_scene(SCENE))`` produce the same outputs. Every key carries its
+unit in its name (``altitude_m``, ``pulse_energy_j``, ``off_nadir_deg``); angles are in degrees in
+the file and radians inside the code.
+
+Examples
+--------
+>>> scene = load_scene(DEFAULT_SCENE_PATH)
+>>> scene.system.wavelength_nm
+532.0
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pipeline.config import from_mapping, setting
+from pipeline.errors import SceneError
+
+__all__ = [
+    "SceneInfo",
+    "SystemSettings",
+    "AtmosphereSettings",
+    "WaterSettings",
+    "SeabedSettings",
+    "BackgroundSettings",
+    "ProfilerSettings",
+    "Scene",
+    "load_scene",
+    "parse_scene",
+    "plan_stages",
+    "DEFAULT_SCENE_PATH",
+]
+
+#: The built-in scene run by ``bathy run`` with no argument.
+DEFAULT_SCENE_PATH = Path(__file__).parent / "scenes" / "default.toml"
+
+
+@dataclass(frozen=True, kw_only=True)
+class SceneInfo:
+    """Name, seed and free-text description of a scene."""
+
+    name: str = setting(doc="short name used in output files")
+    seed: int = setting(0, ge=0, doc="seed of every random draw (with the chunk index)")
+    description: str = setting("", doc="free text")
+
+
+@dataclass(frozen=True, kw_only=True)
+class SystemSettings:
+    """The lidar instrument: transmitter, receiver and detector."""
+
+    wavelength_nm: float = setting(532.0, gt=200.0, lt=2000.0, doc="laser wavelength")
+    pulse_energy_j: float = setting(gt=0.0, le=1.0, doc="energy per transmitted pulse")
+    transmitter_efficiency: float = setting(1.0, gt=0.0, le=1.0, doc="transmit optics")
+    receiver_efficiency: float = setting(
+        gt=0.0, le=1.0, doc="receive optics incl. filter and detector quantum efficiency"
+    )
+    telescope_diameter_m: float = setting(gt=0.0, le=5.0, doc="receiver aperture diameter")
+    overlap_factor: float = setting(1.0, ge=0.0, le=1.0, doc="geometric overlap G(R)")
+    pulse_fwhm_s: float = setting(gt=0.0, le=1e-6, doc="transmitted pulse FWHM")
+    prf_hz: float = setting(gt=0.0, le=1e7, doc="pulse repetition frequency")
+    beam_divergence_mrad: float = setting(gt=0.0, le=100.0, doc="full-angle beam divergence")
+    receiver_fov_mrad: float = setting(gt=0.0, le=200.0, doc="full-angle receiver field of view")
+    filter_bandwidth_nm: float = setting(gt=0.0, le=100.0, doc="receiver optical filter width")
+    dark_count_rate_hz: float = setting(0.0, ge=0.0, doc="detector dark counts")
+
+    def __post_init__(self) -> None:
+        if self.receiver_fov_mrad < self.beam_divergence_mrad:
+            raise SceneError(
+                "`system.receiver_fov_mrad` must be >= `system.beam_divergence_mrad` "
+                f"({self.beam_divergence_mrad}) so the receiver sees the whole footprint; "
+                f"got {self.receiver_fov_mrad}."
+            )
+
+
+@dataclass(frozen=True, kw_only=True)
+class AtmosphereSettings:
+    """Air between the aircraft and the water."""
+
+    extinction_per_m: float = setting(
+        1.5e-4, ge=0.0, le=1.0, doc="air extinction at the laser wavelength"
+    )
+    refractive_index: float = setting(1.000277, ge=1.0, le=1.01, doc="phase index of air")
+
+
+@dataclass(frozen=True, kw_only=True)
+class WaterSettings:
+    """Water optics and surface state."""
+
+    phase_index: float = setting(1.3415, ge=1.0, le=2.0, doc="bends rays (Snell)")
+    group_index: float = setting(1.3638, ge=1.0, le=2.0, doc="sets the pulse's travel time")
+    extinction_per_m: float = setting(ge=0.0, le=100.0, doc="beam attenuation c = a + b")
+    backscatter_180_per_m_sr: float = setting(
+        0.0, ge=0.0, le=10.0, doc="volume scattering function at 180 degrees"
+    )
+    wind_speed_m_s: float = setting(
+        0.0, ge=0.0, le=40.0, doc="wind at 12.5 m; sets Cox-Munk slopes and whitecaps"
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class SeabedSettings:
+    """A flat seabed (the profiler's target); meshes come with the survey issue."""
+
+    depth_m: float = setting(ge=0.0, le=200.0, doc="water depth below the surface")
+    reflectance: float = setting(ge=0.0, le=1.0, doc="Lambertian bottom reflectance")
+
+
+@dataclass(frozen=True, kw_only=True)
+class BackgroundSettings:
+    """Solar background seen by the receiver."""
+
+    solar_irradiance_w_m2_nm: float = setting(
+        0.0, ge=0.0, le=2.5, doc="downwelling spectral irradiance at the sea surface"
+    )
+    scene_reflectance: float = setting(
+        0.05, ge=0.0, le=1.0, doc="water-leaving + reflected sunlight, as a Lambertian albedo"
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class ProfilerSettings:
+    """The nadir profiling bathymeter of the reference document (Figures 14-17)."""
+
+    altitude_m: float = setting(gt=0.0, le=20000.0, doc="height above the water surface")
+    depth_sweep_m: tuple[float, float] = setting(
+        (0.1, 60.0), gt=0.0, le=500.0, doc="depth range of the photon-budget figures"
+    )
+    shot_counts: tuple[int, ...] = setting(
+        (1, 10, 100, 1000, 10000), ge=1, le=10_000_000, doc="shots accumulated per histogram"
+    )
+    bin_width_s: float = setting(5e-10, gt=0.0, le=1e-6, doc="histogram bin width")
+    gate_before_surface_s: float = setting(5e-8, ge=0.0, le=1e-5, doc="range gate opens")
+    gate_after_floor_s: float = setting(5e-8, ge=0.0, le=1e-5, doc="range gate closes")
+
+    def __post_init__(self) -> None:
+        lo, hi = self.depth_sweep_m
+        if not lo < hi:
+            raise SceneError(
+                f"`profiler.depth_sweep_m` must be [min, max] with min < max; got [{lo}, {hi}]."
+            )
+
+
+@dataclass(frozen=True, kw_only=True)
+class Scene:
+    """A whole validated scene; sections a scene does not have are ``None``."""
+
+    scene: SceneInfo = setting(doc="name and seed")
+    system: SystemSettings = setting(doc="the lidar")
+    atmosphere: AtmosphereSettings = setting(AtmosphereSettings(), doc="air")
+    water: WaterSettings = setting(doc="water")
+    seabed: SeabedSettings = setting(doc="the target")
+    background: BackgroundSettings = setting(BackgroundSettings(), doc="sunlight")
+    profiler: ProfilerSettings | None = setting(None, doc="nadir profiling bathymeter")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the scene as plain data (what was validated, defaults filled in)."""
+        return dataclasses.asdict(self)
+
+
+def parse_scene(data: dict[str, Any], source: str = "scene") -> Scene:
+    """Validate parsed TOML ``data`` into a :class:`Scene`.
+
+    Raises
+    ------
+    SceneError
+        Naming the first offending key, its value and what is allowed.
+    """
+    scene = from_mapping(Scene, data, "")
+    if scene.profiler is None:
+        raise SceneError(
+            f"{source}: no stage to run: add a `[profiler]` table (the nadir profiling "
+            "bathymeter); survey scenes come with the survey stage."
+        )
+    return scene
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and validate a TOML scene file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The scene file.
+
+    Raises
+    ------
+    SceneError
+        If the file is missing, is not valid TOML, or any key is invalid.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SceneError(f"Scene file not found: {path}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(f"Cannot read scene file {path}: {exc}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{path} is not valid TOML: {exc}") from None
+    return parse_scene(data, str(path))
+
+
+def plan_stages(scene: Scene) -> list[tuple[str, bool, str]]:
+    """The stages this scene needs, and why the others are left out.
+
+    Returns
+    -------
+    list of (stage, runs, reason)
+    """
+    plan = []
+    prof = scene.profiler is not None
+    plan.append(("photon_budget", prof, "nadir profiler: lidar equation along one path"))
+    plan.append(("photon_histograms", prof, "accumulate shots with background and dark counts"))
+    for stage in ("survey", "trace", "waveform", "process", "evaluate"):
+        plan.append((stage, False, "no [flight]/[scanner] sections: not a survey scene"))
+    return plan
