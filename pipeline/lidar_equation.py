@@ -215,7 +215,7 @@ def solar_background_rate_hz(scene, altitude_m: float) -> float:
     sysm = scene.system
     bg = scene.background
     wavelength_m = sysm.wavelength_nm * 1e-9
-    half_fov_rad = sysm.receiver_fov_mrad * 1e-3 / 2.0
+    half_fov_rad = scene.scanner.receiver_fov_mrad * 1e-3 / 2.0
     solid_angle_sr = 2.0 * math.pi * (1.0 - math.cos(half_fov_rad))
     aperture_m2 = math.pi * (sysm.telescope_diameter_m / 2.0) ** 2
     power_w = (

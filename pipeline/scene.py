@@ -22,6 +22,7 @@ from typing import Any
 
 from pipeline.config import from_mapping, setting
 from pipeline.errors import SceneError
+from pipeline.simulate.scanner import ScannerSettings
 
 __all__ = [
     "SceneInfo",
@@ -53,7 +54,7 @@ class SceneInfo:
 
 @dataclass(frozen=True, kw_only=True)
 class SystemSettings:
-    """The lidar instrument: transmitter, receiver and detector."""
+    """The lidar instrument: transmitter, receiver and detector (the scan is in `scanner`)."""
 
     wavelength_nm: float = setting(532.0, gt=200.0, lt=2000.0, doc="laser wavelength")
     pulse_energy_j: float = setting(gt=0.0, le=1.0, doc="energy per transmitted pulse")
@@ -64,19 +65,8 @@ class SystemSettings:
     telescope_diameter_m: float = setting(gt=0.0, le=5.0, doc="receiver aperture diameter")
     overlap_factor: float = setting(1.0, ge=0.0, le=1.0, doc="geometric overlap G(R)")
     pulse_fwhm_s: float = setting(gt=0.0, le=1e-6, doc="transmitted pulse FWHM")
-    prf_hz: float = setting(gt=0.0, le=1e7, doc="pulse repetition frequency")
-    beam_divergence_mrad: float = setting(gt=0.0, le=100.0, doc="full-angle beam divergence")
-    receiver_fov_mrad: float = setting(gt=0.0, le=200.0, doc="full-angle receiver field of view")
     filter_bandwidth_nm: float = setting(gt=0.0, le=100.0, doc="receiver optical filter width")
     dark_count_rate_hz: float = setting(0.0, ge=0.0, doc="detector dark counts")
-
-    def __post_init__(self) -> None:
-        if self.receiver_fov_mrad < self.beam_divergence_mrad:
-            raise SceneError(
-                "`system.receiver_fov_mrad` must be >= `system.beam_divergence_mrad` "
-                f"({self.beam_divergence_mrad}) so the receiver sees the whole footprint; "
-                f"got {self.receiver_fov_mrad}."
-            )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -153,6 +143,7 @@ class Scene:
 
     scene: SceneInfo = setting(doc="name and seed")
     system: SystemSettings = setting(doc="the lidar")
+    scanner: ScannerSettings = setting(doc="scan pattern, pulse rate, beam and field of view")
     atmosphere: AtmosphereSettings = setting(AtmosphereSettings(), doc="air")
     water: WaterSettings = setting(doc="water")
     seabed: SeabedSettings = setting(doc="the target")

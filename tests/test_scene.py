@@ -61,8 +61,8 @@ BROKEN = {
         r"Missing key `seabed.reflectance` \(Lambertian bottom reflectance\)",
     ),
     "inconsistent keys": (
-        lambda d: d["system"].update(receiver_fov_mrad=0.5),
-        r"`system.receiver_fov_mrad` must be >= `system.beam_divergence_mrad`",
+        lambda d: d["scanner"].update(receiver_fov_mrad=0.5),
+        r"`scanner.receiver_fov_mrad` must be >= `scanner.beam_divergence_mrad`",
     ),
     "bad choice of array": (
         lambda d: d["profiler"].update(depth_sweep_m=[10.0, 1.0]),

@@ -1,0 +1,1 @@
+"""Simulation stages: survey geometry (:mod:`.survey`) and the physics built on its pulses."""
