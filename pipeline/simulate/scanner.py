@@ -33,6 +33,7 @@ from pipeline.errors import SceneError
 __all__ = ["ScannerSettings", "beam_directions_body", "footprint_diameter_m", "swath_width_m"]
 
 SCANNER_KINDS = ("palmer", "oscillating", "profiler")
+POLARISATIONS = ("unpolarised", "circular", "linear_across_track", "linear_along_track")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -56,7 +57,11 @@ class ScannerSettings:
     receiver_fov_mrad: float = setting(
         10.0, gt=0.0, doc="receiver field of view, full angle (mrad)"
     )
-    polarisation: str = setting("", doc="optional polarisation label, carried along unused")
+    polarisation: str = setting(
+        "unpolarised",
+        choices=POLARISATIONS,
+        doc="transmitted polarisation; sets the Fresnel s/p split at the water surface",
+    )
 
     def __post_init__(self) -> None:
         if self.receiver_fov_mrad < self.beam_divergence_mrad:
