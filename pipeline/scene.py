@@ -22,7 +22,11 @@ from typing import Any
 
 from pipeline.config import from_mapping, setting
 from pipeline.errors import SceneError
+from pipeline.simulate.noise import NavigationNoiseSettings
 from pipeline.simulate.scanner import ScannerSettings
+from pipeline.simulate.trace_settings import TraceSettings
+from pipeline.simulate.trajectory import AttitudeSettings, FlightSettings
+from pipeline.simulate.world import FrameSettings, SeabedSettings, WaterSurfaceSettings
 
 __all__ = [
     "SceneInfo",
@@ -32,6 +36,7 @@ __all__ = [
     "SeabedSettings",
     "BackgroundSettings",
     "ProfilerSettings",
+    "RunSettings",
     "Scene",
     "load_scene",
     "parse_scene",
@@ -95,14 +100,6 @@ class WaterSettings:
 
 
 @dataclass(frozen=True, kw_only=True)
-class SeabedSettings:
-    """A flat seabed (the profiler's target); meshes come with the survey issue."""
-
-    depth_m: float = setting(ge=0.0, le=200.0, doc="water depth below the surface")
-    reflectance: float = setting(ge=0.0, le=1.0, doc="Lambertian bottom reflectance")
-
-
-@dataclass(frozen=True, kw_only=True)
 class BackgroundSettings:
     """Solar background seen by the receiver."""
 
@@ -138,6 +135,13 @@ class ProfilerSettings:
 
 
 @dataclass(frozen=True, kw_only=True)
+class RunSettings:
+    """How the run is executed (never what it computes)."""
+
+    chunk_pulses: int = setting(100_000, ge=1, le=10_000_000, doc="pulses per streamed chunk")
+
+
+@dataclass(frozen=True, kw_only=True)
 class Scene:
     """A whole validated scene; sections a scene does not have are ``None``."""
 
@@ -146,9 +150,18 @@ class Scene:
     scanner: ScannerSettings = setting(doc="scan pattern, pulse rate, beam and field of view")
     atmosphere: AtmosphereSettings = setting(AtmosphereSettings(), doc="air")
     water: WaterSettings = setting(doc="water")
-    seabed: SeabedSettings = setting(doc="the target")
+    seabed: SeabedSettings = setting(doc="the seabed (truth)")
+    water_surface: WaterSurfaceSettings = setting(WaterSurfaceSettings(), doc="flat or waves")
+    frame: FrameSettings = setting(FrameSettings(), doc="local origin and CRS")
     background: BackgroundSettings = setting(BackgroundSettings(), doc="sunlight")
     profiler: ProfilerSettings | None = setting(None, doc="nadir profiling bathymeter")
+    flight: FlightSettings | None = setting(None, doc="survey flight lines")
+    attitude: AttitudeSettings = setting(AttitudeSettings(), doc="aircraft motion")
+    navigation: NavigationNoiseSettings = setting(
+        NavigationNoiseSettings(), doc="GNSS/INS errors of the measured trajectory"
+    )
+    trace: TraceSettings = setting(TraceSettings(), doc="sub-rays per footprint")
+    run: RunSettings = setting(RunSettings(), doc="chunking")
 
     def to_dict(self) -> dict[str, Any]:
         """Return the scene as plain data (what was validated, defaults filled in)."""
@@ -164,10 +177,10 @@ def parse_scene(data: dict[str, Any], source: str = "scene") -> Scene:
         Naming the first offending key, its value and what is allowed.
     """
     scene = from_mapping(Scene, data, "")
-    if scene.profiler is None:
+    if scene.profiler is None and scene.flight is None:
         raise SceneError(
-            f"{source}: no stage to run: add a `[profiler]` table (the nadir profiling "
-            "bathymeter); survey scenes come with the survey stage."
+            f"{source}: no stage to run: add a `[profiler]` table (nadir profiling bathymeter) "
+            "or a `[flight]` table (a survey)."
         )
     return scene
 
@@ -206,10 +219,14 @@ def plan_stages(scene: Scene) -> list[tuple[str, bool, str]]:
     -------
     list of (stage, runs, reason)
     """
-    plan = []
     prof = scene.profiler is not None
-    plan.append(("photon_budget", prof, "nadir profiler: lidar equation along one path"))
-    plan.append(("photon_histograms", prof, "accumulate shots with background and dark counts"))
-    for stage in ("survey", "trace", "waveform", "process", "evaluate"):
-        plan.append((stage, False, "no [flight]/[scanner] sections: not a survey scene"))
-    return plan
+    survey = scene.flight is not None
+    why_prof = "nadir profiler" if prof else "no [profiler] table"
+    why_survey = "survey scene ([flight])" if survey else "no [flight] table: not a survey"
+    return [
+        ("photon_budget", prof, f"{why_prof}: lidar equation along one path"),
+        ("photon_histograms", prof, f"{why_prof}: accumulate shots with background"),
+        ("terrain", survey, f"{why_survey}: seabed and water-surface truth and meshes"),
+        ("survey", survey, f"{why_survey}: flight lines, attitude, scanner, measured nav"),
+        ("trace", survey, f"{why_survey}: refracted ray paths to the seabed"),
+    ]

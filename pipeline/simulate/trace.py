@@ -23,8 +23,8 @@ import numpy as np
 import open3d as o3d
 
 from pipeline import optics
-from pipeline.config import setting
 from pipeline.simulate import paths as P
+from pipeline.simulate.trace_settings import TraceSettings
 
 __all__ = [
     "TraceSettings",
@@ -38,17 +38,6 @@ __all__ = [
 
 _INVALID = np.uint32(0xFFFFFFFF)
 _GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
-
-
-@dataclass(frozen=True, kw_only=True)
-class TraceSettings:
-    """How finely each beam footprint is sampled."""
-
-    subrays: int = setting(1, ge=1, le=1000, doc="sub-rays per pulse across the divergence cone")
-    cone_extent: float = setting(
-        1.5, gt=0.0, le=3.0, doc="sub-rays reach this many 1/e² half-angles off the beam axis"
-    )
-    nthreads: int = setting(0, ge=0, le=256, doc="open3d ray-casting threads (0 = all cores)")
 
 
 class MeshCaster:

@@ -1,0 +1,59 @@
+import json
+import tomllib
+
+import numpy as np
+import pytest
+
+from pipeline.cli import main
+from pipeline.run import run_scene
+from pipeline.scene import load_scene, parse_scene
+
+from .conftest import REFERENCE_SCENE, ROOT
+
+
+def _png_ok(path):
+    return path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 10_000
+
+
+def test_cli_and_python_api_give_the_same_outputs(tmp_path):
+    assert main(["run", str(REFERENCE_SCENE), "--out", str(tmp_path / "cli")]) == 0
+    run_scene(load_scene(REFERENCE_SCENE), tmp_path / "api", log=lambda _: None)
+    for name in (
+        "fig14_transmittance.png",
+        "fig15_photons_vs_depth.png",
+        "fig16_ideal_measurements.png",
+        "fig17_photon_histograms.png",
+    ):
+        assert _png_ok(tmp_path / "cli" / name)
+    a = json.loads((tmp_path / "cli" / "photon_budget.json").read_text())
+    b = json.loads((tmp_path / "api" / "photon_budget.json").read_text())
+    assert a == b  # same seed, same histograms, bit for bit
+    assert a["floor"]["photons_per_shot"] > 0
+    assert not list((tmp_path / "cli").glob(".*tmp*"))  # no temporary left behind
+
+
+def test_default_scene_runs(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["run"]) == 0
+    manifest = json.loads((tmp_path / "out" / "default" / "manifest.json").read_text())
+    assert manifest["scene"]["scene"]["name"] == "default"
+
+
+@pytest.fixture
+def small_survey():
+    data = tomllib.loads((ROOT / "data_synthetic" / "scenes" / "palmer_survey.toml").read_text())
+    data["flight"]["area_m"] = [0.0, 100.0, 0.0, 100.0]
+    data["flight"]["run_in_m"] = 0.0
+    data["scanner"]["prf_hz"] = 5000.0
+    data["run"] = {"chunk_pulses": 3000}
+    return parse_scene(data)
+
+
+def test_survey_scene_traces_and_summarises(tmp_path, small_survey):
+    manifest = run_scene(small_survey, tmp_path, log=lambda _: None)
+    summary = json.loads((tmp_path / "trace_summary.json").read_text())
+    assert summary["pulses"] == summary["subray_flags"]["ok"] + summary["subray_flags"]["land"]
+    assert summary["subray_flags"]["miss"] == 0
+    assert np.isclose(summary["swath_width_m"], 2 * 400 * np.tan(np.radians(20)))
+    stages = {s["stage"]: s["runs"] for s in manifest["plan"]}
+    assert stages["trace"] and not stages["photon_budget"]
