@@ -1,7 +1,7 @@
 import math
 import tomllib
-from pathlib import Path
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
