@@ -1,0 +1,198 @@
+"""``points.laz``: LAS 1.4, point format 6, CRS as WKT, per-point extras, written atomically.
+
+Layout
+------
+* Coordinates are world coordinates (local + origin) stored as int32 with scale
+  ``scale_m`` (default 1 mm) and offsets = the origin rounded to whole metres, so millimetres
+  survive next to UTM-sized eastings/northings (int32 covers +-2147 km around the offset at
+  1 mm). The exact origin is kept in a ``bathy`` VLR (JSON) so the reader returns the same local
+  frame.
+* CRS: an OGC WKT VLR (``header.add_crs``; the WKT bit of the global encoding is set).
+* Standard fields: classification (ASPRS codes of :mod:`pipeline.process.classify`), return
+  number / number of returns, synthetic flag for derived (synthetic) points, point source id 0,
+  GPS time 0 (no timing in points), intensity 0.
+* Extra bytes (LAS 1.4 extra-bytes VLR): ``depth_m`` (f8), ``uncertainty_v_m``,
+  ``uncertainty_h_m``, ``confidence`` (f4), ``pulse_id`` (i8), ``kind`` (u1),
+  ``process_flags``, ``detector_flags`` (u2), and ``amplitude`` (f4) when present.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import laspy
+import numpy as np
+import pyproj
+
+from pipeline.outputs.atomic import atomic_path
+from pipeline.process.returns import PointFlag, Points
+
+__all__ = ["LazContents", "write_points_laz", "read_points_laz"]
+
+_VLR_USER = "bathy"
+_VLR_RECORD = 1
+_EXTRA = (
+    ("depth_m", "f8", "depth below water surface (m)"),
+    ("uncertainty_v_m", "f4", "vertical 1-sigma uncertainty (m)"),
+    ("uncertainty_h_m", "f4", "horiz. 1-sigma uncertainty (m)"),
+    ("confidence", "f4", "detection confidence 0-1"),
+    ("pulse_id", "i8", "global pulse number"),
+    ("kind", "u1", "1 surface 2 bottom 3 derived"),
+    ("process_flags", "u2", "processing flag bits"),
+    ("detector_flags", "u2", "detector flag bits"),
+)
+_INT32 = 2**31 - 1
+
+
+@dataclass(frozen=True)
+class LazContents:
+    """What :func:`read_points_laz` returns."""
+
+    points: Points
+    crs: pyproj.CRS | None
+    origin_m: np.ndarray
+    scales: np.ndarray
+    offsets: np.ndarray
+
+
+def write_points_laz(
+    path: str | Path,
+    points: Points,
+    *,
+    crs: Any,
+    origin_m: Sequence[float] = (0.0, 0.0, 0.0),
+    scale_m: float = 0.001,
+    compress: bool | None = None,
+) -> Path:
+    """Write ``points`` as LAS 1.4 point format 6 (LAZ if ``.laz``), atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file; ``.laz`` compresses (unless ``compress`` says otherwise).
+    points : Points
+        Points in the local frame.
+    crs : any
+        Horizontal CRS of the world coordinates (EPSG code, WKT, ``pyproj.CRS``).
+    origin_m : (easting, northing, height)
+        World coordinates of the local origin.
+    scale_m : float
+        Coordinate quantum (default 1 mm).
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    ValueError
+        If a coordinate does not fit int32 at this scale around the offset.
+    """
+    path = Path(path)
+    origin = np.asarray(origin_m, dtype=np.float64)
+    if origin.shape != (3,) or not np.all(np.isfinite(origin)):
+        raise ValueError(f"`origin_m` must be 3 finite numbers; got {origin_m!r}")
+    if not (np.isfinite(scale_m) and scale_m > 0):
+        raise ValueError(f"`scale_m` must be finite and > 0; got {scale_m!r}")
+    crs = pyproj.CRS.from_user_input(crs)
+    offsets = np.round(origin)
+    scales = np.full(3, float(scale_m))
+
+    header = laspy.LasHeader(version="1.4", point_format=6)
+    header.offsets = offsets
+    header.scales = scales
+    header.system_identifier = "bathy pipeline"
+    header.generating_software = "bathy pipeline (laspy)"
+    extras = list(_EXTRA)
+    if points.amplitude is not None:
+        extras.append(("amplitude", "f4", "amplitude (detector units)"))
+    header.add_extra_dims(
+        [laspy.ExtraBytesParams(name=n, type=t, description=desc) for n, t, desc in extras]
+    )
+    header.add_crs(crs)
+    meta = {"origin_m": origin.tolist(), "frame": "local = world - origin_m; z up; metres"}
+    header.vlrs.append(
+        laspy.VLR(
+            user_id=_VLR_USER,
+            record_id=_VLR_RECORD,
+            description="local frame origin",
+            record_data=json.dumps(meta).encode("utf-8"),
+        )
+    )
+
+    las = laspy.LasData(header)
+    world = points.xyz_m + origin
+    ints = np.round((world - offsets) / scales)
+    if ints.size and np.max(np.abs(ints)) > _INT32:
+        raise ValueError(
+            f"coordinates span more than int32 at scale {scale_m} m around offset "
+            f"{offsets.tolist()}; use a coarser `scale_m`"
+        )
+    las.X, las.Y, las.Z = (ints[:, i].astype(np.int32) for i in range(3))
+    las.classification = points.classification
+    las.return_number = np.clip(points.return_number, 1, 15)
+    las.number_of_returns = np.clip(points.number_of_returns, 1, 15)
+    las.synthetic = (points.flags & np.uint16(PointFlag.SYNTHETIC)) != 0
+    las.depth_m = points.depth_m
+    las.uncertainty_v_m = points.uncertainty_v_m.astype(np.float32)
+    las.uncertainty_h_m = points.uncertainty_h_m.astype(np.float32)
+    las.confidence = points.confidence.astype(np.float32)
+    las.pulse_id = points.pulse_id
+    las.kind = points.kind
+    las.process_flags = points.flags
+    las.detector_flags = points.detector_flags
+    if points.amplitude is not None:
+        las.amplitude = points.amplitude.astype(np.float32)
+    do_compress = path.suffix.lower() == ".laz" if compress is None else compress
+    with atomic_path(path) as tmp:
+        las.write(str(tmp), do_compress=do_compress)
+    return path
+
+
+def read_points_laz(path: str | Path) -> LazContents:
+    """Read a file written by :func:`write_points_laz` back into local-frame :class:`Points`.
+
+    Files without the ``bathy`` origin VLR use the header offsets as the origin; missing extra
+    dimensions get neutral values (depth = -z, confidence 1, zeros elsewhere).
+    """
+    las = laspy.read(str(path))
+    hdr = las.header
+    origin = np.asarray(hdr.offsets, dtype=np.float64)
+    for vlr in hdr.vlrs:
+        if vlr.user_id == _VLR_USER and vlr.record_id == _VLR_RECORD:
+            origin = np.asarray(json.loads(bytes(vlr.record_data).decode())["origin_m"], float)
+    world = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
+    xyz = world - origin
+    n = len(xyz)
+    names = set(las.point_format.extra_dimension_names)
+
+    def extra(name, default, dtype):
+        return np.asarray(las[name], dtype=dtype) if name in names else np.full(n, default, dtype)
+
+    points = Points(
+        pulse_id=extra("pulse_id", 0, np.int64),
+        xyz_m=xyz,
+        depth_m=extra("depth_m", 0.0, np.float64) if "depth_m" in names else -xyz[:, 2],
+        classification=np.asarray(las.classification, dtype=np.uint8),
+        kind=extra("kind", 0, np.uint8),
+        flags=extra("process_flags", 0, np.uint16),
+        detector_flags=extra("detector_flags", 0, np.uint16),
+        return_number=np.asarray(las.return_number, dtype=np.uint8),
+        number_of_returns=np.asarray(las.number_of_returns, dtype=np.uint8),
+        confidence=extra("confidence", 1.0, np.float64),
+        uncertainty_v_m=extra("uncertainty_v_m", 0.0, np.float64),
+        uncertainty_h_m=extra("uncertainty_h_m", 0.0, np.float64),
+        amplitude=extra("amplitude", 0.0, np.float64) if "amplitude" in names else None,
+    )
+    return LazContents(
+        points=points,
+        crs=hdr.parse_crs(),
+        origin_m=origin,
+        scales=np.asarray(hdr.scales, dtype=np.float64),
+        offsets=np.asarray(hdr.offsets, dtype=np.float64),
+    )

@@ -1,0 +1,180 @@
+"""ASPRS LAS 1.4 point classes (topo-bathy domain profile) and the rules that assign them.
+
+Class codes
+-----------
+LAS 1.4 R15 standard classes used here: 1 unclassified, 2 ground, 7 low noise, 18 high noise.
+The ASPRS Topo-Bathy Lidar Domain Profile adds 40 bathymetric point (seabed), 41 water surface,
+42 derived water surface (synthetic, where refraction was computed), 43 submerged object,
+44 IHO S-57 object and 45 no-bottom-found-at. 43-45 are defined for completeness; the rules below
+do not produce them.
+
+Rules (:func:`classify_points`), first match wins
+-------------------------------------------------
+Bottom returns (``ReturnKind.BOTTOM``):
+
+1. ``GRAZING`` (no valid water entry) -> 1 unclassified.
+2. Any detector flag of ``unreliable_detector_flags`` (default MERGED, SATURATED, TRUNCATED:
+   the bottom time is not trustworthy) -> 1 unclassified.
+3. ``confidence < min_confidence`` -> 7 low noise.
+4. ``LAND`` (the pulse is above the water level + margin) -> 2 ground.
+5. ``ABOVE_SURFACE`` or ``depth_m < 0`` (a "bottom" above the fitted water surface over water)
+   -> 18 high noise.
+6. ``depth_m > max_depth_m`` (when set: deeper than the system can see) -> 7 low noise.
+7. Otherwise -> 40 bathymetric point.
+
+Surface returns (``ReturnKind.SURFACE``); detector flags are ignored (a saturated specular
+surface return still times the surface):
+
+1. ``GRAZING`` -> 1 unclassified.
+2. ``LAND``: the only return of its pulse -> 2 ground; the first of several -> 1 (vegetation,
+   structure or unknown).
+3. ``confidence < min_confidence`` -> 7 low noise.
+4. ``SURFACE_OUTLIER``: above its local surface (``depth_m < 0``) -> 18 high noise (spray,
+   birds), below -> 7 low noise.
+5. Otherwise -> 41 water surface.
+
+Derived water-surface points (``ReturnKind.DERIVED_SURFACE``) -> 42.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.config import setting
+from pipeline.process.returns import DetectorFlag, PointFlag, Points, ReturnKind
+
+__all__ = [
+    "NEVER_CLASSIFIED",
+    "UNCLASSIFIED",
+    "GROUND",
+    "LOW_NOISE",
+    "HIGH_NOISE",
+    "BATHYMETRIC_POINT",
+    "WATER_SURFACE",
+    "DERIVED_WATER_SURFACE",
+    "SUBMERGED_OBJECT",
+    "IHO_S57_OBJECT",
+    "NO_BOTTOM_FOUND_AT",
+    "CLASS_NAMES",
+    "ClassifySettings",
+    "classify_points",
+]
+
+NEVER_CLASSIFIED = 0
+UNCLASSIFIED = 1
+GROUND = 2
+LOW_NOISE = 7
+HIGH_NOISE = 18
+BATHYMETRIC_POINT = 40
+WATER_SURFACE = 41
+DERIVED_WATER_SURFACE = 42
+SUBMERGED_OBJECT = 43
+IHO_S57_OBJECT = 44
+NO_BOTTOM_FOUND_AT = 45
+
+CLASS_NAMES: dict[int, str] = {
+    NEVER_CLASSIFIED: "never classified",
+    UNCLASSIFIED: "unclassified",
+    GROUND: "ground",
+    LOW_NOISE: "low noise",
+    HIGH_NOISE: "high noise",
+    BATHYMETRIC_POINT: "bathymetric point",
+    WATER_SURFACE: "water surface",
+    DERIVED_WATER_SURFACE: "derived water surface",
+    SUBMERGED_OBJECT: "submerged object",
+    IHO_S57_OBJECT: "IHO S-57 object",
+    NO_BOTTOM_FOUND_AT: "no-bottom-found-at",
+}
+
+_FLAG_NAMES = tuple(f.name for f in DetectorFlag)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ClassifySettings:
+    """Thresholds of the classification rules."""
+
+    min_confidence: float = setting(0.5, ge=0.0, le=1.0, doc="below: noise")
+    max_depth_m: float | None = setting(None, gt=0.0, doc="deeper bottom points: low noise")
+    unreliable_detector_flags: tuple[str, ...] = setting(
+        ("MERGED", "SATURATED", "TRUNCATED"),
+        doc="detector flags that leave a bottom point unclassified",
+    )
+
+    def __post_init__(self) -> None:
+        for name in self.unreliable_detector_flags:
+            if name not in _FLAG_NAMES:
+                raise ValueError(
+                    f"`unreliable_detector_flags` items must be one of {', '.join(_FLAG_NAMES)}; "
+                    f"got {name!r}"
+                )
+
+    @property
+    def unreliable_mask(self) -> int:
+        """The unreliable detector flags as one bit mask."""
+        mask = 0
+        for name in self.unreliable_detector_flags:
+            mask |= int(DetectorFlag[name])
+        return mask
+
+
+def _has(flags: np.ndarray, bits: int) -> np.ndarray:
+    return (flags & np.uint16(bits)) != 0
+
+
+def classify_points(points: Points, settings: ClassifySettings | None = None) -> Points:
+    """Assign ASPRS class codes by the rules of this module's docstring.
+
+    Parameters
+    ----------
+    points : Points
+        Points from :mod:`pipeline.process.refraction` (any classification).
+    settings : ClassifySettings, optional
+        Defaults if omitted.
+
+    Returns
+    -------
+    Points
+        A copy with ``classification`` filled in.
+    """
+    st = settings or ClassifySettings()
+    f, df = points.flags, points.detector_flags
+    conf, depth = points.confidence, points.depth_m
+    low_conf = conf < st.min_confidence
+    grazing = _has(f, PointFlag.GRAZING)
+    land = _has(f, PointFlag.LAND)
+
+    bottom = np.select(
+        [
+            grazing,
+            _has(df, st.unreliable_mask),
+            low_conf,
+            land,
+            _has(f, PointFlag.ABOVE_SURFACE) | (depth < 0.0),
+            (depth > st.max_depth_m) if st.max_depth_m is not None else np.zeros_like(land),
+        ],
+        [UNCLASSIFIED, UNCLASSIFIED, LOW_NOISE, GROUND, HIGH_NOISE, LOW_NOISE],
+        default=BATHYMETRIC_POINT,
+    )
+    outlier = _has(f, PointFlag.SURFACE_OUTLIER)
+    surface = np.select(
+        [
+            grazing,
+            land & (points.number_of_returns <= 1),
+            land,
+            low_conf,
+            outlier & (depth < 0.0),
+            outlier,
+        ],
+        [UNCLASSIFIED, GROUND, UNCLASSIFIED, LOW_NOISE, HIGH_NOISE, LOW_NOISE],
+        default=WATER_SURFACE,
+    )
+    cls = np.select(
+        [points.kind == ReturnKind.BOTTOM, points.kind == ReturnKind.SURFACE],
+        [bottom, surface],
+        default=np.where(
+            points.kind == ReturnKind.DERIVED_SURFACE, DERIVED_WATER_SURFACE, UNCLASSIFIED
+        ),
+    )
+    return points.replace(classification=cls.astype(np.uint8))

@@ -1,0 +1,292 @@
+"""Seabed points: refraction at the fitted water surface and the in-water range at group speed.
+
+Geometry per pulse with a bottom return (measured origin ``o``, unit direction ``d``)
+---------------------------------------------------------------------------------
+* Entry point ``E = o + d r_e`` on the pulse's local water plane (upward normal ``N``), from
+  :func:`pipeline.process.surface_fit.fit_water_surface`.
+* Refracted direction ``t`` by the vector form of Snell's law with the water's *phase* index
+  (:func:`pipeline.optics.refract_direction`, air index from the surface fit).
+* In-water one-way path along ``t`` at the *group* speed ``c / n_g``:
+
+  - with the pulse's own (non-outlier) surface return: ``L = c (t_b - t_s) / (2 n_g)``, the
+    time between the surface and bottom returns;
+  - otherwise (surface missed or rejected, flagged ``SURFACE_INTERPOLATED``):
+    ``L = (c t_b / 2 - n_air r_e) / n_g``, the bottom time less the air path to the fitted
+    entry point.
+
+* Seabed point ``B = E + t L``; ``depth_m`` is the height of the local water plane at ``B``'s
+  horizontal position minus ``B_z`` (vertical, positive down).
+
+The *uncorrected* point (``correct_refraction=False``, flagged ``NOT_REFRACTED``) is the
+straight beam at the speed of light in air for the whole range: ``o + d c t_b / (2 n_air)``.
+Land pulses are always computed that way (no water to cross), flagged ``LAND``.
+
+Uncertainty (a-priori, first order, one sigma; independent terms added in quadrature)
+-------------------------------------------------------------------------------------
+navigation position (``position_sigma_h_m``, ``position_sigma_v_m``); pointing
+(``pointing_sigma_deg``) over the air and water paths; fitted surface height and tilt
+(from the surface fit; a tilt error ``dN`` turns the refracted ray by ``dN (1 - n_air/n_w)``);
+timing of both returns (the detector's sigmas, else ``timing_sigma_s``) and the group index
+(``group_index_sigma``) along the in-water path.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.config import setting
+from pipeline.optics import SPEED_OF_LIGHT_M_S, refract_direction
+from pipeline.process.classify import ClassifySettings, classify_points
+from pipeline.process.returns import DetectedReturns, PointFlag, Points, ReturnKind
+from pipeline.process.surface_fit import SurfaceFitSettings, WaterSurface, fit_water_surface
+
+__all__ = [
+    "RefractionSettings",
+    "ProcessedPoints",
+    "seabed_points",
+    "water_surface_points",
+    "georeference",
+]
+
+_C = SPEED_OF_LIGHT_M_S
+
+
+@dataclass(frozen=True, kw_only=True)
+class RefractionSettings:
+    """Water indices and the a-priori uncertainty model of the georeferencing."""
+
+    phase_index: float = setting(1.3415, ge=1.0, le=2.0, doc="water phase index (Snell)")
+    group_index: float = setting(1.3638, ge=1.0, le=2.0, doc="water group index (travel time)")
+    position_sigma_h_m: float = setting(0.05, ge=0.0, doc="navigation horizontal sigma")
+    position_sigma_v_m: float = setting(0.08, ge=0.0, doc="navigation vertical sigma")
+    pointing_sigma_deg: float = setting(0.005, ge=0.0, le=10.0, doc="beam pointing sigma")
+    timing_sigma_s: float = setting(1e-10, ge=0.0, doc="per-return timing sigma if not given")
+    group_index_sigma: float = setting(0.0, ge=0.0, doc="group index sigma")
+
+
+@dataclass(frozen=True)
+class ProcessedPoints:
+    """Everything :func:`georeference` makes.
+
+    Attributes
+    ----------
+    surface : WaterSurface
+        The fitted water surface per pulse.
+    points : Points
+        Classified points: surface returns, then bottom returns (refraction corrected), then
+        (if asked) derived water-surface points.
+    uncorrected : Points
+        Classified bottom returns without refraction correction, for comparison.
+    """
+
+    surface: WaterSurface
+    points: Points
+    uncorrected: Points
+
+
+def _returns_numbering(returns: DetectedReturns, idx: np.ndarray, bottom: bool):
+    hs = returns.has_surface[idx]
+    n_ret = hs.astype(np.uint8) + returns.has_bottom[idx].astype(np.uint8)
+    number = (1 + hs.astype(np.uint8)) if bottom else np.ones(len(idx), dtype=np.uint8)
+    return number.astype(np.uint8), n_ret
+
+
+def _timing_sigma(returns: DetectedReturns, idx: np.ndarray, which: str, default: float):
+    sig = getattr(returns, f"t_{which}_sigma_s")
+    return np.full(len(idx), default) if sig is None else sig[idx]
+
+
+def seabed_points(
+    returns: DetectedReturns,
+    surface: WaterSurface,
+    settings: RefractionSettings | None = None,
+    *,
+    correct_refraction: bool = True,
+) -> Points:
+    """Georeference the bottom returns of every pulse that has one.
+
+    Parameters
+    ----------
+    returns : DetectedReturns
+        Measured navigation and detected return times.
+    surface : WaterSurface
+        The fitted water surface of the same pulses.
+    settings : RefractionSettings, optional
+        Defaults if omitted.
+    correct_refraction : bool
+        False gives the uncorrected points (straight beam, speed of light in air).
+
+    Returns
+    -------
+    Points
+        One point per pulse with a bottom return, ``kind = BOTTOM``, unclassified (1).
+    """
+    st = settings or RefractionSettings()
+    if len(surface) != len(returns):
+        raise ValueError(f"`surface` has {len(surface)} pulses; `returns` has {len(returns)}")
+    na, nw, ng = surface.air_index, st.phase_index, st.group_index
+    idx = np.flatnonzero(returns.has_bottom)
+    o, d = returns.origin_meas_m[idx], returns.direction_meas[idx]
+    tb, ts = returns.t_bottom_s[idx], returns.t_surface_s[idx]
+    flags = surface.flags[idx].copy()
+    water = surface.is_water[idx]
+    r_straight = _C * tb / (2.0 * na)
+    straight = o + d * r_straight[:, None]
+
+    entry, nrm, r_e = surface.entry_m[idx], surface.normal[idx], surface.range_to_entry_m[idx]
+    own = returns.has_surface[idx] & ((flags & PointFlag.SURFACE_OUTLIER) == 0)
+    sig_tb = _timing_sigma(returns, idx, "bottom", st.timing_sigma_s)
+    sig_ts = _timing_sigma(returns, idx, "surface", st.timing_sigma_s)
+    if correct_refraction:
+        length = np.where(own, _C * (tb - ts) / (2.0 * ng), (_C * tb / 2.0 - na * r_e) / ng)
+        flags[water & ~own] |= np.uint16(PointFlag.SURFACE_INTERPOLATED)
+        above = water & (length <= 0.0)
+        flags[above] |= np.uint16(PointFlag.ABOVE_SURFACE)
+        refr = water & ~above
+        t_dir = d.copy()
+        if refr.any():
+            t_dir[refr], _ = refract_direction(d[refr], nrm[refr], na, nw)
+        length = np.where(refr, length, 0.0)
+        xyz = np.where(refr[:, None], entry + t_dir * length[:, None], straight)
+        sig_dt = np.where(own, np.hypot(sig_ts, sig_tb), sig_tb)
+    else:
+        refr = np.zeros(len(idx), dtype=bool)
+        t_dir, length = d, np.zeros(len(idx))
+        flags |= np.uint16(PointFlag.NOT_REFRACTED)
+        xyz = straight
+        sig_dt = sig_tb
+
+    depth = surface.surface_z_m(idx, xyz[:, 0], xyz[:, 1]) - xyz[:, 2]
+
+    # a-priori uncertainty, first order
+    point = np.radians(st.pointing_sigma_deg)
+    sin_i = np.linalg.norm(np.cross(d, nrm), axis=1)
+    sin_w = np.linalg.norm(np.cross(t_dir, nrm), axis=1)
+    cos_w = np.sqrt(np.maximum(1.0 - sin_w**2, 0.0))
+    cos_i = np.sqrt(np.maximum(1.0 - sin_i**2, 0.0))
+    r_air = np.where(refr, r_e, r_straight)
+    var_v = st.position_sigma_v_m**2 + (r_air * sin_i * point) ** 2
+    var_h = st.position_sigma_h_m**2 + (r_air * point) ** 2
+    sig_len = np.where(refr, _C * sig_dt / (2.0 * ng), _C * sig_dt / (2.0 * na))
+    sig_len = np.hypot(sig_len, length * st.group_index_sigma / ng)
+    # range error along the (refracted or straight) path
+    cos_path, sin_path = np.where(refr, cos_w, cos_i), np.where(refr, sin_w, sin_i)
+    var_v += (sig_len * cos_path) ** 2
+    var_h += (sig_len * sin_path) ** 2
+    # in-water: pointing, surface height and tilt
+    turn = surface.normal_sigma_rad[idx] * (1.0 - na / nw)
+    hs = np.where(refr, surface.height_sigma_m[idx], 0.0)
+    var_v += (length * sin_w * np.hypot(point, turn)) ** 2 + hs**2
+    tan_i = sin_i / np.maximum(cos_i, 1e-3)
+    var_h += (length * np.hypot(point, turn) * cos_w) ** 2 + (hs * tan_i) ** 2
+
+    number, n_ret = _returns_numbering(returns, idx, bottom=True)
+    amp = None if returns.bottom_amplitude is None else returns.bottom_amplitude[idx]
+    return Points(
+        pulse_id=returns.pulse_id[idx],
+        xyz_m=xyz,
+        depth_m=depth,
+        classification=np.ones(len(idx), dtype=np.uint8),
+        kind=np.full(len(idx), ReturnKind.BOTTOM, dtype=np.uint8),
+        flags=flags,
+        detector_flags=returns.flags[idx],
+        return_number=number,
+        number_of_returns=n_ret,
+        confidence=returns.bottom_confidence[idx],
+        uncertainty_v_m=np.sqrt(var_v),
+        uncertainty_h_m=np.sqrt(var_h),
+        amplitude=amp,
+    )
+
+
+def water_surface_points(
+    returns: DetectedReturns,
+    surface: WaterSurface,
+    settings: RefractionSettings | None = None,
+    *,
+    derived: bool = False,
+) -> Points:
+    """Surface-return points (``derived=False``) or derived water-surface points (``True``).
+
+    Measured surface points lie on the beam at ``c t_s / (2 n_air)``, one per pulse with a
+    surface return (``kind = SURFACE``). Derived points are the water entry points of the
+    water pulses, on the fitted surface (``kind = DERIVED_SURFACE``, flagged ``SYNTHETIC``,
+    depth 0, confidence 1, vertical uncertainty = fitted height standard error).
+    """
+    st = settings or RefractionSettings()
+    point = np.radians(st.pointing_sigma_deg)
+    if derived:
+        idx = np.flatnonzero(surface.is_water)
+        xyz = surface.entry_m[idx]
+        m = len(idx)
+        return Points(
+            pulse_id=returns.pulse_id[idx],
+            xyz_m=xyz,
+            depth_m=np.zeros(m),
+            classification=np.ones(m, dtype=np.uint8),
+            kind=np.full(m, ReturnKind.DERIVED_SURFACE, dtype=np.uint8),
+            flags=surface.flags[idx] | np.uint16(PointFlag.SYNTHETIC),
+            detector_flags=returns.flags[idx],
+            return_number=np.ones(m, dtype=np.uint8),
+            number_of_returns=np.ones(m, dtype=np.uint8),
+            confidence=np.ones(m),
+            uncertainty_v_m=np.hypot(surface.height_sigma_m[idx], st.position_sigma_v_m),
+            uncertainty_h_m=np.hypot(st.position_sigma_h_m, surface.range_to_entry_m[idx] * point),
+        )
+    idx = np.flatnonzero(returns.has_surface)
+    xyz = surface.surface_point_m[idx]
+    d, nrm = returns.direction_meas[idx], surface.normal[idx]
+    sin_i = np.linalg.norm(np.cross(d, nrm), axis=1)
+    cos_i = np.sqrt(np.maximum(1.0 - sin_i**2, 0.0))
+    r = _C * returns.t_surface_s[idx] / (2.0 * surface.air_index)
+    sig_r = _C * _timing_sigma(returns, idx, "surface", st.timing_sigma_s) / 2.0
+    number, n_ret = _returns_numbering(returns, idx, bottom=False)
+    amp = None if returns.surface_amplitude is None else returns.surface_amplitude[idx]
+    return Points(
+        pulse_id=returns.pulse_id[idx],
+        xyz_m=xyz,
+        depth_m=surface.surface_z_m(idx, xyz[:, 0], xyz[:, 1]) - xyz[:, 2],
+        classification=np.ones(len(idx), dtype=np.uint8),
+        kind=np.full(len(idx), ReturnKind.SURFACE, dtype=np.uint8),
+        flags=surface.flags[idx],
+        detector_flags=returns.flags[idx],
+        return_number=number,
+        number_of_returns=n_ret,
+        confidence=returns.surface_confidence[idx],
+        uncertainty_v_m=np.sqrt(
+            st.position_sigma_v_m**2 + (sig_r * cos_i) ** 2 + (r * sin_i * point) ** 2
+        ),
+        uncertainty_h_m=np.sqrt(st.position_sigma_h_m**2 + (sig_r * sin_i) ** 2 + (r * point) ** 2),
+        amplitude=amp,
+    )
+
+
+def georeference(
+    returns: DetectedReturns,
+    *,
+    surface_settings: SurfaceFitSettings | None = None,
+    refraction_settings: RefractionSettings | None = None,
+    classify_settings: ClassifySettings | None = None,
+    include_derived_surface: bool = False,
+) -> ProcessedPoints:
+    """Detected returns to classified points: surface fit, refraction, classification.
+
+    Returns
+    -------
+    ProcessedPoints
+        The fitted surface, the classified points (surface returns, refraction-corrected
+        bottom returns, optional derived surface points) and the classified uncorrected bottom
+        points.
+    """
+    surface = fit_water_surface(returns, surface_settings)
+    parts = [
+        water_surface_points(returns, surface, refraction_settings),
+        seabed_points(returns, surface, refraction_settings),
+    ]
+    if include_derived_surface:
+        parts.append(water_surface_points(returns, surface, refraction_settings, derived=True))
+    points = classify_points(Points.concatenate(parts), classify_settings)
+    raw = seabed_points(returns, surface, refraction_settings, correct_refraction=False)
+    return ProcessedPoints(surface, points, classify_points(raw, classify_settings))

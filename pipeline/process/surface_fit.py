@@ -1,0 +1,422 @@
+"""The water surface from the surface returns: a robust local plane under every pulse.
+
+Method
+------
+1. Surface points: ``p_s = origin + direction * c t_s / (2 n_air)`` for every pulse with a
+   surface return.
+2. Water level and land: the water surface is the densest level layer of surface points: the
+   mode of a histogram of their heights (or ``water_level_hint_m``) starts an iterated
+   least-squares *global plane* fitted to the points within the band
+   ``[-below_margin_m, +land_margin_m]`` around it. A surface point higher than the band is
+   land; a pulse without a surface return whose straight (air) bottom point is higher than the
+   band is land too. Points below the band are not water surface (flagged outliers).
+3. Local fit, batched: for each water pulse, the ``k_neighbours`` nearest water-surface points
+   (horizontally, within ``radius_m``, from a ``scipy.spatial.cKDTree``) give the plane
+   ``z = z_global(x, y) + a + b dx + c dy`` by weighted least squares on stacked 3x3 normal
+   equations (``numpy.linalg.inv`` on ``(m, 3, 3)``). Outliers are residuals above
+   ``max(outlier_sigma * 1.4826 MAD, outlier_floor_m)``: first from the global slope through
+   the neighbours' median height (robust start), then ``robust_iterations`` times from the
+   latest fit. A ridge
+   of ``count * slope_prior_m**2`` on ``(b, c)`` pulls the local slope towards the global
+   slope, which keeps nearly collinear neighbourhoods (a profiler track) solvable; those are
+   flagged ``SURFACE_ILL_CONDITIONED``. With fewer than ``min_neighbours`` neighbours the
+   global plane is used, flagged ``SURFACE_GLOBAL_FALLBACK``.
+4. The beam meets its local plane at the entry point; the plane's upward unit normal is the
+   surface normal for Snell's law. A plane over ``k`` neighbours smooths waves shorter than
+   about twice the neighbourhood radius; longer waves and any tilt are kept.
+
+Only measured navigation and detected times are used.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from pipeline.config import setting
+from pipeline.optics import SPEED_OF_LIGHT_M_S
+from pipeline.process.returns import DetectedReturns, PointFlag
+
+__all__ = ["SurfaceFitSettings", "WaterSurface", "fit_water_surface", "surface_points_m"]
+
+#: 1.4826 * MAD estimates the standard deviation of normally distributed residuals.
+_MAD_TO_SIGMA = 1.4826
+#: |N . d| below this: the beam runs along the surface (no usable entry point).
+_GRAZING_COS = 1e-6
+
+
+@dataclass(frozen=True, kw_only=True)
+class SurfaceFitSettings:
+    """Settings of the water-surface fit."""
+
+    air_index: float = setting(1.000277, ge=1.0, le=1.01, doc="index of air for the air range")
+    k_neighbours: int = setting(16, ge=3, le=256, doc="surface points per local plane fit")
+    radius_m: float = setting(5.0, gt=0.0, le=1000.0, doc="neighbour search radius")
+    min_neighbours: int = setting(6, ge=3, le=256, doc="fewer: use the global plane")
+    robust_iterations: int = setting(2, ge=0, le=10, doc="outlier-rejection passes")
+    outlier_sigma: float = setting(3.0, gt=0.0, doc="rejection threshold in robust sigmas")
+    own_outlier_sigma: float = setting(
+        5.0, gt=0.0, doc="a pulse's own surface point further off its fit: SURFACE_OUTLIER"
+    )
+    outlier_floor_m: float = setting(
+        0.02, ge=0.0, doc="residuals below this are never rejected (exact data)"
+    )
+    land_margin_m: float = setting(1.0, gt=0.0, doc="higher above the water level: land")
+    below_margin_m: float = setting(1.0, gt=0.0, doc="lower below the water level: not surface")
+    water_level_hint_m: float | None = setting(
+        None, doc="known water level (local z) to start from instead of the histogram mode"
+    )
+    level_bin_m: float = setting(0.25, gt=0.0, doc="histogram bin of the water-level search")
+    slope_prior_m: float = setting(
+        0.05, ge=0.0, doc="ridge towards the global slope, as an equivalent spread"
+    )
+    min_spread_m: float = setting(
+        0.25, ge=0.0, doc="smaller neighbour spread across: flag ill-conditioned"
+    )
+    fallback_water_level_m: float = setting(
+        0.0, doc="water level used when there are fewer than 3 surface returns"
+    )
+    chunk_size: int = setting(131072, ge=1, doc="pulses per batched local fit")
+
+    def __post_init__(self) -> None:
+        if self.min_neighbours > self.k_neighbours:
+            raise ValueError(
+                f"`min_neighbours` ({self.min_neighbours}) must be <= `k_neighbours` "
+                f"({self.k_neighbours})"
+            )
+
+
+@dataclass(frozen=True)
+class WaterSurface:
+    """The fitted water surface seen by each pulse (``n`` rows, one per pulse).
+
+    Attributes
+    ----------
+    entry_m : (n, 3)
+        Where the measured beam meets the fitted surface (land pulses: the global plane; grazing
+        pulses: the origin).
+    range_to_entry_m : (n,)
+        Distance along the beam from the measured origin to ``entry_m`` (0 when grazing).
+    normal : (n, 3)
+        Upward unit normal of the local plane.
+    is_water, is_land : (n,) bool
+        The pulse enters water / hits land. Neither: no valid entry (grazing).
+    surface_point_m : (n, 3)
+        Measured surface-return point (zeros where there is no surface return).
+    surface_residual_m : (n,)
+        Signed distance of the pulse's own surface point above its local plane (0 if none).
+    fit_sigma_m : (n,)
+        Residual standard deviation of the local fit (global fit where it fell back).
+    height_sigma_m : (n,)
+        Standard error of the fitted surface height at the entry point.
+    normal_sigma_rad : (n,)
+        Standard error of the surface tilt.
+    n_used : (n,) int64
+        Surface points used by the local fit (0 where the global plane was used).
+    flags : (n,) uint16
+        :class:`~pipeline.process.returns.PointFlag` bits (fallback, outlier, land, grazing,
+        ill-conditioned).
+    global_plane : (3,)
+        ``(z0_m, dz_dx, dz_dy)``: the global water plane ``z = z0 + dz_dx x + dz_dy y``.
+    global_sigma_m : float
+        Residual standard deviation of the global plane fit.
+    air_index : float
+        Index of air used for every air range.
+    """
+
+    entry_m: np.ndarray
+    range_to_entry_m: np.ndarray
+    normal: np.ndarray
+    is_water: np.ndarray
+    is_land: np.ndarray
+    surface_point_m: np.ndarray
+    surface_residual_m: np.ndarray
+    fit_sigma_m: np.ndarray
+    height_sigma_m: np.ndarray
+    normal_sigma_rad: np.ndarray
+    n_used: np.ndarray
+    flags: np.ndarray
+    global_plane: np.ndarray
+    global_sigma_m: float
+    air_index: float
+
+    def __len__(self) -> int:
+        return int(self.entry_m.shape[0])
+
+    def surface_z_m(self, index: np.ndarray, x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
+        """Height of the local planes of pulses ``index`` at ``(x_m, y_m)``.
+
+        Land pulses use the global water plane; grazing pulses (no entry) too.
+        """
+        e = self.entry_m[index]
+        nrm = self.normal[index]
+        z = e[:, 2] - (nrm[:, 0] * (x_m - e[:, 0]) + nrm[:, 1] * (y_m - e[:, 1])) / nrm[:, 2]
+        valid = self.is_water[index] | self.is_land[index]
+        return np.where(valid, z, self.global_z_m(x_m, y_m))  # grazing: no local entry
+
+    def global_z_m(self, x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
+        """Height of the global water plane at ``(x_m, y_m)``."""
+        z0, gx, gy = self.global_plane
+        return z0 + gx * np.asarray(x_m) + gy * np.asarray(y_m)
+
+
+def surface_points_m(returns: DetectedReturns, air_index: float) -> np.ndarray:
+    """Surface-return points ``origin + direction * c t_s / (2 n_air)``; (n, 3), 0 where none."""
+    r = SPEED_OF_LIGHT_M_S * returns.t_surface_s / (2.0 * air_index)
+    p = returns.origin_meas_m + returns.direction_meas * r[:, None]
+    return np.where(returns.has_surface[:, None], p, 0.0)
+
+
+def _plane_lstsq(x, y, z):
+    """Least-squares ``z = z0 + gx x + gy y`` (minimum-norm slope if degenerate) and sigma."""
+    xm, ym = x.mean(), y.mean()
+    a = np.column_stack([np.ones_like(x), x - xm, y - ym])
+    coef, *_ = np.linalg.lstsq(a, z, rcond=1e-10)
+    resid = z - a @ coef
+    dof = max(len(z) - 3, 1)
+    sigma = float(np.sqrt(np.sum(resid**2) / dof))
+    return np.array([coef[0] - coef[1] * xm - coef[2] * ym, coef[1], coef[2]]), sigma
+
+
+def _global_plane(ps: np.ndarray, st: SurfaceFitSettings) -> tuple[np.ndarray, float]:
+    """Water plane from surface points ``ps`` (m, 3): histogram mode, then iterated band fit."""
+    z = ps[:, 2]
+    if st.water_level_hint_m is not None:
+        level = float(st.water_level_hint_m)
+    else:
+        lo, hi = float(z.min()), float(z.max())
+        nbins = int(min(max(np.ceil((hi - lo) / st.level_bin_m), 1), 1_000_000))
+        counts, edges = np.histogram(z, bins=nbins, range=(lo, lo + nbins * st.level_bin_m))
+        i = int(np.argmax(counts))
+        level = 0.5 * (edges[i] + edges[i + 1])
+    plane = np.array([level, 0.0, 0.0])
+    sigma = 0.0
+    for _ in range(6):
+        res = z - (plane[0] + plane[1] * ps[:, 0] + plane[2] * ps[:, 1])
+        band = (res > -st.below_margin_m) & (res < st.land_margin_m)
+        if band.sum() < 3:
+            break
+        new, sigma = _plane_lstsq(ps[band, 0], ps[band, 1], z[band])
+        # one robust pass: drop gross outliers of this fit, then refit
+        r2 = z[band] - (new[0] + new[1] * ps[band, 0] + new[2] * ps[band, 1])
+        keep = np.abs(r2) <= max(st.outlier_sigma * _MAD_TO_SIGMA * np.median(np.abs(r2)), 1e-9)
+        keep |= np.abs(r2) <= st.outlier_floor_m
+        if keep.sum() >= 3:
+            xb, yb, zb = ps[band, 0][keep], ps[band, 1][keep], z[band][keep]
+            new, sigma = _plane_lstsq(xb, yb, zb)
+        converged = np.allclose(new, plane, rtol=0.0, atol=1e-12)
+        plane = new
+        if converged:
+            break
+    return plane, sigma
+
+
+def _masked_median(v: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Row medians of ``v`` over ``valid`` entries (rows with no valid entry give 0)."""
+    cnt = valid.sum(axis=1)
+    s = np.sort(np.where(valid, v, np.inf), axis=1)
+    c = np.maximum(cnt, 1)
+    lo = np.take_along_axis(s, ((c - 1) // 2)[:, None], axis=1)[:, 0]
+    hi = np.take_along_axis(s, (c // 2)[:, None], axis=1)[:, 0]
+    hi = np.where(cnt >= 2, hi, lo)
+    return np.where(cnt > 0, 0.5 * (lo + hi), 0.0)
+
+
+def _solve(w, dx, dy, z, lam):
+    """Batched weighted least squares with a ridge ``lam`` on the slopes; params and inverse."""
+    sw = w.sum(1)
+    sx, sy = (w * dx).sum(1), (w * dy).sum(1)
+    sxx, syy, sxy = (w * dx * dx).sum(1), (w * dy * dy).sum(1), (w * dx * dy).sum(1)
+    m = len(sw)
+    a = np.empty((m, 3, 3))
+    a[:, 0, 0] = sw
+    a[:, 0, 1] = a[:, 1, 0] = sx
+    a[:, 0, 2] = a[:, 2, 0] = sy
+    a[:, 1, 1] = sxx + lam
+    a[:, 2, 2] = syy + lam
+    a[:, 1, 2] = a[:, 2, 1] = sxy
+    bad = sw <= 0
+    a[bad] = np.eye(3)
+    rhs = np.stack([(w * z).sum(1), (w * dx * z).sum(1), (w * dy * z).sum(1)], axis=1)
+    rhs[bad] = 0.0
+    inv = np.linalg.inv(a)
+    params = np.einsum("mij,mj->mi", inv, rhs)
+    return params, inv, (sw, sx, sy, sxx, syy, sxy)
+
+
+def _local_fit(tree, spts, qxy, st):
+    """Robust local planes of the residual heights ``spts[:, 2]`` around queries ``qxy``."""
+    m, ns = len(qxy), len(spts)
+    k = min(st.k_neighbours, ns)
+    _, idx = tree.query(qxy, k=k, distance_upper_bound=st.radius_m, workers=-1)
+    idx = np.asarray(idx).reshape(m, k)
+    valid = idx < ns
+    ic = np.where(valid, idx, 0)
+    dx = np.where(valid, spts[ic, 0] - qxy[:, :1], 0.0)
+    dy = np.where(valid, spts[ic, 1] - qxy[:, 1:], 0.0)
+    z = np.where(valid, spts[ic, 2], 0.0)
+    count = valid.sum(1)
+    lam = count * st.slope_prior_m**2
+
+    def inliers(r):
+        scale = _MAD_TO_SIGMA * _masked_median(np.abs(r), valid)
+        thresh = np.maximum(st.outlier_sigma * scale, st.outlier_floor_m)
+        return (valid & (np.abs(r) <= thresh[:, None])).astype(np.float64)
+
+    # robust start: residuals from the global slope through the neighbours' median height
+    w = inliers(z - _masked_median(z, valid)[:, None]) if st.robust_iterations else valid * 1.0
+    for it in range(st.robust_iterations + 1):
+        params, inv, sums = _solve(w, dx, dy, z, lam)
+        r = z - (params[:, :1] + params[:, 1:2] * dx + params[:, 2:3] * dy)
+        if it == st.robust_iterations:
+            break
+        w = inliers(r)
+    n_used = w.sum(1)
+    sigma = np.sqrt((w * r * r).sum(1) / np.maximum(n_used - 3.0, 1.0))
+    sw, sx, sy, sxx, syy, sxy = sums
+    swp = np.maximum(sw, 1.0)
+    cxx = sxx / swp - (sx / swp) ** 2
+    cyy = syy / swp - (sy / swp) ** 2
+    cxy = sxy / swp - (sx / swp) * (sy / swp)
+    half = 0.5 * (cxx + cyy)
+    lam_min = half - np.sqrt(np.maximum(0.25 * (cxx - cyy) ** 2 + cxy**2, 0.0))
+    ill = lam_min < st.min_spread_m**2
+    h_sigma = sigma * np.sqrt(np.maximum(inv[:, 0, 0], 0.0))
+    n_sigma = sigma * np.sqrt(np.maximum(inv[:, 1, 1] + inv[:, 2, 2], 0.0))
+    ok = count >= st.min_neighbours
+    return params, ok, n_used.astype(np.int64), sigma, h_sigma, n_sigma, ill
+
+
+def _intersect(origin, direction, point, normal):
+    """Range along ``direction`` from ``origin`` to the plane (point, normal); grazing mask."""
+    den = np.sum(normal * direction, axis=1)
+    grazing = den > -_GRAZING_COS  # the beam must go down through an upward normal
+    num = np.sum(normal * (point - origin), axis=1)
+    r = num / np.where(grazing, -1.0, den)
+    grazing |= r <= 0.0
+    return np.where(grazing, 0.0, r), grazing
+
+
+def fit_water_surface(
+    returns: DetectedReturns, settings: SurfaceFitSettings | None = None
+) -> WaterSurface:
+    """Fit the water surface under every pulse from the surface returns.
+
+    Parameters
+    ----------
+    returns : DetectedReturns
+        Measured navigation and detected return times.
+    settings : SurfaceFitSettings, optional
+        Defaults if omitted.
+
+    Returns
+    -------
+    WaterSurface
+        Entry point, upward normal, land/water decision, uncertainties and flags per pulse.
+    """
+    st = settings or SurfaceFitSettings()
+    n = len(returns)
+    o, d = returns.origin_meas_m, returns.direction_meas
+    c = SPEED_OF_LIGHT_M_S
+    ps = surface_points_m(returns, st.air_index)
+    has_s = returns.has_surface
+    flags = np.zeros(n, dtype=np.uint16)
+
+    if has_s.sum() >= 3:
+        gplane, gsigma = _global_plane(ps[has_s], st)
+    else:
+        level = st.water_level_hint_m
+        gplane = np.array([st.fallback_water_level_m if level is None else level, 0.0, 0.0])
+        gsigma = 0.0
+    z0, gx, gy = gplane
+
+    def zg(x, y):
+        return z0 + gx * x + gy * y
+
+    # land / water decision per pulse
+    res_s = np.where(has_s, ps[:, 2] - zg(ps[:, 0], ps[:, 1]), 0.0)
+    land_s = has_s & (res_s >= st.land_margin_m)
+    low_s = has_s & (res_s <= -st.below_margin_m)
+    water_s = has_s & ~land_s & ~low_s
+    pb = o + d * (c * returns.t_bottom_s / (2.0 * st.air_index))[:, None]
+    land_b = ~has_s & returns.has_bottom & (pb[:, 2] - zg(pb[:, 0], pb[:, 1]) >= st.land_margin_m)
+    is_land = land_s | land_b
+
+    # global plane: entry and normal for everyone to start with
+    gnorm = np.array([-gx, -gy, 1.0]) / np.sqrt(1.0 + gx * gx + gy * gy)
+    normal = np.broadcast_to(gnorm, (n, 3)).copy()
+    r_g, grazing = _intersect(o, d, np.array([0.0, 0.0, z0]), normal)
+    entry = o + d * r_g[:, None]
+    rng = r_g.copy()
+
+    fit_sigma = np.full(n, gsigma)
+    height_sigma = np.full(n, gsigma)
+    normal_sigma = np.full(n, gsigma / st.radius_m)
+    n_used = np.zeros(n, dtype=np.int64)
+    resid = np.zeros(n)
+
+    water = ~is_land & ~grazing
+    q = np.flatnonzero(water)
+    qxy = np.where(water_s[q, None], ps[q, :2], entry[q, :2])
+    spts = np.column_stack([ps[water_s, :2], res_s[water_s]])
+    fallback = np.ones(len(q), dtype=bool)
+    if len(spts) >= 1 and len(q):
+        tree = cKDTree(spts[:, :2])
+        for lo in range(0, len(q), st.chunk_size):
+            sl = slice(lo, lo + st.chunk_size)
+            qi, xy = q[sl], qxy[sl]
+            params, ok, used, sig, hsig, nsig, ill = _local_fit(tree, spts, xy, st)
+            fallback[sl] = ~ok
+            qi, xy, params = qi[ok], xy[ok], params[ok]
+            sx, sy = gx + params[:, 1], gy + params[:, 2]
+            nrm = np.column_stack([-sx, -sy, np.ones_like(sx)])
+            nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+            p0 = np.column_stack([xy, zg(xy[:, 0], xy[:, 1]) + params[:, 0]])
+            r, gr = _intersect(o[qi], d[qi], p0, nrm)
+            normal[qi] = nrm
+            rng[qi] = r
+            entry[qi] = o[qi] + d[qi] * r[:, None]
+            grazing[qi] = gr
+            fit_sigma[qi], height_sigma[qi], normal_sigma[qi] = sig[ok], hsig[ok], nsig[ok]
+            n_used[qi] = used[ok]
+            flags[qi[ill[ok]]] |= np.uint16(PointFlag.SURFACE_ILL_CONDITIONED)
+            own = water_s[qi]
+            rs = np.sum(nrm * (ps[qi] - p0), axis=1)
+            resid[qi] = np.where(own, rs, 0.0)
+            tol = np.maximum(st.own_outlier_sigma * sig[ok], st.outlier_floor_m)
+            out = own & (np.abs(rs) > tol)
+            flags[qi[out]] |= np.uint16(PointFlag.SURFACE_OUTLIER)
+    fb = q[fallback]
+    flags[fb] |= np.uint16(PointFlag.SURFACE_GLOBAL_FALLBACK)
+    resid[fb] = np.where(has_s[fb], np.sum(gnorm * (ps[fb] - entry[fb]), axis=1), 0.0)
+    resid[land_s] = 0.0
+
+    flags[low_s] |= np.uint16(PointFlag.SURFACE_OUTLIER)
+    resid[low_s] = np.sum(normal[low_s] * (ps[low_s] - entry[low_s]), axis=1)
+    flags[is_land] |= np.uint16(PointFlag.LAND)
+    grazing &= ~is_land
+    flags[grazing] |= np.uint16(PointFlag.GRAZING)
+    entry[grazing] = o[grazing]
+    rng[grazing] = 0.0
+    is_water = ~is_land & ~grazing
+    if has_s.sum() < 3:
+        flags[is_water] |= np.uint16(PointFlag.SURFACE_GLOBAL_FALLBACK)
+    return WaterSurface(
+        entry_m=entry,
+        range_to_entry_m=rng,
+        normal=normal,
+        is_water=is_water,
+        is_land=is_land,
+        surface_point_m=ps,
+        surface_residual_m=resid,
+        fit_sigma_m=fit_sigma,
+        height_sigma_m=height_sigma,
+        normal_sigma_rad=normal_sigma,
+        n_used=n_used,
+        flags=flags,
+        global_plane=gplane,
+        global_sigma_m=float(gsigma),
+        air_index=float(st.air_index),
+    )

@@ -1,0 +1,92 @@
+"""Gridding against a brute-force loop over the cells."""
+
+import numpy as np
+import pytest
+
+from pipeline.process.grid import grid_points, grid_seabed, snap_bounds_m
+from pipeline.process.returns import Points
+
+
+def brute_force(x, y, v, bounds, res):
+    w, e, s, n = bounds
+    nx, ny = round((e - w) / res), round((n - s) / res)
+    mean = np.full((ny, nx), np.nan)
+    med = np.full((ny, nx), np.nan)
+    std = np.full((ny, nx), np.nan)
+    cnt = np.zeros((ny, nx), int)
+    for row in range(ny):
+        for col in range(nx):
+            x0, x1 = w + col * res, w + (col + 1) * res
+            y1, y0 = n - row * res, n - (row + 1) * res
+            sel = (x >= x0) & (x < x1) & (y > y0) & (y <= y1)
+            vals = v[sel]
+            cnt[row, col] = vals.size
+            if vals.size:
+                mean[row, col] = vals.mean()
+                med[row, col] = np.median(vals)
+            if vals.size >= 2:
+                std[row, col] = vals.std(ddof=1)
+    return mean, med, std, cnt
+
+
+def test_matches_brute_force():
+    rng = np.random.default_rng(0)
+    n = 3000
+    x = rng.uniform(-7.3, 12.1, n)
+    y = rng.uniform(-4.0, 9.7, n)
+    v = 10 + 0.1 * x + rng.normal(0, 0.2, n)
+    origin = (500_000.0, 5_000_000.0, 0.0)
+    g = grid_points(x, y, v, resolution_m=2.0, origin_m=origin, crs=32633)
+    mean, med, std, cnt = brute_force(x, y, v, g.bounds_m, 2.0)
+    np.testing.assert_array_equal(g.count, cnt)
+    assert g.count.sum() == n  # default bounds enclose every point
+    # summation order differs from numpy's: agree to a few ulps of ~10 m
+    np.testing.assert_allclose(g.depth_m, mean, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(g.median_depth_m, med, rtol=0, atol=0)
+    np.testing.assert_allclose(g.spread_m, std, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(g.z_m, -mean, rtol=0, atol=1e-12)
+    # cell centres and world transform
+    w, e, s, nn = g.bounds_m
+    np.testing.assert_allclose(g.x_m, w + 1.0 + 2.0 * np.arange(g.shape[1]))
+    np.testing.assert_allclose(g.y_m, nn - 1.0 - 2.0 * np.arange(g.shape[0]))
+    assert g.transform.c == pytest.approx(w + origin[0]) and g.transform.e == -2.0
+    assert (w + origin[0]) % 2.0 == 0.0 and (nn + origin[1]) % 2.0 == 0.0
+    assert g.crs.to_epsg() == 32633
+
+
+def test_given_bounds_and_edges():
+    # points on the west/north edges are inside, on the east/south edges outside
+    x = np.array([0.0, 1.0, 2.0, 0.5, 1.5])
+    y = np.array([2.0, 1.0, 1.5, 0.0, 0.5])
+    v = np.arange(5.0)
+    g = grid_points(x, y, v, resolution_m=1.0, bounds_m=(0, 2, 0, 2))
+    # (0, 2) -> row 0, col 0; (1, 1) and (1.5, 0.5) -> row 1, col 1; x = 2 and y = 0 are out
+    np.testing.assert_array_equal(g.count, [[1, 0], [0, 2]])
+    with pytest.raises(ValueError, match="whole cells"):
+        grid_points(x, y, v, resolution_m=1.5, bounds_m=(0, 2, 0, 2))
+
+
+def test_snap_includes_max_on_a_multiple():
+    b = snap_bounds_m(np.array([0.0, 4.0]), np.array([0.0, 4.0]), 2.0)
+    np.testing.assert_array_equal(b, [0.0, 6.0, -2.0, 4.0])
+
+
+def test_grid_seabed_selects_class_40():
+    n = 4
+    p = Points(
+        pulse_id=np.arange(n),
+        xyz_m=np.array([[0.5, 0.5, -5.0], [0.5, 0.5, -7.0], [0.5, 0.5, 1.0], [0.5, 0.5, -6.0]]),
+        depth_m=np.array([5.0, 7.0, -1.0, 6.0]),
+        classification=np.array([40, 40, 2, 7], np.uint8),
+        kind=np.full(n, 2, np.uint8),
+        flags=np.zeros(n, np.uint16),
+        detector_flags=np.zeros(n, np.uint16),
+        return_number=np.ones(n, np.uint8),
+        number_of_returns=np.ones(n, np.uint8),
+        confidence=np.ones(n),
+        uncertainty_v_m=np.zeros(n),
+        uncertainty_h_m=np.zeros(n),
+    )
+    g = grid_seabed(p, 1.0)
+    assert g.shape == (1, 1) and g.count[0, 0] == 2
+    assert g.depth_m[0, 0] == 6.0 and g.spread_m[0, 0] == pytest.approx(np.sqrt(2.0))

@@ -1,0 +1,162 @@
+"""Water-surface fit: a tilted plane, outliers, land, sparse pulses, a profiler line."""
+
+import numpy as np
+from scipy import constants
+
+from pipeline.process.returns import DetectedReturns, PointFlag
+from pipeline.process.surface_fit import SurfaceFitSettings, fit_water_surface
+
+C = constants.c
+N_AIR = 1.000277
+FIT = SurfaceFitSettings(air_index=N_AIR)
+
+
+def beams(n_side=35, spacing_m=1.2, seed=3):
+    """Beam directions (up to 20 deg off nadir, any azimuth) hitting a regular xy grid."""
+    rng = np.random.default_rng(seed)
+    g = (np.arange(n_side) - n_side / 2) * spacing_m
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    n = x.size
+    theta = np.radians(rng.uniform(0, 20, n))
+    phi = rng.uniform(0, 2 * np.pi, n)
+    d = np.column_stack([np.sin(theta) * np.sin(phi), np.sin(theta) * np.cos(phi), -np.cos(theta)])
+    return x, y, d
+
+
+def from_hits(hits, d, range_m=300.0):
+    """Origins ``range_m`` up each beam from its hit point: exact ranges by construction."""
+    r = np.full(len(hits), range_m)
+    return hits - d * r[:, None], r
+
+
+def tilted_returns(tilt_deg=2.0, tilt_azimuth_deg=30.0, z0=0.3, **kw):
+    """Surface returns from the plane z = z0 + gx x + gy y, hit on a regular grid.
+
+    The plane's steepest ascent points along ``tilt_azimuth_deg`` (clockwise from north) with
+    slope tan(tilt).
+    """
+    s = np.tan(np.radians(tilt_deg))
+    az = np.radians(tilt_azimuth_deg)
+    gx, gy = s * np.sin(az), s * np.cos(az)
+    x, y, d = beams(**kw)
+    o, r = from_hits(np.column_stack([x, y, z0 + gx * x + gy * y]), d)
+    normal = np.array([-gx, -gy, 1.0]) / np.sqrt(1 + gx * gx + gy * gy)
+    return o, d, r, normal, (z0, gx, gy)
+
+
+def make_returns(o, d, r, has_surface=None, t_bottom_s=None):
+    n = len(o)
+    hs = np.ones(n, bool) if has_surface is None else has_surface
+    ts = np.where(hs, 2 * r * N_AIR / C, 0.0)
+    hb = np.zeros(n, bool) if t_bottom_s is None else t_bottom_s > 0
+    tb = np.zeros(n) if t_bottom_s is None else t_bottom_s
+    return DetectedReturns(
+        pulse_id=np.arange(n),
+        origin_meas_m=o,
+        direction_meas=d,
+        has_surface=hs,
+        t_surface_s=ts,
+        has_bottom=hb,
+        t_bottom_s=tb,
+        surface_confidence=np.where(hs, 1.0, 0.0),
+        bottom_confidence=np.where(hb, 1.0, 0.0),
+        flags=np.zeros(n, np.uint16),
+    )
+
+
+def angle_deg(a, b):
+    return np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1)))
+
+
+def test_tilted_plane_normal_recovered_despite_spikes():
+    o, d, r, normal, (z0, gx, gy) = tilted_returns()
+    # 2 % of the surface returns are spikes 0.4 m early or late (spray, bad picks)
+    rng = np.random.default_rng(5)
+    spikes = rng.random(len(r)) < 0.02
+    r_meas = r + np.where(spikes, rng.choice([-0.4, 0.4], len(r)), 0.0)
+    ws = fit_water_surface(make_returns(o, d, r_meas), FIT)
+    assert ws.is_water.all()
+    # brief: normal within 0.05 deg; exact inliers leave only rounding, the spikes are rejected
+    assert angle_deg(ws.normal, normal).max() < 0.05
+    # the entry points lie on the true plane (a spike's own entry is on the fit, not the spike)
+    e = ws.entry_m
+    assert np.max(np.abs(e[:, 2] - (z0 + gx * e[:, 0] + gy * e[:, 1]))) < 1e-6
+    assert np.all(ws.flags[spikes] & PointFlag.SURFACE_OUTLIER)
+    assert not np.any(ws.flags[~spikes] & PointFlag.SURFACE_OUTLIER)
+    # global plane: slope of the tilt
+    np.testing.assert_allclose(ws.global_plane[1:], [gx, gy], atol=1e-6)
+
+
+def test_waves_are_followed_locally():
+    # a long swell (wavelength 60 m, amplitude 0.5 m) seen through 16-point planes of ~2 m
+    # radius: the local normal follows the swell slope (max 3 deg) to within 0.2 deg
+    x, y, d = beams()
+    k, amp = 2 * np.pi / 60.0, 0.5
+    p = np.column_stack([x, y, amp * np.sin(k * x)])
+    o, r = from_hits(p, d)
+    ws = fit_water_surface(make_returns(o, d, r), FIT)
+    inner = np.all(np.abs(p[:, :2]) < 15, axis=1)
+    slope = amp * k * np.cos(k * ws.entry_m[:, 0])
+    true_n = np.column_stack([-slope, np.zeros_like(slope), np.ones_like(slope)])
+    true_n /= np.linalg.norm(true_n, axis=1, keepdims=True)
+    assert angle_deg(ws.normal[inner], true_n[inner]).max() < 0.2
+    # the plane through the neighbours cuts the crest/trough curvature: k^2 amp R^2 / 2 ~ 1 cm
+    e = ws.entry_m[inner]
+    assert np.max(np.abs(e[:, 2] - amp * np.sin(k * e[:, 0]))) < 0.02
+
+
+def test_land_and_isolated_pulses():
+    o, d, r, normal, (z0, gx, gy) = tilted_returns(tilt_deg=0.0, z0=0.0)
+    land = o[:, 0] + d[:, 0] * r > 12.0  # a plateau 3 m above the water east of x = 12 m
+    r = np.where(land, r - 3.0 / -d[:, 2], r)
+    # one isolated water pulse 200 m away: no neighbours within 5 m
+    o = np.vstack([o, [200.0, 200.0, 300.0]])
+    d = np.vstack([d, [0.0, 0.0, -1.0]])
+    r = np.append(r, 300.0)
+    land = np.append(land, False)
+    ws = fit_water_surface(make_returns(o, d, r), FIT)
+    np.testing.assert_array_equal(ws.is_land, land)
+    assert np.all(ws.flags[land] & PointFlag.LAND)
+    assert ws.flags[-1] & PointFlag.SURFACE_GLOBAL_FALLBACK
+    assert not np.any(ws.flags[:-1] & PointFlag.SURFACE_GLOBAL_FALLBACK)
+    assert abs(ws.entry_m[-1, 2]) < 1e-9
+    np.testing.assert_allclose(ws.global_plane, [0.0, 0.0, 0.0], atol=1e-9)
+    # land depth reference is the water level: a land point 3 m up is at depth -3 m
+    idx = np.flatnonzero(land)
+    pts = o[idx] + d[idx] * r[idx, None]
+    np.testing.assert_allclose(ws.surface_z_m(idx, pts[:, 0], pts[:, 1]) - pts[:, 2], -3.0)
+
+
+def test_bottom_only_pulse_over_land_is_land():
+    o, d, r, *_ = tilted_returns(tilt_deg=0.0, z0=0.0, n_side=10)
+    has_s = np.ones(len(o), bool)
+    has_s[0] = False
+    tb = np.zeros(len(o))
+    tb[0] = 2 * (300.0 - 5.0) / -d[0, 2] * N_AIR / C  # ground 5 m above water, no surface
+    ws = fit_water_surface(make_returns(o, d, r, has_surface=has_s, t_bottom_s=tb), FIT)
+    assert ws.is_land[0] and not ws.is_land[1:].any()
+
+
+def test_profiler_line_is_ill_conditioned_but_level():
+    # a nadir profiler: every surface point on one line (x = 0); the cross-track slope cannot
+    # be seen, so the fit keeps the global (level) one and flags the pulses
+    n = 400
+    y = np.arange(n) * 0.1
+    o = np.column_stack([np.zeros(n), y, np.full(n, 300.0)])
+    d = np.tile([0.0, 0.0, -1.0], (n, 1))
+    r = o[:, 2] - 0.002 * y  # the water rises 2 mm per m northwards
+    ws = fit_water_surface(make_returns(o, d, r), FIT)
+    assert np.all(ws.flags & PointFlag.SURFACE_ILL_CONDITIONED)
+    np.testing.assert_allclose(ws.normal[:, 0], 0.0, atol=1e-12)
+    np.testing.assert_allclose(ws.entry_m[:, 2], 0.002 * y, atol=1e-9)
+    assert np.all(np.isfinite(ws.normal))
+
+
+def test_no_surface_returns_falls_back_to_the_level():
+    o, d, r, *_ = tilted_returns(tilt_deg=0.0, z0=0.0, n_side=5)
+    tb = 2 * (r + 5.0) * N_AIR / C
+    ret = make_returns(o, d, r, has_surface=np.zeros(len(o), bool), t_bottom_s=tb)
+    ws = fit_water_surface(ret, SurfaceFitSettings(air_index=N_AIR, fallback_water_level_m=0.0))
+    assert ws.is_water.all()
+    assert np.all(ws.flags & PointFlag.SURFACE_GLOBAL_FALLBACK)
+    np.testing.assert_allclose(ws.entry_m[:, 2], 0.0, atol=1e-9)
