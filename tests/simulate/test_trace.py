@@ -170,3 +170,33 @@ def test_identical_paths_for_chunk_sizes_1000_and_100000():
     a, b = run(1000), run(100_000)
     assert a.n_pulses == lines.n_pulses_total > 100_000
     assert a.equals(b)
+
+
+class _StubWater:
+    """Flat water at z = 0 seen from above; seen from below, a facet tilted ``tilt_deg``."""
+
+    def __init__(self, tilt_deg):
+        t = math.radians(tilt_deg)
+        self.up_normal = np.array([math.sin(t), 0.0, math.cos(t)])
+
+    def cast(self, origin_m, direction, nthreads=0):
+        t = -origin_m[:, 2] / direction[:, 2]
+        nrm = np.where((direction[:, 2] > 0)[:, None], self.up_normal, [0.0, 0.0, 1.0])
+        return np.ones(len(t), bool), t, nrm
+
+
+@pytest.mark.parametrize("tilt_deg, tir_expected", [(0.0, False), (40.0, False), (60.0, True)])
+def test_total_internal_reflection_on_the_way_back_is_flagged(tilt_deg, tir_expected):
+    # a nadir return meets a facet tilted by tilt_deg: TIR when tilt > critical 48.2° (n 1.3415)
+    world = World(water=_StubWater(tilt_deg), seabed=_plane_mesh(-5.0), n_air=1.0, n_water=N_WATER)
+    p = trace(_Pulses([[0.0, 0.0, 100.0]], [[0.0, 0.0, -1.0]]), world, TraceSettings(), 1e-3)
+    assert bool(p.flags[0, 0] & P.TIR_RETURN) is tir_expected
+    assert math.degrees(math.asin(1 / N_WATER)) == pytest.approx(48.2, abs=0.05)
+    if tir_expected:
+        assert p.transmittance_up[0, 0] == 0.0
+    else:
+        ci = math.cos(math.radians(tilt_deg))
+        ct = math.sqrt(1 - (N_WATER * math.sin(math.radians(tilt_deg))) ** 2)
+        rs = (N_WATER * ci - ct) / (N_WATER * ci + ct)
+        rp = (ci - N_WATER * ct) / (N_WATER * ct + ci)
+        assert p.transmittance_up[0, 0] == pytest.approx(1 - 0.5 * (rs**2 + rp**2), rel=1e-9)
