@@ -1,0 +1,256 @@
+"""Detect the water surface and the bottom in full waveforms (measured data only).
+
+Per waveform, vectorised over the batch:
+
+1. **Noise floor from the waveform itself**: the baseline and noise σ are the median and the
+   scaled MAD of the samples before the first return (the range gate opens before the surface;
+   the first ``noise_fraction`` of the window is used).
+2. **Matched filter**: a Gaussian of the system pulse's σ (the known system response),
+   which maximises the SNR of a Gaussian return in white noise.
+3. **Surface**: the first local maximum whose filtered amplitude exceeds ``threshold_sigma``
+   noise σ. **Bottom**: the strongest local maximum after ``surface + min_separation``; a
+   later peak than the surface that does not exceed the threshold is no bottom.
+4. **Sub-sample timing**: a parabola through the logarithm of the three samples around the peak
+   (exact for a Gaussian peak).
+5. **Shallow regime**: where the bottom is closer than ``min_separation`` the two returns merge
+   into one peak; a two-Gaussian fit (:func:`fit_merged`) separates them when the merged peak is
+   measurably wider than the system pulse, otherwise the pulse is flagged MERGED with no bottom.
+6. **Confidence**: ``1 − exp(−(SNR / threshold)^4 / 2)``, 0.4 at the threshold and → 1 above it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from pipeline.config import setting
+from pipeline.process.returns import DetectorFlag
+
+__all__ = ["DetectSettings", "WaveformDetections", "detect_full_waveform", "fit_merged"]
+
+FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
+MAD_TO_SIGMA = 1.4826
+
+
+@dataclass(frozen=True, kw_only=True)
+class DetectSettings:
+    """Detection thresholds."""
+
+    threshold_sigma: float = setting(5.0, gt=0.0, le=100.0, doc="detection threshold, noise σ")
+    noise_fraction: float = setting(
+        0.1, gt=0.0, lt=0.9, doc="leading part of the window used for the noise floor"
+    )
+    min_separation_fwhm: float = setting(
+        1.5, gt=0.0, le=20.0, doc="surface-bottom separation below which returns merge"
+    )
+    fit_merged: bool = setting(True, doc="separate merged returns by a two-Gaussian fit")
+
+
+@dataclass(frozen=True)
+class WaveformDetections:
+    """Detected returns per waveform, shapes ``(n_pulses,)``.
+
+    Times are from the start of each waveform's time axis (``t0_s``): round-trip times.
+    Absent returns have their mask False and 0 in the other fields (never NaN).
+    """
+
+    has_surface: np.ndarray
+    t_surface_s: np.ndarray
+    surface_amplitude: np.ndarray
+    surface_confidence: np.ndarray
+    has_bottom: np.ndarray
+    t_bottom_s: np.ndarray
+    bottom_amplitude: np.ndarray
+    bottom_confidence: np.ndarray
+    noise_sigma: np.ndarray
+    flags: np.ndarray
+
+
+def _confidence(snr: np.ndarray, threshold: float) -> np.ndarray:
+    return 1.0 - np.exp(-0.5 * (np.maximum(snr, 0.0) / threshold) ** 4)
+
+
+def _parabolic_peak(y: np.ndarray, idx: np.ndarray):
+    """Sub-sample peak position, height and σ (samples) from three samples (log-parabola)."""
+    n = y.shape[1]
+    rows = np.arange(y.shape[0])
+    i = np.clip(idx, 1, n - 2)
+    ym, y0, yp = y[rows, i - 1], y[rows, i], y[rows, i + 1]
+    floor = 1e-12 * np.maximum(np.abs(y0), 1e-30)
+    lm, l0, lp = (np.log(np.maximum(v, floor)) for v in (ym, y0, yp))
+    den = lm - 2.0 * l0 + lp
+    ok = (ym > 0) & (y0 > 0) & (yp > 0) & (den < 0)
+    off = np.where(ok, 0.5 * (lm - lp) / np.where(ok, den, -1.0), 0.0)
+    off = np.clip(off, -0.5, 0.5)
+    height = np.where(ok, np.exp(l0 - 0.25 * (lm - lp) * off), y0)
+    # a Gaussian's log has curvature -1/σ²
+    width = np.where(ok, np.sqrt(-1.0 / np.where(ok, den, -1.0)), 0.0)
+    return i + off, height, width
+
+
+def detect_full_waveform(
+    samples: np.ndarray,
+    dt_s: float,
+    pulse_fwhm_s: float,
+    settings: DetectSettings | None = None,
+) -> WaveformDetections:
+    """Find the surface and bottom returns in a batch of waveforms.
+
+    Parameters
+    ----------
+    samples : (n_pulses, n_samples) array_like
+        Digitised waveforms (any linear unit), baseline included.
+    dt_s : float
+        Sample interval, seconds.
+    pulse_fwhm_s : float
+        FWHM of the system response (transmitted pulse ⊗ detector), seconds.
+    settings : DetectSettings, optional
+
+    Returns
+    -------
+    WaveformDetections
+        Times relative to the first sample.
+    """
+    s = settings or DetectSettings()
+    y = np.asarray(samples, dtype=np.float64)
+    n, m = y.shape
+    sigma_samples = pulse_fwhm_s * FWHM_TO_SIGMA / dt_s
+    k = max(4, int(s.noise_fraction * m))
+    baseline = np.median(y[:, :k], axis=1)
+    filt = gaussian_filter1d(y - baseline[:, None], sigma_samples, axis=1, mode="nearest")
+    # raw noise σ from first differences over the whole waveform (robust: returns are a few
+    # samples wide, the MAD ignores them), then through the filter's own discrete kernel
+    diff = np.diff(y, axis=1)
+    noise = MAD_TO_SIGMA * np.median(np.abs(diff - np.median(diff, axis=1)[:, None]), axis=1)
+    impulse = np.zeros(int(8 * sigma_samples) * 2 + 3)
+    impulse[impulse.size // 2] = 1.0
+    kernel = gaussian_filter1d(impulse, sigma_samples, mode="constant")
+    noise_f = noise / math.sqrt(2.0) * math.sqrt(float(np.sum(kernel**2)))
+    # a noise-free waveform still needs a finite threshold: a tiny fraction of its peak
+    noise_f = np.maximum(noise_f, 1e-9 * np.max(np.abs(filt), axis=1) + 1e-300)
+    thr = s.threshold_sigma * noise_f
+    peak = np.zeros_like(filt, dtype=bool)
+    peak[:, 1:-1] = (filt[:, 1:-1] >= filt[:, :-2]) & (filt[:, 1:-1] > filt[:, 2:])
+    strong = peak & (filt > thr[:, None])
+    strong[:, :k] = False  # the noise window holds no return by construction
+    has_s = strong.any(axis=1)
+    i_s = np.where(has_s, np.argmax(strong, axis=1), 0)
+    t_idx_s, amp_s, width_s = _parabolic_peak(filt, i_s)
+
+    sep = s.min_separation_fwhm * pulse_fwhm_s / dt_s
+    after = np.arange(m)[None, :] > (i_s + sep)[:, None]
+    cand = strong & after & has_s[:, None]
+    has_b = cand.any(axis=1)
+    i_b = np.where(has_b, np.argmax(np.where(cand, filt, -np.inf), axis=1), 0)
+    t_idx_b, amp_b, _ = _parabolic_peak(filt, i_b)
+
+    flags = np.zeros(n, dtype=np.uint16)
+    # a surface peak wider than the system response hides a bottom just below it
+    # (the filtered system response has σ √2 samples; 15 % wider means a second return)
+    merged = has_s & ~has_b & (width_s > 1.15 * math.sqrt(2.0) * sigma_samples)
+    flags[merged] |= np.uint16(DetectorFlag.MERGED)
+    if s.fit_merged and merged.any():
+        idx = np.flatnonzero(merged)
+        ts, tb, a_s, a_b, ok = fit_merged(filt[idx], t_idx_s[idx], sigma_samples)
+        good = ok & (a_b > thr[idx])
+        sel = idx[good]
+        t_idx_s[sel], t_idx_b[sel], amp_s[sel], amp_b[sel] = (
+            ts[good],
+            tb[good],
+            a_s[good],
+            a_b[good],
+        )
+        has_b[sel] = True
+    snr_s = amp_s / noise_f
+    snr_b = amp_b / noise_f
+    flags[has_s & (snr_s < 2 * s.threshold_sigma)] |= np.uint16(DetectorFlag.LOW_SNR)
+    zero = np.zeros(n)
+    return WaveformDetections(
+        has_surface=has_s,
+        t_surface_s=np.where(has_s, t_idx_s * dt_s, zero),
+        surface_amplitude=np.where(has_s, amp_s, zero),
+        surface_confidence=np.where(has_s, _confidence(snr_s, s.threshold_sigma), zero),
+        has_bottom=has_b,
+        t_bottom_s=np.where(has_b, t_idx_b * dt_s, zero),
+        bottom_amplitude=np.where(has_b, amp_b, zero),
+        bottom_confidence=np.where(has_b, _confidence(snr_b, s.threshold_sigma), zero),
+        noise_sigma=noise_f,
+        flags=flags,
+    )
+
+
+def fit_merged(filt: np.ndarray, t_guess: np.ndarray, sigma_samples: float, iterations: int = 30):
+    """Two Gaussians of the filtered system width fitted to merged returns (batched LM).
+
+    Parameters
+    ----------
+    filt : (n, m) ndarray
+        Matched-filtered, baseline-free waveforms.
+    t_guess : (n,) ndarray
+        Sample index of the merged peak.
+    sigma_samples : float
+        σ of the system response in samples (the filtered return has σ √2).
+
+    Returns
+    -------
+    t_surface, t_bottom, a_surface, a_bottom : (n,) ndarray
+        Sample positions and heights of the two components, ``t_surface < t_bottom``.
+    ok : (n,) bool
+        Converged with both amplitudes positive and the two centres apart.
+    """
+    n, m = filt.shape
+    sg = math.sqrt(2.0) * sigma_samples
+    x = np.arange(m, dtype=float)[None, :]
+    # fit only around the merged peak
+    window = np.abs(x - t_guess[:, None]) <= 6.0 * sg
+    peak_h = np.max(np.where(window, filt, -np.inf), axis=1)
+    p = np.column_stack([t_guess - 0.5 * sg, t_guess + 0.5 * sg, peak_h, 0.3 * peak_h])
+    lam = np.full(n, 1e-2)
+
+    def model(p):
+        g1 = np.exp(-0.5 * ((x - p[:, 0:1]) / sg) ** 2)
+        g2 = np.exp(-0.5 * ((x - p[:, 1:2]) / sg) ** 2)
+        return p[:, 2:3] * g1 + p[:, 3:4] * g2, g1, g2
+
+    def cost(p):
+        f, _, _ = model(p)
+        return np.sum(np.where(window, (f - filt) ** 2, 0.0), axis=1)
+
+    c = cost(p)
+    for _ in range(iterations):
+        f, g1, g2 = model(p)
+        r = np.where(window, f - filt, 0.0)
+        jac = (
+            np.stack(
+                [
+                    p[:, 2:3] * g1 * (x - p[:, 0:1]) / sg**2,
+                    p[:, 3:4] * g2 * (x - p[:, 1:2]) / sg**2,
+                    g1,
+                    g2,
+                ],
+                axis=2,
+            )
+            * window[:, :, None]
+        )
+        jtj = np.einsum("nmi,nmj->nij", jac, jac)
+        jtr = np.einsum("nmi,nm->ni", jac, r)
+        damp = jtj + lam[:, None, None] * np.eye(4)[None] * (
+            np.diagonal(jtj, axis1=1, axis2=2)[:, None, :] + 1e-12
+        )
+        step = np.linalg.solve(damp, -jtr[:, :, None])[:, :, 0]
+        trial = p + step
+        c_new = cost(trial)
+        better = c_new < c
+        p = np.where(better[:, None], trial, p)
+        c = np.where(better, c_new, c)
+        lam = np.where(better, lam * 0.3, lam * 10.0)
+    lo = np.minimum(p[:, 0], p[:, 1])
+    hi = np.maximum(p[:, 0], p[:, 1])
+    first_is_0 = p[:, 0] <= p[:, 1]
+    a_lo = np.where(first_is_0, p[:, 2], p[:, 3])
+    a_hi = np.where(first_is_0, p[:, 3], p[:, 2])
+    ok = (a_lo > 0) & (a_hi > 0) & (hi - lo > 0.3 * sg) & np.isfinite(c)
+    return lo, hi, a_lo, a_hi, ok
