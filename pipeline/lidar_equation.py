@@ -162,7 +162,7 @@ def nadir_budget(scene, altitude_m: float, depth_m: float) -> PhotonBudget:
     r0 = _fresnel_r0(scene)
     t0 = 1.0 - r0
     water = scene.water
-    n = water.phase_index
+    n = water.phase_index / scene.atmosphere.refractive_index
     surface = dict(common)
     surface["surface_backscatter_per_sr"] = math.log(
         float(surface_backscatter_per_sr(r0, water.wind_speed_m_s))
@@ -173,7 +173,8 @@ def nadir_budget(scene, altitude_m: float, depth_m: float) -> PhotonBudget:
     floor["water_two_way"] = 2.0 * float(optics.log_transmittance(water.extinction_per_m, depth_m))
     rho = scene.seabed.reflectance
     floor["bottom_lambertian_per_sr"] = math.log(rho / math.pi) if rho > 0 else -math.inf
-    # n² radiance law and the footprint seen through the surface: A / (n H + D)².
+    # n² radiance law and the footprint seen through the surface: A / (n H + D)², with n the
+    # relative index water/air
     floor["inverse_range_squared"] = -2.0 * math.log(n * altitude_m + depth_m)
     return PhotonBudget(surface_log_terms=surface, floor_log_terms=floor)
 
@@ -202,7 +203,7 @@ def column_log_photons_per_m(scene, altitude_m: float, z_m):
         + 2.0 * math.log(t0)
         + 2.0 * optics.log_transmittance(water.extinction_per_m, z)
         + log_beta
-        - 2.0 * np.log(water.phase_index * altitude_m + z)
+        - 2.0 * np.log(water.phase_index / scene.atmosphere.refractive_index * altitude_m + z)
     )
 
 

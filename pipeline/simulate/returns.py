@@ -1,0 +1,395 @@
+"""Expected photoelectrons and time shapes of every return, per pulse and sub-ray, in log space.
+
+The lidar equation of the reference document (Figure 11),
+``N = N_L [beta dR] (A/R^2) [T T] [eta G] + N_B``, evaluated along each traced sub-ray
+(:class:`~pipeline.simulate.paths.Paths`) and kept as natural logarithms, so that a 100 m deep
+floor in turbid water (e^-3000) is as exact as a bright land echo. Common factor of every return:
+``ln N_L + ln eta_t + ln eta_r + ln A + ln G(R) + ln w_j - 2 alpha_air R``.
+
+Returns
+-------
+* **Water surface**: quasi-specular reflection from wave facets (Kirchhoff geometric optics):
+  a facet sends light back to the receiver only when its normal points along the beam, at local
+  normal incidence, so with Fresnel ``R_F(0)`` and the isotropic Gaussian (Cox-Munk) slope
+  density ``p(tan t) = exp(-tan^2 t / s^2) / (pi s^2)`` the intensity per sr per incident watt is
+  ``(1 - W) R_F(0) sec^5(t) p(tan t) / 4`` (``sec^4`` from slope space to solid angle and the
+  quadrupled reflected cone, ``sec`` from the footprint's spread), with ``t`` the incidence angle
+  on the mesh normal, plus whitecaps ``W rho_foam cos(t) / pi`` (Lambertian). At nadir this is
+  :func:`pipeline.lidar_equation.surface_backscatter_per_sr`. Slope variance (model choice):
+  ``s^2 = max(s^2_CoxMunk(U) - s^2_resolved, 0.003)``: the mesh's own facets already carry
+  ``s^2_resolved`` (0 for flat water: the full Cox-Munk value); the floor 0.003 is Cox & Munk's
+  clean-sea value at zero wind, ripples no mesh resolves, which also keeps the specular lobe
+  wider than the beam so sub-ray sampling converges.
+* **Land** (LAND sub-rays): Lambertian, ``rho cos(t) / pi``, ``rho`` a Table 1 graybody power
+  reflectance (desert sand by default), range ``R``.
+* **Bottom**: ``T_down T_up exp(-2 c L) (rho_b / pi) cos(t_b)`` times the refracted aperture term
+  (:mod:`.geometry`).
+* **Water column**: ``T_down T_up beta(180) ∫ exp(-2 c l) dOmega_w(l) dl``; ``T_up`` by
+  reciprocity at the entry facet (unpolarised T air→water at the same angle pair), because the
+  trace stage only gives ``T_up`` for bottom returns. NO_BOTTOM sub-rays scatter until the end
+  of the window.
+
+Time: echoes at ``2 n_air R / c0`` and ``+ 2 n_g L / c0`` (group index in water). Gaussian
+widths ``sigma^2 = sigma_pulse^2 + sigma_detector^2 (+ sigma_fs^2)``; forward-scattering
+stretching of the bottom echo (model choice, from the small-angle multiple-scattering path
+excess ``b <theta^2> L^2 / 4`` per way): ``sigma_fs = xi (c L) (2 n_g L / c0)`` with
+``xi = (b/c) <theta^2> / 4 ~ 0.01`` for ``b/c ~ 0.8`` and ``<theta^2> ~ 0.05 rad^2``; it keeps
+the echo symmetric (the real stretched echo is skewed late). The column of a pulse is one
+component: N-weighted mean start, decay rate ``2c + d ln(dOmega_w)/dl`` and duration.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline import lidar_equation as le
+from pipeline import optics
+from pipeline.config import setting
+from pipeline.profiler import FWHM_TO_SIGMA
+from pipeline.simulate import paths as P
+from pipeline.simulate.geometry import (
+    LOG_ZERO,
+    log_aperture_factor,
+    log_column_integral,
+    safe_log,
+    virtual_source_slopes,
+)
+
+__all__ = [
+    "ReturnSettings",
+    "ReturnBudget",
+    "MIN_MEAN_SQUARE_SLOPE",
+    "surface_mean_square_slope",
+    "log_surface_backscatter_per_sr",
+    "land_power_reflectance",
+    "forward_scatter_sigma_s",
+    "return_budget",
+]
+
+C0 = optics.SPEED_OF_LIGHT_M_S
+#: Cox & Munk (1954) clean-surface slope variance at zero wind: the unresolved floor.
+MIN_MEAN_SQUARE_SLOPE = le.COX_MUNK_INTERCEPT
+
+
+@dataclass(frozen=True, kw_only=True)
+class ReturnSettings:
+    """Model choices of the return budget that the scene does not hold elsewhere."""
+
+    land_surface: str = setting(
+        "desert_sand",
+        choices=tuple(optics.GRAYBODY_AMPLITUDE_PERCENT),
+        doc="Table 1 graybody surface of LAND sub-rays",
+    )
+    land_reflectivity_position: float = setting(
+        0.5, ge=0.0, le=1.0, doc="where in Table 1's amplitude range: 0 low end, 1 high end"
+    )
+    resolved_mean_square_slope: float = setting(
+        0.0, ge=0.0, le=1.0, doc="slope variance the water-surface mesh already carries"
+    )
+    forward_scatter_coefficient: float = setting(
+        0.01, ge=0.0, le=1.0, doc="xi of the bottom-echo stretching xi (c L)(2 n_g L / c0)"
+    )
+    full_overlap_range_m: float = setting(
+        0.0, ge=0.0, le=1e5, doc="G(R) = overlap_factor (R / R_full)^2 below this range"
+    )
+
+
+def surface_mean_square_slope(wind_speed_m_s, resolved_mss=0.0):
+    """Unresolved slope variance ``max(s^2_CM(U) - resolved, 0.003)`` of the surface facets."""
+    full = le.cox_munk_mean_square_slope(wind_speed_m_s)
+    return np.maximum(full - resolved_mss, MIN_MEAN_SQUARE_SLOPE)
+
+
+def log_surface_backscatter_per_sr(cos_t, fresnel_r0, mss, whitecap):
+    """Log of the surface backscatter per sr per incident watt at incidence ``t`` (see module).
+
+    Parameters
+    ----------
+    cos_t : ndarray
+        Cosine of the incidence angle on the (mesh) surface normal.
+    fresnel_r0 : float
+        Fresnel reflectance at normal incidence.
+    mss : float
+        Slope variance ``s^2`` of the unresolved facets.
+    whitecap : float
+        Whitecap cover fraction ``W``.
+
+    Returns
+    -------
+    ndarray
+        ``ln[(1 - W) R0 sec^5 t exp(-tan^2 t / s^2) / (4 pi s^2) + W rho_foam cos t / pi]``.
+    """
+    cos_t = np.clip(np.asarray(cos_t, dtype=np.float64), 0.0, 1.0)
+    log_cos = safe_log(cos_t)
+    ok = cos_t > 1e-100  # tan^2 below 1e200: finite, and exp(-tan^2/s^2) is 0 anyway
+    tan2 = np.where(ok, (1.0 - cos_t**2) / np.where(ok, cos_t, 1.0) ** 2, 1e200)
+    glint = (
+        math.log(fresnel_r0 / (4.0 * math.pi * mss)) + math.log1p(-whitecap)
+        if whitecap < 1.0
+        else LOG_ZERO
+    )
+    log_glint = glint - 5.0 * log_cos - tan2 / mss
+    log_foam = (
+        math.log(whitecap * le.FOAM_REFLECTANCE / math.pi) + log_cos if whitecap > 0 else LOG_ZERO
+    )
+    return np.maximum(np.logaddexp(log_glint, log_foam), LOG_ZERO)
+
+
+def land_power_reflectance(settings: ReturnSettings) -> float:
+    """Power reflectance of the Table 1 land surface at the chosen point of its range."""
+    lo, hi = optics.GRAYBODY_AMPLITUDE_PERCENT[settings.land_surface]
+    amp = lo + settings.land_reflectivity_position * (hi - lo)
+    return float(optics.graybody_power_reflectance(amp))
+
+
+def forward_scatter_sigma_s(xi, extinction_per_m, water_path_m, group_index):
+    """Forward-scattering stretch ``xi (c L)(2 n_g L / c0)`` of the bottom echo, seconds."""
+    length = np.asarray(water_path_m, dtype=np.float64)
+    return xi * extinction_per_m * length * (2.0 * group_index * length / C0)
+
+
+@dataclass(frozen=True)
+class ReturnBudget:
+    """Expected photoelectrons (log) and time shapes, shapes ``(n_pulses, n_sub)`` unless stated.
+
+    Attributes
+    ----------
+    pulse_id : (n_pulses,) int64
+    subray_flags : uint8
+        The trace flags (:mod:`pipeline.simulate.paths`).
+    t0_s : (n_pulses,) float64
+        Time of sample 0 (bin centre) after emission; the window is
+        ``[t0 - dt/2, t0 + (n_samples - 1/2) dt)``.
+    sample_interval_s : float
+    n_samples : int
+    log_surface, log_land, log_bottom, log_column : float64
+        ln expected photoelectrons of each sub-ray's water-surface, land, bottom and column
+        return (:data:`~pipeline.simulate.geometry.LOG_ZERO` where there is none).
+    t_surface_s, sigma_surface_s : float64
+        Centre and Gaussian sigma of the surface or land echo, seconds.
+    t_bottom_s, sigma_bottom_s : float64
+        Centre and sigma of the bottom echo (0 where there is none).
+    column_log_pe, column_start_s, column_width_s, column_rate_per_s, column_sigma_s : (n_pulses,)
+        The pulse's water column as one truncated-exponential-plus-Gaussian component.
+    background_rate_hz : (n_pulses,) float64
+        Solar background plus dark counts, photoelectrons per second.
+    """
+
+    pulse_id: np.ndarray
+    subray_flags: np.ndarray
+    t0_s: np.ndarray
+    sample_interval_s: float
+    n_samples: int
+    log_surface: np.ndarray
+    log_land: np.ndarray
+    log_bottom: np.ndarray
+    log_column: np.ndarray
+    t_surface_s: np.ndarray
+    sigma_surface_s: np.ndarray
+    t_bottom_s: np.ndarray
+    sigma_bottom_s: np.ndarray
+    column_log_pe: np.ndarray
+    column_start_s: np.ndarray
+    column_width_s: np.ndarray
+    column_rate_per_s: np.ndarray
+    column_sigma_s: np.ndarray
+    background_rate_hz: np.ndarray
+
+    @property
+    def n_pulses(self) -> int:
+        """Pulses in the chunk."""
+        return int(self.pulse_id.shape[0])
+
+    @property
+    def window_start_s(self) -> np.ndarray:
+        """(n_pulses,) opening time of the window (edge of sample 0's bin)."""
+        return self.t0_s - 0.5 * self.sample_interval_s
+
+    @property
+    def window_length_s(self) -> float:
+        """Length of the window, ``n_samples * dt``."""
+        return self.n_samples * self.sample_interval_s
+
+    def totals(self) -> dict[str, np.ndarray]:
+        """(n_pulses,) expected photoelectrons of each return type (0.0 below float range)."""
+
+        def lse(a):
+            m = np.max(a, axis=1)
+            return m + np.log(np.sum(np.exp(a - m[:, None]), axis=1))
+
+        out = {
+            "surface": lse(self.log_surface),
+            "land": lse(self.log_land),
+            "bottom": lse(self.log_bottom),
+            "column": self.column_log_pe,
+        }
+        out = {k: np.exp(np.maximum(v, -745.0)) * (v > LOG_ZERO / 2) for k, v in out.items()}
+        out["background"] = self.background_rate_hz * self.window_length_s
+        return out
+
+
+def _log_common(scene) -> float:
+    """Log of the factors every return shares: photons, efficiencies, aperture, overlap."""
+    sysm = scene.system
+    photons = float(optics.photons_per_pulse(sysm.pulse_energy_j, sysm.wavelength_nm * 1e-9))
+    aperture_m2 = math.pi * (sysm.telescope_diameter_m / 2.0) ** 2
+    terms = [photons, sysm.transmitter_efficiency, sysm.receiver_efficiency, aperture_m2]
+    terms.append(sysm.overlap_factor)
+    return float(sum(safe_log(t) for t in terms))
+
+
+def return_budget(paths, scene, detector, settings: ReturnSettings | None = None) -> ReturnBudget:
+    """Evaluate the lidar equation for every sub-ray of a chunk of traced pulses.
+
+    Parameters
+    ----------
+    paths : Paths
+        Traced geometry, ``(n_pulses, n_sub)``.
+    scene : Scene
+        Uses ``system``, ``scanner.receiver_fov_mrad``, ``atmosphere``, ``water``,
+        ``seabed.reflectance`` and ``background``.
+    detector : DetectorSettings
+        For the window (sample rate, length, pre-trigger) and the detector's timing spread.
+    settings : ReturnSettings, optional
+
+    Returns
+    -------
+    ReturnBudget
+    """
+    rs = settings or ReturnSettings()
+    n_a = scene.atmosphere.refractive_index
+    water = scene.water
+    n_w, n_g, c_w = water.phase_index, water.group_index, water.extinction_per_m
+    flags = np.asarray(paths.flags)
+    n, k = flags.shape
+    wet = (flags & (P.MISS | P.LAND)) == 0
+    land = (flags & P.LAND) != 0
+    bottom = flags == P.OK
+    hit = (flags & P.MISS) == 0
+    r_air = np.where(hit, paths.air_range_m, 0.0)
+    cos_a = np.where(hit, np.cos(np.clip(paths.incidence_rad, 0.0, 0.5 * np.pi)), 0.0)
+    length = np.where(bottom, paths.water_path_m, 0.0)
+
+    # common factors per sub-ray: pulse, optics, sub-ray weight, air two-way, overlap, 1/R^2
+    base = _log_common(scene) + safe_log(paths.subray_weight)[None, :]
+    base = base + 2.0 * optics.log_transmittance(scene.atmosphere.extinction_per_m, r_air)
+    if rs.full_overlap_range_m > 0.0:
+        base = base + 2.0 * safe_log(np.minimum(r_air / rs.full_overlap_range_m, 1.0))
+    inv_r2 = -2.0 * safe_log(r_air)
+
+    r0, _ = optics.fresnel_unpolarised(n_a, n_w, 0.0)
+    mss = float(surface_mean_square_slope(water.wind_speed_m_s, rs.resolved_mean_square_slope))
+    white = float(le.whitecap_fraction(water.wind_speed_m_s))
+    log_bs = log_surface_backscatter_per_sr(cos_a, float(r0), mss, white)
+    log_surface = np.where(wet, base + log_bs + inv_r2, LOG_ZERO)
+    rho_land = land_power_reflectance(rs)
+    log_land = np.where(
+        land, base + safe_log(rho_land / math.pi) + safe_log(cos_a) + inv_r2, LOG_ZERO
+    )
+
+    cos_b = np.cos(np.clip(paths.bottom_incidence_rad, 0.0, 0.5 * np.pi))
+    log_bot = (
+        base
+        + safe_log(paths.transmittance_down)
+        + safe_log(paths.transmittance_up)
+        + 2.0 * optics.log_transmittance(c_w, length)
+        + safe_log(scene.seabed.reflectance / math.pi)
+        + safe_log(cos_b)
+        + log_aperture_factor(np.where(bottom, r_air, 1.0), length, cos_a, n_a, n_w)
+    )
+    log_bot = np.where(bottom, np.maximum(log_bot, LOG_ZERO), LOG_ZERO)
+
+    # times and widths
+    dt = detector.sample_interval_s
+    m = detector.n_samples
+    t_surf = np.where(hit, 2.0 * n_a * r_air / C0, 0.0)
+    t_bot = np.where(bottom, t_surf + 2.0 * n_g * length / C0, 0.0)
+    sig_sys2 = (scene.system.pulse_fwhm_s * FWHM_TO_SIGMA) ** 2 + (
+        detector.impulse_response_fwhm_s * FWHM_TO_SIGMA
+    ) ** 2
+    sig_fs = forward_scatter_sigma_s(rs.forward_scatter_coefficient, c_w, length, n_g)
+    sig_bot = np.where(bottom, np.sqrt(sig_sys2 + sig_fs**2), 0.0)
+    sig_surf = np.full((n, k), math.sqrt(sig_sys2))
+    t_first = np.min(np.where(hit, t_surf, np.inf), axis=1)
+    t_first = np.where(np.isfinite(t_first), t_first, detector.pre_trigger_s)
+    t0 = np.floor((t_first - detector.pre_trigger_s) / dt) * dt
+    t_end = t0 + (m - 0.5) * dt
+
+    # water column: NO_BOTTOM sub-rays scatter until the window closes
+    no_bottom = wet & ((flags & P.NO_BOTTOM) != 0)
+    col_len = np.where(bottom | ((flags & P.TIR_RETURN) != 0), paths.water_path_m, 0.0)
+    open_len = np.maximum(t_end[:, None] - t_surf, 0.0) * C0 / (2.0 * n_g)
+    col_len = np.where(wet, np.where(no_bottom, open_len, col_len), 0.0)
+    _, t_entry = optics.fresnel_unpolarised(n_a, n_w, np.arccos(np.where(wet, cos_a, 1.0)))
+    log_col = (
+        base
+        + 2.0 * safe_log(np.where(wet, t_entry, 0.0))  # T_down and T_up by reciprocity
+        + safe_log(water.backscatter_180_per_m_sr)
+        + log_column_integral(c_w, col_len, np.where(wet, r_air, 1.0), cos_a, n_a, n_w)
+    )
+    log_col = np.where(wet & (col_len > 0.0), np.maximum(log_col, LOG_ZERO), LOG_ZERO)
+    col = _column_aggregate(log_col, t_surf, col_len, r_air, cos_a, c_w, n_a, n_w, n_g, sig_sys2)
+
+    # background: sunlight off water or land seen through the air, plus dark counts
+    w = np.asarray(paths.subray_weight)[None, :] * hit
+    wsum = np.maximum(w.sum(axis=1), 1e-300)
+    r_axis = (w * r_air).sum(axis=1) / wsum
+    f_land = (w * land).sum(axis=1) / wsum
+    albedo = (1.0 - f_land) * scene.background.scene_reflectance + f_land * rho_land
+    unit = dataclasses.replace(
+        scene, background=dataclasses.replace(scene.background, scene_reflectance=1.0)
+    )
+    solar = le.solar_background_rate_hz(unit, 0.0)
+    air = optics.beer_lambert_transmittance(scene.atmosphere.extinction_per_m, r_axis)
+    bg = solar * albedo * air + scene.system.dark_count_rate_hz
+
+    return ReturnBudget(
+        pulse_id=np.asarray(paths.pulse_id, dtype=np.int64),
+        subray_flags=flags,
+        t0_s=t0,
+        sample_interval_s=dt,
+        n_samples=m,
+        log_surface=log_surface,
+        log_land=log_land,
+        log_bottom=log_bot,
+        log_column=log_col,
+        t_surface_s=t_surf,
+        sigma_surface_s=sig_surf,
+        t_bottom_s=t_bot,
+        sigma_bottom_s=sig_bot,
+        background_rate_hz=np.asarray(bg, dtype=np.float64),
+        **col,
+    )
+
+
+def _column_aggregate(log_col, t_surf, col_len, r_air, cos_a, c_w, n_a, n_w, n_g, sig_sys2):
+    """One column component per pulse: N-weighted start, duration, decay rate and blur."""
+    lmax = np.max(log_col, axis=1)
+    present = log_col > LOG_ZERO / 2
+    q = np.where(present, np.exp(log_col - lmax[:, None]), 0.0)  # relative: never overflows
+    qsum = q.sum(axis=1)
+    has = qsum > 0.0
+    wq = q / np.where(has, qsum, 1.0)[:, None]
+    log_total = np.where(has, lmax + np.log(np.where(has, qsum, 1.0)), LOG_ZERO)
+    start = (wq * t_surf).sum(axis=1)
+    spread2 = (wq * (t_surf - start[:, None]) ** 2).sum(axis=1)
+    to_time = 2.0 * n_g / C0  # seconds per metre of in-water path, two-way
+    width = (wq * col_len).sum(axis=1) * to_time
+    # decay per metre: 2c plus the slope of the aperture term at the mean scattering depth
+    s = 2.0 * c_w
+    mean_l = np.minimum(1.0 / s if s > 0 else np.inf, 0.5 * col_len)
+    k_t, k_s = virtual_source_slopes(cos_a, n_a, n_w)
+    r = np.where(present, r_air, 1.0)
+    gamma = np.where(present, k_t / (r + k_t * mean_l) + k_s / (r + k_s * mean_l), 0.0)
+    rate = (wq * (s + gamma)).sum(axis=1) / to_time
+    return {
+        "column_log_pe": log_total,
+        "column_start_s": start,
+        "column_width_s": width,
+        "column_rate_per_s": rate,
+        "column_sigma_s": np.sqrt(sig_sys2 + spread2),
+    }
