@@ -13,7 +13,7 @@ import time
 import tomllib
 from pathlib import Path
 
-from pipeline.run import survey_extent_m
+from pipeline.run_survey import survey_extent_m
 from pipeline.scene import parse_scene
 from pipeline.simulate import paths as P
 from pipeline.simulate import survey

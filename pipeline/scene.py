@@ -22,7 +22,10 @@ from typing import Any
 
 from pipeline.config import from_mapping, setting
 from pipeline.errors import SceneError
+from pipeline.process.settings import ProcessSettings
+from pipeline.simulate.detector import DetectorSettings
 from pipeline.simulate.noise import NavigationNoiseSettings
+from pipeline.simulate.returns import ReturnSettings
 from pipeline.simulate.scanner import ScannerSettings
 from pipeline.simulate.trace_settings import TraceSettings
 from pipeline.simulate.trajectory import AttitudeSettings, FlightSettings
@@ -53,6 +56,9 @@ class SceneInfo:
     """Name, seed and free-text description of a scene."""
 
     name: str = setting(doc="short name used in output files")
+    preset: str = setting(
+        "", doc="system preset merged under this file's tables (pipeline/scenes/presets)"
+    )
     seed: int = setting(0, ge=0, doc="seed of every random draw (with the chunk index)")
     description: str = setting("", doc="free text")
 
@@ -161,11 +167,38 @@ class Scene:
         NavigationNoiseSettings(), doc="GNSS/INS errors of the measured trajectory"
     )
     trace: TraceSettings = setting(TraceSettings(), doc="sub-rays per footprint")
+    detector: DetectorSettings = setting(DetectorSettings(), doc="receiver and digitiser")
+    returns: ReturnSettings = setting(ReturnSettings(), doc="return-model choices")
+    process: ProcessSettings = setting(ProcessSettings(), doc="processing of measured data")
     run: RunSettings = setting(RunSettings(), doc="chunking")
 
     def to_dict(self) -> dict[str, Any]:
         """Return the scene as plain data (what was validated, defaults filled in)."""
         return dataclasses.asdict(self)
+
+
+def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    """Deep merge: tables of ``over`` update those of ``base`` key by key."""
+    out = dict(base)
+    for key, value in over.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def _with_preset(data: dict[str, Any]) -> dict[str, Any]:
+    """The scene mapping with its preset's tables underneath (the file's keys win)."""
+    info = data.get("scene")
+    name = info.get("preset") if isinstance(info, dict) else None
+    if not name:
+        return data
+    if not isinstance(name, str):
+        raise SceneError(f"`scene.preset` must be a string; got {name!r}.")
+    from pipeline.simulate.detector import load_preset
+
+    return _merge(load_preset(name), data)
 
 
 def parse_scene(data: dict[str, Any], source: str = "scene") -> Scene:
@@ -176,6 +209,7 @@ def parse_scene(data: dict[str, Any], source: str = "scene") -> Scene:
     SceneError
         Naming the first offending key, its value and what is allowed.
     """
+    data = _with_preset(data)
     scene = from_mapping(Scene, data, "")
     if scene.profiler is None and scene.flight is None:
         raise SceneError(
@@ -229,4 +263,8 @@ def plan_stages(scene: Scene) -> list[tuple[str, bool, str]]:
         ("terrain", survey, f"{why_survey}: seabed and water-surface truth and meshes"),
         ("survey", survey, f"{why_survey}: flight lines, attitude, scanner, measured nav"),
         ("trace", survey, f"{why_survey}: refracted ray paths to the seabed"),
+        ("receiver", survey, f"{why_survey}: waveforms or photon events per pulse"),
+        ("detect", survey, f"{why_survey}: surface and bottom returns from measured data"),
+        ("process", survey, f"{why_survey}: surface fit, refraction, classes, grid"),
+        ("evaluate", survey, f"{why_survey}: points and grid against the truth"),
     ]

@@ -1,7 +1,6 @@
 import json
 import tomllib
 
-import numpy as np
 import pytest
 
 from pipeline.cli import main
@@ -49,11 +48,16 @@ def small_survey():
     return parse_scene(data)
 
 
-def test_survey_scene_traces_and_summarises(tmp_path, small_survey):
+def test_survey_scene_end_to_end(tmp_path, small_survey):
     manifest = run_scene(small_survey, tmp_path, log=lambda _: None)
-    summary = json.loads((tmp_path / "trace_summary.json").read_text())
-    assert summary["pulses"] == summary["subray_flags"]["ok"] + summary["subray_flags"]["land"]
-    assert summary["subray_flags"]["miss"] == 0
-    assert np.isclose(summary["swath_width_m"], 2 * 400 * np.tan(np.radians(20)))
+    ev = json.loads((tmp_path / "evaluation.json").read_text())
+    flags = ev["subray_flags"]
+    assert ev["pulses"] == flags["ok"] + flags["land"] and flags["miss"] == 0
     stages = {s["stage"]: s["runs"] for s in manifest["plan"]}
-    assert stages["trace"] and not stages["photon_budget"]
+    assert stages["trace"] and stages["evaluate"] and not stages["photon_budget"]
+    # the refraction-corrected points are far better than the uncorrected ones
+    err = ev["error"]
+    assert err["points"]["n"] > 100
+    assert err["points"]["rmse_m"] < 0.5 * err["points_uncorrected"]["rmse_m"]
+    for name in ("points.laz", "grid.tif"):
+        assert (tmp_path / name).stat().st_size > 1000

@@ -8,8 +8,10 @@ Per waveform, vectorised over the batch:
 2. **Matched filter**: a Gaussian of the system pulse's σ (the known system response),
    which maximises the SNR of a Gaussian return in white noise.
 3. **Surface**: the first local maximum whose filtered amplitude exceeds ``threshold_sigma``
-   noise σ. **Bottom**: the strongest local maximum after ``surface + min_separation``; a
-   later peak than the surface that does not exceed the threshold is no bottom.
+   noise σ. **Bottom**: the strongest local maximum after ``surface + min_separation`` of the
+   filtered waveform minus its running median over ``trend_fwhm`` system widths: the
+   water-column return decays smoothly over tens of ns and the median follows it, while a
+   bottom echo a few samples wide stands out of it. No peak above the threshold: no bottom.
 4. **Sub-sample timing**: a parabola through the logarithm of the three samples around the peak
    (exact for a Gaussian peak).
 5. **Shallow regime**: where the bottom is closer than ``min_separation`` the two returns merge
@@ -24,7 +26,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
+from scipy.ndimage import gaussian_filter1d, median_filter
 
 from pipeline.config import setting
 from pipeline.process.returns import DetectorFlag
@@ -47,6 +49,9 @@ class DetectSettings:
         1.5, gt=0.0, le=20.0, doc="surface-bottom separation below which returns merge"
     )
     fit_merged: bool = setting(True, doc="separate merged returns by a two-Gaussian fit")
+    trend_fwhm: float = setting(
+        8.0, ge=2.0, le=100.0, doc="running-median width (system FWHMs) of the column trend"
+    )
 
 
 @dataclass(frozen=True)
@@ -96,6 +101,8 @@ def detect_full_waveform(
     dt_s: float,
     pulse_fwhm_s: float,
     settings: DetectSettings | None = None,
+    noise_samples: int | None = None,
+    shot_noise_counts: float = 0.0,
 ) -> WaveformDetections:
     """Find the surface and bottom returns in a batch of waveforms.
 
@@ -108,6 +115,14 @@ def detect_full_waveform(
     pulse_fwhm_s : float
         FWHM of the system response (transmitted pulse ⊗ detector), seconds.
     settings : DetectSettings, optional
+    noise_samples : int, optional
+        Leading samples known to hold no return (the range gate's pre-trigger); they set the
+        baseline. Default: ``settings.noise_fraction`` of the window.
+    shot_noise_counts : float
+        ``F·G``: excess-noise factor × counts per photoelectron. The variance of a sample
+        holding ``y`` counts of signal is then ``σ² + F·G·y``, so the bottom threshold rises
+        over the water-column return, whose shot noise would otherwise pass as echoes.
+        0 (default): signal-independent noise.
 
     Returns
     -------
@@ -118,7 +133,8 @@ def detect_full_waveform(
     y = np.asarray(samples, dtype=np.float64)
     n, m = y.shape
     sigma_samples = pulse_fwhm_s * FWHM_TO_SIGMA / dt_s
-    k = max(4, int(s.noise_fraction * m))
+    k = int(s.noise_fraction * m) if noise_samples is None else int(noise_samples)
+    k = min(max(k, 4), m - 1)
     baseline = np.median(y[:, :k], axis=1)
     filt = gaussian_filter1d(y - baseline[:, None], sigma_samples, axis=1, mode="nearest")
     # raw noise σ from first differences over the whole waveform (robust: returns are a few
@@ -128,7 +144,8 @@ def detect_full_waveform(
     impulse = np.zeros(int(8 * sigma_samples) * 2 + 3)
     impulse[impulse.size // 2] = 1.0
     kernel = gaussian_filter1d(impulse, sigma_samples, mode="constant")
-    noise_f = noise / math.sqrt(2.0) * math.sqrt(float(np.sum(kernel**2)))
+    kernel_sq = float(np.sum(kernel**2))
+    noise_f = noise / math.sqrt(2.0) * math.sqrt(kernel_sq)
     # a noise-free waveform still needs a finite threshold: a tiny fraction of its peak
     noise_f = np.maximum(noise_f, 1e-9 * np.max(np.abs(filt), axis=1) + 1e-300)
     thr = s.threshold_sigma * noise_f
@@ -141,11 +158,21 @@ def detect_full_waveform(
     t_idx_s, amp_s, width_s = _parabolic_peak(filt, i_s)
 
     sep = s.min_separation_fwhm * pulse_fwhm_s / dt_s
+    width = max(3, int(round(s.trend_fwhm * pulse_fwhm_s / dt_s)) | 1)
+    resid = filt - median_filter(filt, size=(1, width), mode="nearest")
+    rpeak = np.zeros_like(peak)
+    rpeak[:, 1:-1] = (resid[:, 1:-1] >= resid[:, :-2]) & (resid[:, 1:-1] > resid[:, 2:])
     after = np.arange(m)[None, :] > (i_s + sep)[:, None]
-    cand = strong & after & has_s[:, None]
+    # local noise: electronic + shot noise of the trend the bottom sits on (filtered domain)
+    trend = np.maximum(filt - resid, 0.0)
+    local_var = noise_f[:, None] ** 2 + shot_noise_counts * trend * kernel_sq
+    local_thr = s.threshold_sigma * np.sqrt(local_var)
+    cand = rpeak & after & has_s[:, None] & (resid > local_thr)
     has_b = cand.any(axis=1)
-    i_b = np.where(has_b, np.argmax(np.where(cand, filt, -np.inf), axis=1), 0)
-    t_idx_b, amp_b, _ = _parabolic_peak(filt, i_b)
+    i_b = np.where(has_b, np.argmax(np.where(cand, resid, -np.inf), axis=1), 0)
+    t_idx_b, _, _ = _parabolic_peak(resid, i_b)
+    amp_b = resid[np.arange(n), i_b]
+    snr_b_local = amp_b / np.sqrt(local_var[np.arange(n), i_b])
 
     flags = np.zeros(n, dtype=np.uint16)
     # a surface peak wider than the system response hides a bottom just below it
@@ -165,7 +192,7 @@ def detect_full_waveform(
         )
         has_b[sel] = True
     snr_s = amp_s / noise_f
-    snr_b = amp_b / noise_f
+    snr_b = np.where(has_b, snr_b_local, amp_b / noise_f)
     flags[has_s & (snr_s < 2 * s.threshold_sigma)] |= np.uint16(DetectorFlag.LOW_SNR)
     zero = np.zeros(n)
     return WaveformDetections(
@@ -252,5 +279,7 @@ def fit_merged(filt: np.ndarray, t_guess: np.ndarray, sigma_samples: float, iter
     first_is_0 = p[:, 0] <= p[:, 1]
     a_lo = np.where(first_is_0, p[:, 2], p[:, 3])
     a_hi = np.where(first_is_0, p[:, 3], p[:, 2])
-    ok = (a_lo > 0) & (a_hi > 0) & (hi - lo > 0.3 * sg) & np.isfinite(c)
+    near = (np.abs(lo - t_guess) <= 4.0 * sg) & (np.abs(hi - t_guess) <= 4.0 * sg)
+    ok = (a_lo > 0) & (a_hi > 0) & (hi - lo > 0.3 * sg) & np.isfinite(c) & near
+    lo, hi = np.where(ok, lo, t_guess), np.where(ok, hi, t_guess)
     return lo, hi, a_lo, a_hi, ok

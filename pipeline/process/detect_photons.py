@@ -60,6 +60,7 @@ def detect_photon_events(
     direction: np.ndarray,
     n_air: float,
     settings: PhotonDetectSettings | None = None,
+    pulse_id: np.ndarray | None = None,
 ) -> WaveformDetections:
     """Surface and bottom per shot from photon events accumulated along track.
 
@@ -74,6 +75,9 @@ def detect_photon_events(
     n_air : float
         Phase index of air (ranges from times of flight).
     settings : PhotonDetectSettings, optional
+    pulse_id : (n_shots,) int, optional
+        Global shot numbers; windows are then ``pulse_id // shots_per_window``, so a survey
+        split into chunks (of whole windows) gives the same windows as one piece.
 
     Returns
     -------
@@ -87,8 +91,9 @@ def detect_photon_events(
     shot = np.repeat(np.arange(n), counts)
     r = c * times_s / (2.0 * n_air)
     z = origin_m[shot, 2] + r * direction[shot, 2]
-    window = np.arange(n) // s.shots_per_window
-    n_win = int(window[-1]) + 1 if n else 0
+    ids = np.arange(n) if pulse_id is None else np.asarray(pulse_id)
+    _, window = np.unique(ids // s.shots_per_window, return_inverse=True)
+    n_win = int(window.max()) + 1 if n else 0
     ev_win = window[shot]
     empty = WaveformDetections(
         *(

@@ -1,0 +1,32 @@
+"""Settings of the processing stages, gathered as the scene's ``[process]`` table."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from pipeline.config import setting
+from pipeline.process.classify import ClassifySettings
+from pipeline.process.detect import DetectSettings
+from pipeline.process.detect_photons import PhotonDetectSettings
+from pipeline.process.surface_fit import SurfaceFitSettings
+
+__all__ = ["ProcessSettings"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class ProcessSettings:
+    """Processing of the measured data (``[process]`` and its sub-tables)."""
+
+    detect: DetectSettings = setting(DetectSettings(), doc="full-waveform detector")
+    photon_detect: PhotonDetectSettings = setting(
+        PhotonDetectSettings(), doc="photon-counting detector"
+    )
+    surface_fit: SurfaceFitSettings = setting(SurfaceFitSettings(), doc="water-surface fit")
+    classify: ClassifySettings = setting(ClassifySettings(), doc="LAS classes")
+    assumed_phase_index: float | None = setting(
+        None, ge=1.0, le=2.0, doc="water phase index processing assumes (default: the scene's)"
+    )
+    assumed_group_index: float | None = setting(
+        None, ge=1.0, le=2.0, doc="water group index processing assumes (default: the scene's)"
+    )
+    grid_resolution_m: float = setting(5.0, gt=0.0, le=1000.0, doc="bathymetry grid cell")

@@ -1,0 +1,274 @@
+"""Orchestration of a survey scene: simulate chunk by chunk, then process, grid and evaluate.
+
+Simulation (terrain → survey → trace → receiver) runs in chunks of ``run.chunk_pulses`` pulses;
+of each chunk only what a real system records is kept: the measured navigation and the
+detections of the receiver's data (times, amplitudes, confidences). Processing then sees only
+those (:mod:`pipeline.process`), and evaluation alone meets the truth.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.outputs.atomic import write_json
+from pipeline.process.detect import WaveformDetections, detect_full_waveform
+from pipeline.process.detect_photons import detect_photon_events
+from pipeline.process.refraction import RefractionSettings
+
+__all__ = ["survey_extent_m", "simulate_detections", "run_survey"]
+
+
+def survey_extent_m(scene, lines) -> tuple[float, float, float, float]:
+    """Local (xmin, xmax, ymin, ymax) covering every line and its swath, plus a margin."""
+    ends = np.concatenate([lines.start_xy, lines.end_xy])
+    pad = 0.5 * lines.swath_width_m + 0.1 * scene.flight.altitude_m + 10.0
+    return (
+        float(ends[:, 0].min() - pad),
+        float(ends[:, 0].max() + pad),
+        float(ends[:, 1].min() - pad),
+        float(ends[:, 1].max() + pad),
+    )
+
+
+def _system_fwhm_s(scene) -> float:
+    """FWHM of the known system response: transmitted pulse ⊗ detector impulse response."""
+    return math.hypot(scene.system.pulse_fwhm_s, scene.detector.impulse_response_fwhm_s)
+
+
+def _detect_chunk(scene, paths) -> WaveformDetections:
+    """Run the receiver on one chunk of traced pulses and detect its returns."""
+    from pipeline.simulate.waveform import simulate_photon_events, simulate_waveforms
+
+    det = scene.detector
+    if det.mode == "photon_counting":
+        ev = simulate_photon_events(paths, scene, det, scene.returns)
+        return ev, None
+    wf = simulate_waveforms(paths, scene, det, scene.returns)
+    # the range gate opens pre_trigger_s before the first echo: those samples are noise only
+    # (less one system FWHM, so the echo's leading edge stays out of the baseline)
+    quiet_s = det.pre_trigger_s - 2.0 * _system_fwhm_s(scene)
+    found = detect_full_waveform(
+        wf.samples,
+        wf.sample_interval_s,
+        _system_fwhm_s(scene),
+        scene.process.detect,
+        noise_samples=max(4, int(quiet_s / wf.sample_interval_s)),
+        shot_noise_counts=det.excess_noise_factor * det.counts_per_photoelectron,
+    )
+    # detection times are from sample 0; sample 0 is t0_s after emission
+    shift = np.where(found.has_surface, wf.t0_s, 0.0)
+    shift_b = np.where(found.has_bottom, wf.t0_s, 0.0)
+    return None, dataclasses.replace(
+        found, t_surface_s=found.t_surface_s + shift, t_bottom_s=found.t_bottom_s + shift_b
+    )
+
+
+def simulate_detections(scene, log=print) -> dict[str, Any]:
+    """Simulate the survey chunk by chunk; keep the measured navigation and the detections.
+
+    Returns
+    -------
+    dict
+        ``returns`` (DetectedReturns), ``truth`` (for evaluation only), ``lines``, ``extent``,
+        ``timings_s``, ``subray_flags`` and ``pulse_flags`` counts.
+    """
+    from pipeline.process.returns import DetectedReturns
+    from pipeline.simulate import paths as P
+    from pipeline.simulate import survey
+    from pipeline.simulate.detector import describe_pulse_flags
+    from pipeline.simulate.trace import trace
+    from pipeline.simulate.world import build_truth, build_world
+
+    timings = dict.fromkeys(("terrain_s", "survey_s", "trace_s", "receiver_s", "detect_s"), 0.0)
+    t0 = time.perf_counter()
+    lines = survey.plan_lines(scene.flight, scene.scanner)
+    extent = survey_extent_m(scene, lines)
+    truth = build_truth(scene, extent)
+    world = build_world(scene, truth, extent)
+    timings["terrain_s"] = time.perf_counter() - t0
+    log(
+        f"  {lines.n_lines} lines, {lines.n_pulses_total} pulses, swath "
+        f"{lines.swath_width_m:.1f} m, line spacing {lines.line_spacing_m:.1f} m"
+    )
+    chunk = scene.run.chunk_pulses
+    photon = scene.detector.mode == "photon_counting"
+    if photon:  # whole accumulation windows per chunk, so chunking cannot change them
+        spw = scene.process.photon_detect.shots_per_window
+        chunk = max(spw, chunk // spw * spw)
+    div_rad = scene.scanner.beam_divergence_mrad * 1e-3
+    n_air = scene.atmosphere.refractive_index
+    sub_flags: dict[str, int] = {}
+    pulse_flags: dict[str, int] = {}
+    parts: list[dict[str, np.ndarray]] = []
+    for c in range(survey.n_chunks(lines, chunk)):
+        t1 = time.perf_counter()
+        pulses = survey.generate_pulses(
+            scene.flight,
+            scene.attitude,
+            scene.navigation,
+            scene.scanner,
+            lines,
+            c,
+            chunk,
+            scene.scene.seed,
+        )
+        t2 = time.perf_counter()
+        paths = trace(pulses, world, scene.trace, div_rad, scene.scanner.polarisation)
+        t3 = time.perf_counter()
+        events, found = _detect_chunk(scene, paths)
+        t4 = time.perf_counter()
+        if photon:
+            found = detect_photon_events(
+                events.offsets,
+                events.times_s,
+                pulses.origin_meas_m,
+                pulses.direction_meas,
+                n_air,
+                scene.process.photon_detect,
+                pulse_id=pulses.pulse_id,
+            )
+            receiver_flags = events.flags
+        else:
+            receiver_flags = None
+        t5 = time.perf_counter()
+        timings["survey_s"] += t2 - t1
+        timings["trace_s"] += t3 - t2
+        timings["receiver_s"] += t4 - t3
+        timings["detect_s"] += t5 - t4
+        for k, v in P.describe_flags(paths.flags).items():
+            sub_flags[k] = sub_flags.get(k, 0) + v
+        if receiver_flags is not None:
+            for k, v in describe_pulse_flags(receiver_flags).items():
+                pulse_flags[k] = pulse_flags.get(k, 0) + v
+        parts.append(
+            {
+                "pulse_id": pulses.pulse_id,
+                "origin_meas_m": pulses.origin_meas_m,
+                "direction_meas": pulses.direction_meas,
+                **{f.name: getattr(found, f.name) for f in dataclasses.fields(found)},
+            }
+        )
+    cat = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    returns = DetectedReturns(
+        pulse_id=cat["pulse_id"],
+        origin_meas_m=cat["origin_meas_m"],
+        direction_meas=cat["direction_meas"],
+        has_surface=cat["has_surface"],
+        t_surface_s=cat["t_surface_s"],
+        has_bottom=cat["has_bottom"],
+        t_bottom_s=cat["t_bottom_s"],
+        surface_confidence=cat["surface_confidence"],
+        bottom_confidence=cat["bottom_confidence"],
+        flags=cat["flags"],
+        surface_amplitude=cat["surface_amplitude"],
+        bottom_amplitude=cat["bottom_amplitude"],
+    )
+    return {
+        "returns": returns,
+        "truth": truth,
+        "lines": lines,
+        "extent": extent,
+        "timings_s": timings,
+        "subray_flags": sub_flags,
+        "pulse_flags": pulse_flags,
+    }
+
+
+def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, float], dict]:
+    """Simulate, process, grid, write and evaluate a survey scene.
+
+    Returns
+    -------
+    files : dict of str to Path
+    timings_s : dict of str to float
+    evaluation : dict
+        The error report (also written to ``evaluation.json``).
+    """
+    from pipeline.evaluate import evaluate
+    from pipeline.outputs.las import write_points_laz
+    from pipeline.outputs.raster import write_grid_tif
+    from pipeline.process.grid import grid_seabed, snap_bounds_m
+    from pipeline.process.refraction import georeference
+
+    sim = simulate_detections(scene, log)
+    timings = sim["timings_s"]
+    ps = scene.process
+    t0 = time.perf_counter()
+    refr = RefractionSettings(
+        phase_index=ps.assumed_phase_index or scene.water.phase_index,
+        group_index=ps.assumed_group_index or scene.water.group_index,
+    )
+    fit = dataclasses.replace(ps.surface_fit, air_index=scene.atmosphere.refractive_index)
+    processed = georeference(
+        sim["returns"],
+        surface_settings=fit,
+        refraction_settings=refr,
+        classify_settings=ps.classify,
+    )
+    fr = scene.frame
+    origin = (fr.origin_easting_m, fr.origin_northing_m, 0.0)
+    xmin, xmax, ymin, ymax = sim["extent"]
+    bounds = snap_bounds_m(
+        np.array([xmin, xmax]), np.array([ymin, ymax]), ps.grid_resolution_m, origin
+    )
+    grid = grid_seabed(
+        processed.points, ps.grid_resolution_m, bounds_m=bounds, origin_m=origin, crs=fr.crs
+    )
+    timings["process_s"] = time.perf_counter() - t0
+    files = {
+        "points": write_points_laz(
+            out / "points.laz", processed.points, crs=fr.crs, origin_m=origin
+        ),
+        "grid": write_grid_tif(out / "grid.tif", grid),
+    }
+    truth = sim["truth"]
+    report = evaluate(
+        processed.points,
+        uncorrected=processed.uncorrected,
+        grid=grid,
+        # depth below the water surface: the datum hydrographers reduce soundings to; GNSS
+        # height errors common to the surface and the seabed returns cancel in it
+        truth_depth_m=truth.depth_m,
+    ).to_dict()
+    evaluation = {
+        "pulses": int(sim["returns"].pulse_id.size),
+        "receiver": scene.detector.mode,
+        "bottom_detected_fraction": float(np.mean(sim["returns"].has_bottom)),
+        "subray_flags": sim["subray_flags"],
+        "receiver_pulse_flags": sim["pulse_flags"],
+        "error": report,
+        "timings_s": timings,
+    }
+    files["evaluation"] = out / "evaluation.json"
+    write_json(files["evaluation"], evaluation)
+    _log_report(report, log)
+    return files, timings, evaluation
+
+
+def _log_report(report: dict, log) -> None:
+    def line(name, st):
+        if not st or not st.get("n"):
+            return f"  {name:<24} no points"
+        return (
+            f"  {name:<24} n={st['n']:<8} bias {st['bias_m']:+.3f} m  RMSE {st['rmse_m']:.3f} m"
+            f"  |err|95 {st['p95_abs_m']:.3f} m"
+        )
+
+    log("  evaluation against the truth (measured minus true depth):")
+    log(line("points, refraction corr.", report.get("points")))
+    log(line("points, uncorrected", report.get("points_uncorrected")))
+    log(line("grid cells", report.get("grid")))
+    iho = report.get("iho_grid") or {}
+    if iho:
+        frac = ", ".join(
+            f"{k} {v['fraction_within']:.1%}"
+            for k, v in iho.items()
+            if v.get("fraction_within") is not None
+        )
+        log(f"  grid cells within IHO S-44 TVU: {frac}")
