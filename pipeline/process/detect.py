@@ -27,7 +27,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d, median_filter
+from scipy.ndimage import gaussian_filter1d
 
 from pipeline.config import setting
 from pipeline.process.returns import DetectorFlag
@@ -77,6 +77,24 @@ class WaveformDetections:
 
 def _confidence(snr: np.ndarray, threshold: float) -> np.ndarray:
     return 1.0 - np.exp(-0.5 * (np.maximum(snr, 0.0) / threshold) ** 4)
+
+
+def _flank_trend(y: np.ndarray, gap: int, length: int) -> np.ndarray:
+    """Slow trend under narrow echoes: the mean of both flanks, ``gap`` samples away.
+
+    At sample ``t`` the trend is the mean of ``y`` over ``[t-gap-length, t-gap)`` and
+    ``(t+gap, t+gap+length]`` (one side alone at the window's ends). An echo narrower than
+    ``gap`` does not raise its own trend, while the smooth water-column return is followed;
+    running sums make it O(n_samples), unlike a running median.
+    """
+    n, m = y.shape
+    c = np.concatenate([np.zeros((n, 1)), np.cumsum(y, axis=1)], axis=1)
+    t = np.arange(m)
+    l0, l1 = np.clip(t - gap - length, 0, m), np.clip(t - gap, 0, m)
+    r0, r1 = np.clip(t + gap + 1, 0, m), np.clip(t + gap + 1 + length, 0, m)
+    total = (c[:, l1] - c[:, l0]) + (c[:, r1] - c[:, r0])
+    count = (l1 - l0) + (r1 - r0)
+    return total / np.maximum(count, 1)
 
 
 def _parabolic_peak(y: np.ndarray, idx: np.ndarray):
@@ -182,11 +200,17 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     t_idx_s, amp_s, width_s = _parabolic_peak(filt, i_s)
 
     sep = s.min_separation_fwhm * pulse_fwhm_s / dt_s
-    width = max(3, int(round(s.trend_fwhm * pulse_fwhm_s / dt_s)) | 1)
-    resid = filt - median_filter(filt, size=(1, width), mode="nearest")
+    fwhm_samples = pulse_fwhm_s / dt_s
+    gap = max(2, math.ceil(1.5 * fwhm_samples))
+    resid = filt - _flank_trend(
+        filt, gap=gap, length=max(3, round(0.5 * s.trend_fwhm * fwhm_samples))
+    )
     rpeak = np.zeros_like(peak)
     rpeak[:, 1:-1] = (resid[:, 1:-1] >= resid[:, :-2]) & (resid[:, 1:-1] > resid[:, 2:])
-    after = np.arange(m)[None, :] > (i_s + sep)[:, None]
+    # after the surface, and not in the last samples, where the trend is one-sided and an echo
+    # would be cut by the end of the window
+    cols = np.arange(m)[None, :]
+    after = (cols > (i_s + sep)[:, None]) & (cols < m - gap)
     # local noise: electronic + shot noise of the trend the bottom sits on (filtered domain)
     trend = np.maximum(filt - resid, 0.0)
     local_var = noise_f[:, None] ** 2 + shot_noise_counts * trend * kernel_sq
