@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
+from scipy.special import ndtr
 
 from pipeline.config import setting
 from pipeline.process.returns import DetectorFlag
@@ -47,9 +48,14 @@ class DetectSettings:
         0.1, gt=0.0, lt=0.9, doc="leading part of the window used for the noise floor"
     )
     min_separation_fwhm: float = setting(
-        1.5, gt=0.0, le=20.0, doc="surface-bottom separation below which returns merge"
+        2.0, gt=0.0, le=20.0, doc="surface-bottom separation below which returns merge"
     )
     fit_merged: bool = setting(True, doc="separate merged returns by a two-Gaussian fit")
+    surface_step: bool = setting(
+        True,
+        doc="time the surface with a Gaussian + column-onset step fit (unbiased by the "
+        "water-column return that starts with it)",
+    )
     trend_fwhm: float = setting(
         8.0, ge=2.0, le=100.0, doc="running-median width (system FWHMs) of the column trend"
     )
@@ -82,19 +88,57 @@ def _confidence(snr: np.ndarray, threshold: float) -> np.ndarray:
 def _flank_trend(y: np.ndarray, gap: int, length: int) -> np.ndarray:
     """Slow trend under narrow echoes: the mean of both flanks, ``gap`` samples away.
 
-    At sample ``t`` the trend is the mean of ``y`` over ``[t-gap-length, t-gap)`` and
-    ``(t+gap, t+gap+length]`` (one side alone at the window's ends). An echo narrower than
-    ``gap`` does not raise its own trend, while the smooth water-column return is followed;
-    running sums make it O(n_samples), unlike a running median.
+    At sample ``t`` the trend is the larger of the means of ``y`` over ``[t-gap-length, t-gap)``
+    and ``(t+gap, t+gap+length]`` (one side alone at the window's ends). An echo narrower than
+    ``gap`` does not raise its own trend, while the smooth water-column return is followed; the
+    larger flank keeps the falling edge of the surface echo (whose earlier flank is high) from
+    passing as a bottom. Running sums make it O(n_samples), unlike a running median.
     """
     n, m = y.shape
     c = np.concatenate([np.zeros((n, 1)), np.cumsum(y, axis=1)], axis=1)
     t = np.arange(m)
     l0, l1 = np.clip(t - gap - length, 0, m), np.clip(t - gap, 0, m)
     r0, r1 = np.clip(t + gap + 1, 0, m), np.clip(t + gap + 1 + length, 0, m)
-    total = (c[:, l1] - c[:, l0]) + (c[:, r1] - c[:, r0])
-    count = (l1 - l0) + (r1 - r0)
-    return total / np.maximum(count, 1)
+    left = (c[:, l1] - c[:, l0]) / np.maximum(l1 - l0, 1)
+    right = (c[:, r1] - c[:, r0]) / np.maximum(r1 - r0, 1)
+    left = np.where(l1 > l0, left, right)
+    right = np.where(r1 > r0, right, left)
+    return np.maximum(left, right)
+
+
+def _surface_step_fit(filt: np.ndarray, i_peak: np.ndarray, sg: float) -> np.ndarray:
+    """Surface time from ``A g(t − t_s) + B Φ((t − t_s)/σ)`` fitted near the surface peak.
+
+    The water-column return starts at the surface and, over a few samples, is a step smoothed
+    by the system response; it pulls the plain peak late. For each candidate ``t_s`` on a
+    0.02-sample grid around the peak, ``A`` and ``B`` follow by linear least squares; the
+    candidate with the smallest residual wins (batched: pulses × candidates × samples).
+    """
+    n, m = filt.shape
+    half_lo, half_hi = int(math.ceil(3.0 * sg)), int(math.ceil(2.0 * sg))
+    cols = np.clip(i_peak[:, None] + np.arange(-half_lo, half_hi + 1), 0, m - 1)
+    y = np.take_along_axis(filt, cols, axis=1)[:, None, :]  # (n, 1, w)
+    cand = i_peak[:, None] + np.arange(-1.5, 0.5001, 0.02)[None, :]  # (n, k)
+    z = (cols[:, None, :] - cand[:, :, None]) / sg  # (n, k, w)
+    g = np.exp(-0.5 * z * z)
+    h = ndtr(z)
+    gg, hh, gh = (g * g).sum(2), (h * h).sum(2), (g * h).sum(2)
+    gy, hy = (g * y).sum(2), (h * y).sum(2)
+    det = gg * hh - gh * gh
+    ok = det > 1e-12 * gg * hh
+    a = np.where(ok, (hh * gy - gh * hy) / np.where(ok, det, 1.0), gy / gg)
+    b = np.where(ok, (gg * hy - gh * gy) / np.where(ok, det, 1.0), 0.0)
+    # negative amplitudes are not physical: fall back to the Gaussian alone there
+    bad = (a <= 0) | (b < 0)
+    a, b = np.where(bad, gy / gg, a), np.where(bad, 0.0, b)
+    sse = (y * y).sum(2) - a * gy - b * hy
+    k = np.clip(np.argmin(sse, axis=1), 1, cand.shape[1] - 2)
+    rows = np.arange(n)
+    s0, s1, s2 = sse[rows, k - 1], sse[rows, k], sse[rows, k + 1]
+    # parabola through the three residuals around the minimum: sub-grid time
+    curv = s0 - 2.0 * s1 + s2
+    off = np.where(curv > 0, 0.5 * (s0 - s2) / np.where(curv > 0, curv, 1.0), 0.0)
+    return cand[rows, k] + 0.02 * np.clip(off, -1.0, 1.0)
 
 
 def _parabolic_peak(y: np.ndarray, idx: np.ndarray):
@@ -198,6 +242,10 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     has_s = strong.any(axis=1)
     i_s = np.where(has_s, np.argmax(strong, axis=1), 0)
     t_idx_s, amp_s, width_s = _parabolic_peak(filt, i_s)
+    if s.surface_step:
+        t_idx_s = np.where(
+            has_s, _surface_step_fit(filt, i_s, math.sqrt(2.0) * sigma_samples), t_idx_s
+        )
 
     sep = s.min_separation_fwhm * pulse_fwhm_s / dt_s
     fwhm_samples = pulse_fwhm_s / dt_s

@@ -22,7 +22,9 @@ class ProcessSettings:
         PhotonDetectSettings(), doc="photon-counting detector"
     )
     surface_fit: SurfaceFitSettings = setting(SurfaceFitSettings(), doc="water-surface fit")
-    classify: ClassifySettings = setting(ClassifySettings(), doc="LAS classes")
+    # bottom candidates between 5 and ~6.7 noise σ (confidence 0.5-0.8) are mostly column or
+    # surface-tail bumps where the real bottom is too deep to see: kept as class 7, not 40
+    classify: ClassifySettings = setting(ClassifySettings(min_confidence=0.8), doc="LAS classes")
     assumed_phase_index: float | None = setting(
         None, ge=1.0, le=2.0, doc="water phase index processing assumes (default: the scene's)"
     )
