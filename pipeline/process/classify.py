@@ -14,12 +14,14 @@ Bottom returns (``ReturnKind.BOTTOM``):
 
 1. ``GRAZING`` (no valid water entry) -> 1 unclassified.
 2. Any detector flag of ``unreliable_detector_flags`` (default MERGED, SATURATED, TRUNCATED:
-   the bottom time is not trustworthy) -> 1 unclassified.
+   the bottom time is not trustworthy), or the pulse's own surface return is an outlier of the
+   local fit (``surface_outlier_unreliable``: its timing reference is suspect) -> 1.
 3. ``confidence < min_confidence`` -> 7 low noise.
 4. ``LAND`` (the pulse is above the water level + margin) -> 2 ground.
 5. ``ABOVE_SURFACE`` or ``depth_m < 0`` (a "bottom" above the fitted water surface over water)
    -> 18 high noise.
-6. ``depth_m > max_depth_m`` (when set: deeper than the system can see) -> 7 low noise.
+6. ``depth_m > max_depth_m`` (when set: deeper than the system can see) or
+   ``depth_m < min_depth_m`` (closer to the surface than the system resolves) -> 7 low noise.
 7. Otherwise -> 40 bathymetric point.
 
 Surface returns (``ReturnKind.SURFACE``); detector flags are ignored (a saturated specular
@@ -97,6 +99,12 @@ class ClassifySettings:
 
     min_confidence: float = setting(0.5, ge=0.0, le=1.0, doc="below: noise")
     max_depth_m: float | None = setting(None, gt=0.0, doc="deeper bottom points: low noise")
+    min_depth_m: float = setting(
+        0.0, ge=0.0, le=10.0, doc="shallower bottom points (unresolvable from the surface): noise"
+    )
+    surface_outlier_unreliable: bool = setting(
+        True, doc="a bottom whose pulse's own surface return is an outlier stays unclassified"
+    )
     unreliable_detector_flags: tuple[str, ...] = setting(
         ("MERGED", "SATURATED", "TRUNCATED"),
         doc="detector flags that leave a bottom point unclassified",
@@ -145,19 +153,20 @@ def classify_points(points: Points, settings: ClassifySettings | None = None) ->
     grazing = _has(f, PointFlag.GRAZING)
     land = _has(f, PointFlag.LAND)
 
+    outlier = _has(f, PointFlag.SURFACE_OUTLIER)
     bottom = np.select(
         [
             grazing,
-            _has(df, st.unreliable_mask),
+            _has(df, st.unreliable_mask) | (outlier & st.surface_outlier_unreliable),
             low_conf,
             land,
             _has(f, PointFlag.ABOVE_SURFACE) | (depth < 0.0),
             (depth > st.max_depth_m) if st.max_depth_m is not None else np.zeros_like(land),
+            depth < st.min_depth_m,
         ],
-        [UNCLASSIFIED, UNCLASSIFIED, LOW_NOISE, GROUND, HIGH_NOISE, LOW_NOISE],
+        [UNCLASSIFIED, UNCLASSIFIED, LOW_NOISE, GROUND, HIGH_NOISE, LOW_NOISE, LOW_NOISE],
         default=BATHYMETRIC_POINT,
     )
-    outlier = _has(f, PointFlag.SURFACE_OUTLIER)
     surface = np.select(
         [
             grazing,

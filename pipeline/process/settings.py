@@ -23,7 +23,8 @@ class ProcessSettings:
     )
     surface_fit: SurfaceFitSettings = setting(SurfaceFitSettings(), doc="water-surface fit")
     # bottom candidates between 5 and ~6.7 noise σ (confidence 0.5-0.8) are mostly column or
-    # surface-tail bumps where the real bottom is too deep to see: kept as class 7, not 40
+    # surface-tail bumps where the real bottom is too deep to see: kept as class 7, not 40;
+    # bottoms shallower than 0.3 m are closer than two system FWHM to the surface (merged)
     classify: ClassifySettings = setting(ClassifySettings(min_confidence=0.8), doc="LAS classes")
     assumed_phase_index: float | None = setting(
         None, ge=1.0, le=2.0, doc="water phase index processing assumes (default: the scene's)"
