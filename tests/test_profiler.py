@@ -139,3 +139,22 @@ def test_accumulated_counts_are_poisson_with_mean_n_lambda(reference_scene, n_sh
         assert abs(counts.mean() - lam) <= 3 * mean_sigma, (name, counts.mean(), lam)
         var_sigma = _poisson_sample_variance_sigma(lam, reps)
         assert abs(counts.var(ddof=1) - lam) <= 3 * var_sigma, (name, counts.var(ddof=1), lam)
+
+
+def test_direct_poisson_sums_match_event_simulation(reference_scene):
+    # the shortcut for bright scenes draws Poisson(N λ) per bin: same mean and variance as
+    # summing per-shot events; compared here on the reference scene with the shortcut forced
+    gate = profiler.range_gate(reference_scene)
+    exp = profiler.expected_histogram(reference_scene, gate)
+    rng = np.random.default_rng(12)
+    sims = np.array(
+        [
+            profiler.simulate_histogram(
+                reference_scene, gate, 1000, rng, max_events=0.0, expected_total=exp["total"]
+            ).sum()
+            for _ in range(400)
+        ]
+    )
+    lam = 1000 * exp["total"].sum()
+    assert abs(sims.mean() - lam) <= 3 * math.sqrt(lam / 400)
+    assert abs(sims.var(ddof=1) - lam) <= 3 * _poisson_sample_variance_sigma(lam, 400)

@@ -61,3 +61,16 @@ def test_survey_scene_end_to_end(tmp_path, small_survey):
     assert err["points"]["rmse_m"] < 0.5 * err["points_uncorrected"]["rmse_m"]
     for name in ("points.laz", "grid.tif"):
         assert (tmp_path / name).stat().st_size > 1000
+
+
+def test_photon_counting_profiler_end_to_end(tmp_path):
+    data = tomllib.loads((ROOT / "data_synthetic" / "scenes" / "photon_profiler.toml").read_text())
+    data["flight"]["area_m"] = [-1.0, 1.0, 0.0, 60.0]
+    scene = parse_scene(data)
+    run_scene(scene, tmp_path, log=lambda _: None)
+    ev = json.loads((tmp_path / "evaluation.json").read_text())
+    assert ev["receiver"] == "photon_counting"
+    assert ev["bottom_detected_fraction"] > 0.9
+    # 2-4 m of water under a 50 nJ beamlet, 400-shot windows: centimetre depths
+    assert ev["error"]["points"]["rmse_m"] < 0.10
+    assert ev["error"]["points_uncorrected"]["rmse_m"] > 0.5

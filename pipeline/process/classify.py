@@ -103,7 +103,7 @@ class ClassifySettings:
         0.0, ge=0.0, le=10.0, doc="shallower bottom points (unresolvable from the surface): noise"
     )
     surface_outlier_unreliable: bool = setting(
-        True, doc="a bottom whose pulse's own surface return is an outlier stays unclassified"
+        False, doc="a bottom whose pulse's own surface return is an outlier stays unclassified"
     )
     unreliable_detector_flags: tuple[str, ...] = setting(
         ("MERGED", "SATURATED", "TRUNCATED"),

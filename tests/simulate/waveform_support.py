@@ -10,11 +10,12 @@ from __future__ import annotations
 import dataclasses
 import math
 import tomllib
+from pathlib import Path
 
 import numpy as np
 
 from pipeline.config import from_mapping
-from pipeline.scene import DEFAULT_SCENE_PATH, parse_scene
+from pipeline.scene import parse_scene
 from pipeline.simulate.detector import DetectorSettings, load_preset
 from pipeline.simulate.returns import ReturnSettings
 
@@ -22,9 +23,12 @@ H_PLANCK = 6.62607015e-34  # J s, exact (SI 2019)
 C_LIGHT = 299_792_458.0  # m/s, exact
 
 
+WAVEFORM_SCENE = Path(__file__).with_name("waveform_scene.toml")
+
+
 def make_scene(**sections):
     """The default scene with whole-section overrides, e.g. ``water={"extinction_per_m": 0.1}``."""
-    data = tomllib.loads(DEFAULT_SCENE_PATH.read_text(encoding="utf-8"))
+    data = tomllib.loads(WAVEFORM_SCENE.read_text(encoding="utf-8"))
     for name, values in sections.items():
         data.setdefault(name, {}).update(values)
     return parse_scene(data)
