@@ -8,8 +8,9 @@ Errors are *depth* errors, positive when the measurement is too deep:
 ``error = depth_measured - depth_true`` with ``truth_depth_m``, or
 ``error = z_true - z_measured`` with ``truth_z_m``.
 
-IHO S-44 (6th edition, 2020), Table 1: the maximum allowable total vertical uncertainty at the
-95 % confidence level is ``TVU(d) = sqrt(a^2 + (b d)^2)``:
+IHO S-44 (6th edition, 2020), Table 1 (from :mod:`pipeline.iho`, re-exported here): the maximum
+allowable total vertical uncertainty at the 95 % confidence level is
+``TVU(d) = sqrt(a^2 + (b d)^2)``:
 
 =========  ======  =======
 order      a (m)   b
@@ -33,12 +34,14 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.iho import IHO_CONFIDENCE, IHO_ORDERS, tvu_allowance_m
 from pipeline.process.classify import BATHYMETRIC_POINT
 from pipeline.process.grid import Grid
 from pipeline.process.returns import Points
 
 __all__ = [
     "IHO_ORDERS",
+    "IHO_CONFIDENCE",
     "ErrorStats",
     "IhoResult",
     "ErrorReport",
@@ -50,27 +53,7 @@ __all__ = [
     "evaluate",
 ]
 
-#: IHO S-44 Ed. 6.0.0 (2020) TVU coefficients per order: (a in m, b dimensionless).
-IHO_ORDERS: dict[str, tuple[float, float]] = {
-    "exclusive": (0.15, 0.0075),
-    "special": (0.25, 0.0075),
-    "1a": (0.5, 0.013),
-    "1b": (0.5, 0.013),
-    "2": (1.0, 0.023),
-}
-#: S-44 allowances are at 95 % confidence.
-IHO_CONFIDENCE = 0.95
-
 TruthFn = Callable[[np.ndarray, np.ndarray], Any]
-
-
-def tvu_allowance_m(depth_m: Any, order: str) -> np.ndarray:
-    """Maximum allowable TVU ``sqrt(a^2 + (b d)^2)`` of an IHO order at depth(s) ``depth_m``."""
-    if order not in IHO_ORDERS:
-        raise ValueError(f"`order` must be one of {', '.join(IHO_ORDERS)}; got {order!r}")
-    a, b = IHO_ORDERS[order]
-    d = np.asarray(depth_m, dtype=np.float64)
-    return np.sqrt(a * a + (b * d) ** 2)[()]
 
 
 @dataclass(frozen=True)
