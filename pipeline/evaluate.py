@@ -239,3 +239,36 @@ def evaluate(
         gerr, gdepth = grid_errors_m(grid, **kw)
         gstats, giho = error_stats(gerr), iho_fractions(gerr, gdepth)
     return ErrorReport(error_stats(err), raw, gstats, iho_fractions(err, depth), giho)
+
+
+def tpu_coverage(
+    points: Points, sigma_v_m: Any, *, truth_depth_m: TruthFn, k: float = 1.96
+) -> dict[str, Any]:
+    """How often the true depth lies within ``± k σ_v`` of the measured depth.
+
+    Parameters
+    ----------
+    points : Points
+        The points whose vertical uncertainty is ``sigma_v_m`` (same order).
+    sigma_v_m : (n,) array_like
+        Propagated 1σ vertical uncertainty, metres.
+    truth_depth_m : callable
+        True depth at local ``(x, y)``.
+    k : float
+        Coverage factor (1.96: the 95 % interval of a normal error).
+
+    Returns
+    -------
+    dict
+        ``n``, ``k``, ``fraction_within`` and the median ``|error| / sigma``.
+    """
+    sig = np.asarray(sigma_v_m, dtype=np.float64)
+    err, _ = point_errors_m(points, truth_depth_m=truth_depth_m)
+    ok = np.isfinite(err) & (sig > 0)
+    z = np.abs(err[ok]) / sig[ok]
+    return {
+        "n": int(ok.sum()),
+        "k": k,
+        "fraction_within": _json_number(float(np.mean(z <= k))) if z.size else None,
+        "median_abs_error_over_sigma": _json_number(float(np.median(z))) if z.size else None,
+    }

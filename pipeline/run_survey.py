@@ -207,7 +207,7 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
     evaluation : dict
         The error report (also written to ``evaluation.json``).
     """
-    from pipeline.evaluate import evaluate
+    from pipeline.evaluate import evaluate, tpu_coverage
     from pipeline.outputs.las import write_points_laz
     from pipeline.outputs.raster import write_grid_tif
     from pipeline.process.grid import grid_seabed, snap_bounds_m
@@ -238,6 +238,9 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
         processed.points, ps.grid_resolution_m, bounds_m=bounds, origin_m=origin, crs=fr.crs
     )
     timings["process_s"] = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    unc = _uncertainty(scene, sim["returns"], processed, refr, grid)
+    timings["uncertainty_s"] = time.perf_counter() - t1
     files = {
         "points": write_points_laz(
             out / "points.laz", processed.points, crs=fr.crs, origin_m=origin
@@ -253,8 +256,11 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
         # height errors common to the surface and the seabed returns cancel in it
         truth_depth_m=truth.depth_m,
     ).to_dict()
+    coverage = tpu_coverage(unc["points40"], unc["tpu40"].sigma_v_m, truth_depth_m=truth.depth_m)
     evaluation = {
         "pulses": int(sim["returns"].pulse_id.size),
+        "iho_orders_from_uncertainty": unc["summary"],
+        "tpu_95_coverage_against_truth": coverage,
         "receiver": scene.detector.mode,
         "bottom_detected_fraction": float(np.mean(sim["returns"].has_bottom)),
         "subray_flags": sim["subray_flags"],
@@ -265,6 +271,18 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
     files["evaluation"] = out / "evaluation.json"
     write_json(files["evaluation"], evaluation)
     _log_report(report, log)
+    orders = unc["summary"].get("orders", {})
+    log(
+        "  strictest IHO S-44 order met per cell (from the propagated uncertainty): "
+        + ", ".join(
+            f"{k} {v['fraction']:.1%}" for k, v in orders.items() if v["fraction"] is not None
+        )
+    )
+    if coverage["fraction_within"] is not None:
+        log(
+            f"  TPU check: the truth lies within ±1.96 σ_v for {coverage['fraction_within']:.1%}"
+            f" of {coverage['n']} points"
+        )
     return files, timings, evaluation
 
 
@@ -289,3 +307,47 @@ def _log_report(report: dict, log) -> None:
             if v.get("fraction_within") is not None
         )
         log(f"  grid cells within IHO S-44 TVU: {frac}")
+
+
+def _uncertainty(scene, returns, processed, refr, grid) -> dict[str, Any]:
+    """TPU of the bathymetric points, cell uncertainty and the IHO order met per cell."""
+    from pipeline import iho
+    from pipeline.process.cell_uncertainty import cell_uncertainty
+    from pipeline.process.classify import BATHYMETRIC_POINT
+    from pipeline.process.returns import ReturnKind
+    from pipeline.process.tpu import point_tpu
+
+    st = dataclasses.replace(
+        scene.process.tpu,
+        beam_divergence_mrad=scene.scanner.beam_divergence_mrad,
+        wavelength_nm=scene.system.wavelength_nm,
+    )
+    tpu = point_tpu(returns, processed.surface, refr, st)
+    pts = processed.points
+    is40 = (pts.classification == BATHYMETRIC_POINT) & (pts.kind == ReturnKind.BOTTOM)
+    points40 = pts.select(is40)
+    # TPU rows are per pulse with a bottom; keep those of the bathymetric points, same order
+    order = np.argsort(tpu.pulse_id)
+    pos = order[np.searchsorted(tpu.pulse_id[order], points40.pulse_id)]
+    tpu40 = _take_tpu(tpu, pos)
+    cells = cell_uncertainty(grid, tpu40)
+    return {
+        "tpu40": tpu40,
+        "points40": points40,
+        "cells": cells,
+        "summary": iho.order_summary(cells.order).to_dict(),
+    }
+
+
+def _take_tpu(tpu, index: np.ndarray):
+    """Rows ``index`` of a PointTpu (every per-point array and term)."""
+    kw = {}
+    for f in dataclasses.fields(tpu):
+        v = getattr(tpu, f.name)
+        if isinstance(v, dict):
+            kw[f.name] = {k: a[index] for k, a in v.items()}
+        elif isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == len(tpu):
+            kw[f.name] = v[index]
+        else:
+            kw[f.name] = v
+    return dataclasses.replace(tpu, **kw)

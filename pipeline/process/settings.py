@@ -9,6 +9,7 @@ from pipeline.process.classify import ClassifySettings
 from pipeline.process.detect import DetectSettings
 from pipeline.process.detect_photons import PhotonDetectSettings
 from pipeline.process.surface_fit import SurfaceFitSettings
+from pipeline.process.tpu import TpuSettings
 
 __all__ = ["ProcessSettings"]
 
@@ -32,4 +33,5 @@ class ProcessSettings:
     assumed_group_index: float | None = setting(
         None, ge=1.0, le=2.0, doc="water group index processing assumes (default: the scene's)"
     )
+    tpu: TpuSettings = setting(TpuSettings(), doc="a-priori uncertainties of the TPU")
     grid_resolution_m: float = setting(5.0, gt=0.0, le=1000.0, doc="bathymetry grid cell")
