@@ -33,7 +33,13 @@ from scipy.special import ndtr
 from pipeline.config import setting
 from pipeline.process.returns import DetectorFlag
 
-__all__ = ["DetectSettings", "WaveformDetections", "detect_full_waveform", "fit_merged"]
+__all__ = [
+    "DetectSettings",
+    "WaveformDetections",
+    "detect_full_waveform",
+    "fit_merged",
+    "flank_trend",
+]
 
 FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
 MAD_TO_SIGMA = 1.4826
@@ -85,7 +91,7 @@ def _confidence(snr: np.ndarray, threshold: float) -> np.ndarray:
     return 1.0 - np.exp(-0.5 * (np.maximum(snr, 0.0) / threshold) ** 4)
 
 
-def _flank_trend(y: np.ndarray, gap: int, length: int) -> np.ndarray:
+def flank_trend(y: np.ndarray, gap: int, length: int) -> np.ndarray:
     """Slow trend under narrow echoes: the mean of both flanks, ``gap`` samples away.
 
     At sample ``t`` the trend is the larger of the means of ``y`` over ``[t-gap-length, t-gap)``
@@ -250,7 +256,7 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     sep = s.min_separation_fwhm * pulse_fwhm_s / dt_s
     fwhm_samples = pulse_fwhm_s / dt_s
     gap = max(2, math.ceil(1.5 * fwhm_samples))
-    resid = filt - _flank_trend(
+    resid = filt - flank_trend(
         filt, gap=gap, length=max(3, round(0.5 * s.trend_fwhm * fwhm_samples))
     )
     rpeak = np.zeros_like(peak)

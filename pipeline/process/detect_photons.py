@@ -29,7 +29,7 @@ from scipy import special, stats
 
 from pipeline import optics
 from pipeline.config import setting
-from pipeline.process.detect import WaveformDetections
+from pipeline.process.detect import WaveformDetections, flank_trend
 from pipeline.process.returns import DetectorFlag
 
 __all__ = ["PhotonDetectSettings", "detect_photon_events"]
@@ -44,6 +44,7 @@ class PhotonDetectSettings:
     threshold_sigma: float = setting(5.0, gt=0.0, le=100.0, doc="bottom significance, Poisson σ")
     min_separation_m: float = setting(0.3, ge=0.0, le=100.0, doc="bottom below the surface by")
     centroid_bins: int = setting(2, ge=0, le=50, doc="bins each side used for the centroid")
+    trend_bins: int = setting(20, ge=2, le=1000, doc="flank length of the column trend, bins")
 
 
 def _significance(k: np.ndarray, b: np.ndarray, n_bins: int) -> np.ndarray:
@@ -114,10 +115,23 @@ def detect_photon_events(
     rows = np.arange(n_win)
     i_s = np.argmax(hist, axis=1)
     sep_bins = int(math.ceil(s.min_separation_m / s.bin_m))
-    below = np.arange(nb)[None, :] <= (i_s - sep_bins)[:, None]
-    i_b = np.argmax(np.where(below, hist, -1.0), axis=1)
+    # the bottom box (±centroid_bins) must not reach into the surface return
+    below = np.arange(nb)[None, :] <= (i_s - sep_bins - s.centroid_bins)[:, None]
+    # the water-column return decays smoothly below the surface: a bottom must stand out of
+    # its local level (the larger mean of the flanking bins), not only of the background
+    local = np.maximum(
+        flank_trend(hist, gap=s.centroid_bins + 1, length=s.trend_bins), bg_safe[:, None]
+    )
+    # counts of a return spread over neighbouring bins: test the sum over the centroid window
+    w = 2 * s.centroid_bins + 1
+    csum = np.concatenate([np.zeros((n_win, 1)), np.cumsum(hist, axis=1)], axis=1)
+    lo = np.clip(np.arange(nb) - s.centroid_bins, 0, nb)
+    hi = np.clip(np.arange(nb) + s.centroid_bins + 1, 0, nb)
+    box = csum[:, hi] - csum[:, lo]
+    sig_all = _significance(box, local * w, nb)
+    i_b = np.argmax(np.where(below, sig_all, -np.inf), axis=1)
     sig_s = _significance(hist[rows, i_s], bg_safe, nb)
-    sig_b = np.where(below[rows, i_b], _significance(hist[rows, i_b], bg_safe, nb), 0.0)
+    sig_b = np.where(below[rows, i_b], sig_all[rows, i_b], 0.0)
     has_s = sig_s >= s.threshold_sigma
     has_b = has_s & (sig_b >= s.threshold_sigma)
 
