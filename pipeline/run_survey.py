@@ -20,6 +20,7 @@ from pipeline.outputs.atomic import write_json
 from pipeline.process.detect import WaveformDetections, detect_full_waveform
 from pipeline.process.detect_photons import detect_photon_events
 from pipeline.process.refraction import RefractionSettings
+from pipeline.process.returns import Points
 
 __all__ = ["survey_extent_m", "simulate_detections", "run_survey"]
 
@@ -228,6 +229,12 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
         refraction_settings=refr,
         classify_settings=ps.classify,
     )
+    processed = dataclasses.replace(
+        processed,
+        points=Points.concatenate(
+            [processed.points, _no_bottom_points(scene, sim["returns"], processed, refr)]
+        ),
+    )
     fr = scene.frame
     origin = (fr.origin_easting_m, fr.origin_northing_m, 0.0)
     xmin, xmax, ymin, ymax = sim["extent"]
@@ -351,3 +358,35 @@ def _take_tpu(tpu, index: np.ndarray):
         else:
             kw[f.name] = v
     return dataclasses.replace(tpu, **kw)
+
+
+def _no_bottom_points(scene, returns, processed, refr):
+    """ASPRS class 45 "no-bottom-found-at" points of the water pulses that have no bottom.
+
+    Each is the deepest point the recorded window reached along the refracted beam: no bottom
+    was seen above it.
+
+    The range gate opens ``pre_trigger_s`` before the first echo and lasts ``window_s``, so the
+    window ends ``window_s − pre_trigger_s`` after the surface echo: system knowledge, not truth.
+    """
+    from pipeline.process.classify import NO_BOTTOM_FOUND_AT
+    from pipeline.process.refraction import seabed_points
+    from pipeline.process.returns import PointFlag
+
+    det = scene.detector
+    none = returns.has_surface & ~returns.has_bottom
+    t_end = returns.t_surface_s + (det.window_s - det.pre_trigger_s)
+    probe = dataclasses.replace(
+        returns,
+        has_bottom=none,
+        t_bottom_s=np.where(none, t_end, 0.0),
+        bottom_confidence=np.where(none, 1.0, 0.0),
+        bottom_amplitude=None,
+        t_bottom_sigma_s=None,
+    )
+    pts = seabed_points(probe, processed.surface, refr)
+    bad = PointFlag.LAND | PointFlag.GRAZING | PointFlag.ABOVE_SURFACE
+    pts = pts.select((pts.flags & np.uint16(bad)) == 0)
+    return pts.replace(
+        classification=np.full(pts.pulse_id.shape, NO_BOTTOM_FOUND_AT, dtype=np.uint8)
+    )

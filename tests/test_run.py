@@ -1,6 +1,7 @@
 import json
 import tomllib
 
+import numpy as np
 import pytest
 
 from pipeline.cli import main
@@ -61,6 +62,14 @@ def test_survey_scene_end_to_end(tmp_path, small_survey):
     assert err["points"]["rmse_m"] < 0.5 * err["points_uncorrected"]["rmse_m"]
     for name in ("points.laz", "grid.tif"):
         assert (tmp_path / name).stat().st_size > 1000
+    from pipeline.outputs.las import read_points_laz
+
+    pts = read_points_laz(tmp_path / "points.laz").points
+    classes = set(np.unique(pts.classification).tolist())
+    assert {40, 41, 45} <= classes
+    # no-bottom-found-at points sit where the window ended: 330 ns of water at 20°, ~35 m
+    deep = pts.depth_m[pts.classification == 45]
+    assert np.all((deep > 30.0) & (deep < 40.0))
 
 
 def test_photon_counting_profiler_end_to_end(tmp_path):
