@@ -324,10 +324,17 @@ def _uncertainty(scene, returns, processed, refr, grid) -> dict[str, Any]:
     from pipeline.process.returns import ReturnKind
     from pipeline.process.tpu import point_tpu
 
+    # the navigation solution's own quality figures (as an SBET reports them) are what the
+    # survey's GNSS/INS error model draws from; the system's beam and wavelength are known
+    nav = scene.navigation
     st = dataclasses.replace(
         scene.process.tpu,
         beam_divergence_mrad=scene.scanner.beam_divergence_mrad,
         wavelength_nm=scene.system.wavelength_nm,
+        position_sigma_h_m=nav.gnss_horizontal_sigma_m,
+        position_sigma_v_m=nav.gnss_vertical_sigma_m,
+        attitude_sigma_deg=max(nav.ins_roll_sigma_deg, nav.ins_pitch_sigma_deg),
+        heading_sigma_deg=nav.ins_heading_sigma_deg,
     )
     tpu = point_tpu(returns, processed.surface, refr, st)
     pts = processed.points
