@@ -70,7 +70,8 @@ def draw_truths(n, rng, pc=False, depth=(1.0, 10.0)):
         areas = np.exp(rng.uniform(np.log([500, 100, 150]), np.log([5000, 2000, 3000]), (n, 3)))
         bg = rng.uniform(0.5, 10.0, n)
     k = np.exp(rng.uniform(np.log(0.08), np.log(0.5), n))
-    th = np.column_stack([d, t_ns, np.log(areas), np.log(k), bg])
+    lw = np.log(rng.uniform(1.0, 2.0, n))  # bottom echo up to twice the response (stretching)
+    th = np.column_stack([d, t_ns, np.log(areas), np.log(k), bg, lw])
     system = PC if pc else FW
     return th, [draw_waveform(t, window(t), system, rng) for t in th]
 
@@ -231,13 +232,17 @@ def main() -> None:
     print("\n## Cramér–Rao (16 realisations, flat bottom at 4 m)")
     crb(
         "full waveform",
-        np.array([4.0, 15.0, math.log(2000), math.log(500), math.log(1200), math.log(0.2), 4.0]),
+        np.array(
+            [4.0, 15.0, math.log(2000), math.log(500), math.log(1200), math.log(0.2), 4.0, 0.0]
+        ),
         FW,
         st,
     )
     crb(
         "photon counting",
-        np.array([4.0, 15.0, math.log(1000), math.log(1000), math.log(400), math.log(0.2), 0.5]),
+        np.array(
+            [4.0, 15.0, math.log(1000), math.log(1000), math.log(400), math.log(0.2), 0.5, 0.0]
+        ),
         PC,
         st,
     )

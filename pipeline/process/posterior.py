@@ -15,7 +15,9 @@ the log prior is a constant inside the box and ``-inf`` outside:
   coast; a pulse alone barely constrains ``k``), or with ``attenuation_prior`` a log-normal
   prior (a survey's known water);
 * background: flat on ``[0, background_max]`` (photon counting from ``1e-9``: a Poisson mean
-  must be > 0).
+  must be > 0);
+* bottom width: log-uniform on ``bottom_width_ratio_bounds`` times the system response's
+  (forward scattering stretches a 20 m bottom echo by a few ns in coastal water).
 
 Sampling
 --------
@@ -121,7 +123,7 @@ class PosteriorFlag(enum.IntFlag):
 class PosteriorSettings:
     """Sampler settings and prior bounds."""
 
-    n_walkers: int = setting(16, ge=16, le=1024, doc="emcee walkers (>= 2 x 7 parameters + 2)")
+    n_walkers: int = setting(16, ge=16, le=1024, doc="emcee walkers (>= 2 x 8 parameters)")
     burn_steps: int = setting(150, ge=0, doc="steps discarded after the start")
     chunk_steps: int = setting(100, ge=10, doc="production steps between convergence checks")
     max_steps: int = setting(4000, ge=10, doc="production steps at most")
@@ -149,6 +151,9 @@ class PosteriorSettings:
         (0.01, 2.0), gt=0.0, length=2, doc="log-uniform prior on the attenuation"
     )
     background_max: float = setting(1e7, gt=0.0, doc="flat prior on the background up to this")
+    bottom_width_ratio_bounds: tuple[float, float] = setting(
+        (0.7, 20.0), gt=0.0, length=2, doc="log-uniform prior on bottom echo / response width"
+    )
     attenuation_prior: tuple[float, float] | None = setting(
         None,
         gt=0.0,
@@ -157,7 +162,12 @@ class PosteriorSettings:
     )
 
     def __post_init__(self) -> None:
-        for name in ("depth_bounds_m", "area_bounds", "attenuation_bounds_per_m"):
+        for name in (
+            "depth_bounds_m",
+            "area_bounds",
+            "attenuation_bounds_per_m",
+            "bottom_width_ratio_bounds",
+        ):
             lo, hi = getattr(self, name)
             if not lo < hi:
                 raise ValueError(f"`{name}` must be increasing; got {getattr(self, name)}")
@@ -177,7 +187,7 @@ class PulseBatch:
     valid : (P, m) bool
     cos_water : (P,) float64
         Cosine of each pulse's in-water angle from the vertical.
-    lower, upper : (P, 7) float64
+    lower, upper : (P, 8) float64
         Prior box per pulse and parameter.
     t_last_s : (P,) float64
         Centre of each waveform's last sample: surface and bottom must lie in
@@ -264,6 +274,7 @@ def make_pulse_batch(
             math.log(st.area_bounds[0]),
             math.log(st.attenuation_bounds_per_m[0]),
             bg_min,
+            math.log(st.bottom_width_ratio_bounds[0]),
         ]
     )
     upper = np.array(
@@ -275,6 +286,7 @@ def make_pulse_batch(
             math.log(st.area_bounds[1]),
             math.log(st.attenuation_bounds_per_m[1]),
             st.background_max,
+            math.log(st.bottom_width_ratio_bounds[1]),
         ]
     )
     upper = np.tile(upper, (n, 1))
@@ -289,7 +301,7 @@ def make_pulse_batch(
 
 
 def _rows_log_lik(th: np.ndarray, data: PulseBatch, pulse: np.ndarray, system) -> np.ndarray:
-    """Log posterior of parameter rows ``th`` (N, 7), row ``j`` for pulse ``pulse[j]``.
+    """Log posterior of parameter rows ``th`` (N, 8), row ``j`` for pulse ``pulse[j]``.
 
     ``-inf`` outside the prior box (flat inside, plus the optional normal prior on ``ln k``);
     NaN raised as :class:`NumericalError`.
@@ -320,8 +332,8 @@ def log_prob_blocks(theta: Any, data: PulseBatch, system: WaveformSystem) -> np.
 
     Parameters
     ----------
-    theta : (n_walkers, 7 P) array_like
-        Walker positions, pulse ``p`` in columns ``7p .. 7p + 6``.
+    theta : (n_walkers, 8 P) array_like
+        Walker positions, pulse ``p`` in columns ``8p .. 8p + 7``.
     data : PulseBatch
     system : WaveformSystem
 
@@ -345,9 +357,9 @@ def log_prob(theta: Any, data: PulseBatch, system: WaveformSystem) -> Any:
 
     Parameters
     ----------
-    theta : (7 P,) or (n_walkers, 7 P) array_like
+    theta : (8 P,) or (n_walkers, 8 P) array_like
         Parameters in :data:`~pipeline.process.waveform_model.PARAM_NAMES` order, pulse by
-        pulse (``P = len(data)``; one pulse: a 7-vector).
+        pulse (``P = len(data)``; one pulse: an 8-vector).
     data : PulseBatch
     system : WaveformSystem
 
@@ -385,11 +397,21 @@ def start_theta(
     return _start(samples, system, cos_water, detect_settings)[0]
 
 
-def _start(samples, system, cos_water, detect_settings=None):
-    """``(theta or None, scanned)``: see :func:`start_theta`."""
+def _start(samples, system, cos_water, detect_settings=None, detect_noise=None):
+    """``(theta or None, scanned)``: see :func:`start_theta`.
+
+    ``detect_noise``: ``(noise_samples, shot_noise_counts)`` of the survey's own detector run
+    (leading samples that are noise only, and the shot-noise counts per photoelectron).
+    """
     y = np.asarray(samples, dtype=np.float64)
+    n_noise, shot = detect_noise if detect_noise is not None else (None, 0.0)
     det = detect_full_waveform(
-        y[None, :], system.sample_interval_s, system.pulse_fwhm_s, detect_settings
+        y[None, :],
+        system.sample_interval_s,
+        system.pulse_fwhm_s,
+        detect_settings,
+        noise_samples=n_noise,
+        shot_noise_counts=shot,
     )
     if not det.has_surface[0]:
         return None, False
@@ -417,6 +439,7 @@ def _start(samples, system, cos_water, detect_settings=None):
         math.log(a_b),
         math.log(0.1),
         bg,
+        0.0,
     ]
     return np.array(th), False
 
@@ -437,7 +460,7 @@ def _scan_start(y, system, cos_water, ts, bg):
     off = -700.0  # log area of an absent return
     basis = []
     for j in (2, 3, 4):
-        th = np.tile([0.0, ts * 1e9, off, off, off, math.log(0.1), 0.0], (taus.size, 1))
+        th = np.tile([0.0, ts * 1e9, off, off, off, math.log(0.1), 0.0, 0.0], (taus.size, 1))
         th[:, 0], th[:, j] = depths, 0.0
         basis.append(expected_waveform(th, m, system, cos_water) - system.offset_counts)
     a = np.stack([np.ones((taus.size, m)), *basis], axis=2)  # (K, m, 4)
@@ -459,6 +482,7 @@ def _scan_start(y, system, cos_water, ts, bg):
             math.log(max(a_b, 1e-2)),
             math.log(0.1),
             max(bgk, bg * 1e-3, 1e-3),
+            0.0,
         ]
     )
 
@@ -486,15 +510,15 @@ def posterior_modes(
     ----------
     data : PulseBatch
     system : WaveformSystem
-    theta0 : (P, 7) array_like
+    theta0 : (P, 8) array_like
         Starting points.
     iterations : int
 
     Returns
     -------
-    theta : (P, 7) ndarray
+    theta : (P, 8) ndarray
         The modes (inside the prior boxes).
-    info : (P, 7, 7) ndarray
+    info : (P, 8, 8) ndarray
         Fisher information there.
     """
     p = len(data)
@@ -704,14 +728,14 @@ class PulseChains:
 
     Attributes
     ----------
-    draws : (P, k, 7) ndarray
+    draws : (P, k, 8) ndarray
         Thinned production draws per pulse (NaN-free; pulses without a start hold their
         start-less zeros and the NO_START flag).
-    mode : (P, 7) ndarray
+    mode : (P, 8) ndarray
         Posterior modes the walkers started around.
     acceptance : (P,) ndarray
         Per-pulse acceptance fraction of the production chain.
-    tau_steps : (P, 7) ndarray
+    tau_steps : (P, 8) ndarray
         Integrated autocorrelation time per pulse and parameter, in steps.
     n_steps : (P,) int64
         Production steps per pulse.
@@ -741,6 +765,8 @@ def sample_batch(
     cos_water: Any = 1.0,
     theta0: Any = None,
     seed: int = 0,
+    detect_settings: DetectSettings | None = None,
+    detect_noise: tuple[int | None, float] | None = None,
 ) -> PulseChains:
     """Sample the posteriors of a batch of waveforms with one emcee ensemble.
 
@@ -751,10 +777,13 @@ def sample_batch(
     settings : PosteriorSettings, optional
     cos_water : float or (P,) array_like
         Cosine of each pulse's in-water angle from the vertical.
-    theta0 : (P, 7) array_like, optional
+    theta0 : (P, 8) array_like, optional
         Starting estimates; default :func:`start_theta` (the detector's) per pulse.
     seed : int
         Seeds the start balls and emcee's generator (results depend on the batch's make-up).
+    detect_settings, detect_noise : optional
+        The survey detector's settings and ``(noise_samples, shot_noise_counts)``, for the
+        starts (:func:`start_theta`): the same detections the survey's points come from.
 
     Returns
     -------
@@ -770,7 +799,9 @@ def sample_batch(
     for i in range(n_p):
         if starts[i] is None:
             one = data.pulse(i)
-            starts[i], scanned = _start(one.samples[0], system, float(one.cos_water[0]))
+            starts[i], scanned = _start(
+                one.samples[0], system, float(one.cos_water[0]), detect_settings, detect_noise
+            )
             if scanned:
                 flags[i] |= np.uint16(PosteriorFlag.START_SCANNED)
     has = np.array([th is not None for th in starts], dtype=bool)
@@ -876,15 +907,15 @@ def sample_batch(
 
 
 def _run(data: PulseBatch, pulses, pos, system, st, n_steps: int, thin: int, rng, proposal):
-    """Advance the walkers ``pos`` (n_walkers, len(pulses), 7) of some pulses ``n_steps``.
+    """Advance the walkers ``pos`` (n_walkers, len(pulses), 8) of some pulses ``n_steps``.
 
     Moves: :class:`BlockDEMove` and :class:`BlockIndependenceMove` (``proposal`` = centres and
     scale matrices of these pulses), mixed with weight ``st.independence_weight``.
 
     Returns
     -------
-    positions : (n_walkers, len(pulses), 7) ndarray
-    chain : (n_steps // thin, n_walkers, len(pulses), 7) ndarray
+    positions : (n_walkers, len(pulses), 8) ndarray
+    chain : (n_steps // thin, n_walkers, len(pulses), 8) ndarray
         The stored chain.
     acceptance : (len(pulses),) ndarray
         Fraction of proposals accepted per pulse (both moves).
@@ -899,7 +930,7 @@ def _run(data: PulseBatch, pulses, pos, system, st, n_steps: int, thin: int, rng
         nw, n_p * N_PARAMS, log_prob_blocks, args=(sub, system), vectorize=True, moves=moves
     )
     sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
-    # each pulse's walkers are independent; the joint (7 P)-D check does not apply
+    # each pulse's walkers are independent; the joint (8 P)-D check does not apply
     state = sampler.run_mcmc(
         pos.reshape(nw, n_p * N_PARAMS),
         n_steps // thin,
@@ -1086,6 +1117,8 @@ def seabed_posteriors(
     *,
     rows: Any = None,
     seed: int = 0,
+    detect_settings: DetectSettings | None = None,
+    detect_noise: tuple[int | None, float] | None = None,
 ) -> SeabedPosteriors:
     """Sample the depth posterior of pulses and carry it to the refracted seabed point.
 
@@ -1108,6 +1141,8 @@ def seabed_posteriors(
         ``benchmarks/RESULTS_posterior.md``).
     seed : int
         Batch ``b`` (``settings.batch_size`` pulses side by side) is seeded ``seed + b0``.
+    detect_settings, detect_noise : optional
+        The survey detector's, for the starts (see :func:`sample_batch`).
 
     Returns
     -------
@@ -1133,7 +1168,15 @@ def seabed_posteriors(
     n_steps, flags = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.uint16)
     for b0 in range(0, m, st.batch_size):
         part = rows[b0 : b0 + st.batch_size]
-        chains = sample_batch(y[part], system, st, cos_water=cosw[part], seed=seed + b0)
+        chains = sample_batch(
+            y[part],
+            system,
+            st,
+            cos_water=cosw[part],
+            seed=seed + b0,
+            detect_settings=detect_settings,
+            detect_noise=detect_noise,
+        )
         for k, r in enumerate(part):
             j = b0 + k
             acc[j], tau_max[j] = chains.acceptance[k], float(np.max(chains.tau_steps[k]))

@@ -5,7 +5,7 @@ instrument (sample clock, system response, noise law, water group index) and the
 the pulse (the in-water angle from the measured beam and the fitted surface), nothing of the
 simulated world.
 
-Parameters ``theta`` (:data:`PARAM_NAMES`, last axis of length 7)
+Parameters ``theta`` (:data:`PARAM_NAMES`, last axis of length 8)
 -----------------------------------------------------------------
 ``depth_m``
     Vertical depth of the bottom below the entry point along the refracted ray, metres.
@@ -21,6 +21,15 @@ Parameters ``theta`` (:data:`PARAM_NAMES`, last axis of length 7)
     Natural log of the attenuation ``k`` of the water column along the beam (``k`` in 1/m).
 ``background``
     Background light, counts per sample (photoelectron-equivalent; no digitiser offset).
+``log_bottom_width``
+    Natural log of the bottom echo's Gaussian sigma over the system response's,
+    ``sigma_b = sigma exp(lambda)``. The bottom echo is wider than the system response by
+    forward scattering in the water (pulse stretching, growing with depth and turbidity), the
+    footprint across a sloping or rough bottom and the beam's spread of incidence, and the
+    response itself is known to a few per cent only: the processing knows none of these
+    exactly, so the width is a nuisance parameter. A log ratio keeps ``lambda = 0`` (the
+    response alone) inside the prior rather than on its edge, where a sampler would pile up.
+    The spread is taken symmetric about the centre, which is the depth.
 
 Model
 -----
@@ -30,7 +39,8 @@ simulator convention; the detector's times are ``i dt``). With the system respon
 
 * in-water two-way time ``tau = 2 n_g depth / (c cos(theta_w))`` (group speed along a slant
   path of length ``L = depth / cos(theta_w)``), bottom time ``t_b = t_s + tau``;
-* surface and bottom: ``A [Phi((hi - t)/sigma) - Phi((lo - t)/sigma)]``;
+* surface and bottom: ``A [Phi((hi - t)/sigma) - Phi((lo - t)/sigma)]`` (``sigma_b`` for the
+  bottom);
 * water column: backscatter from path ``l = c x / (2 n_g)`` (``x = t - t_s``) decays as
   ``exp(-2 k l) = exp(-r x)`` with ``r = k c / n_g`` per second, from the surface to the
   bottom, blurred by the system response. Its cumulative counts
@@ -91,6 +101,7 @@ PARAM_NAMES = (
     "log_bottom_area",
     "log_attenuation_per_m",
     "background",
+    "log_bottom_width",
 )
 N_PARAMS = len(PARAM_NAMES)
 FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
@@ -100,7 +111,7 @@ _SQRT1_2 = math.sqrt(0.5)
 _BAND_Z = 8.5
 #: Finite-difference step per parameter, in the parameter's own unit (central differences:
 #: error ~ h^2 f''' / 6, far below the noise for these smooth functions).
-_FD_STEP = np.array([1e-5, 1e-5, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6])
+_FD_STEP = np.array([1e-5, 1e-5, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6])
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -197,7 +208,7 @@ def expected_waveform(
 
     Parameters
     ----------
-    theta : (7,) or (n_walkers, 7) array_like
+    theta : (8,) or (n_walkers, 8) array_like
         Parameters in :data:`PARAM_NAMES` order.
     n_samples : int
         Samples in the window; sample ``i`` is centred at ``i dt``.
@@ -214,7 +225,7 @@ def expected_waveform(
     dt, s = system.sample_interval_s, system.pulse_sigma_s
     n = th.shape[0]
     cw = np.broadcast_to(np.asarray(cos_water, dtype=np.float64), (n,))
-    depth, t_ns, la_s, la_c, la_b, lk, bg = th.T
+    depth, t_ns, la_s, la_c, la_b, lk, bg, lw = th.T
     t_s = t_ns * 1e-9
     r = np.exp(lk) * _C / system.group_index  # two-way decay rate of the column, 1/s
     tau = in_water_delay_s(depth, cw, system.group_index)
@@ -235,7 +246,7 @@ def expected_waveform(
     # bands closer than 2 x 8.5 sigma overlap: there both parts are exact everywhere
     near = np.flatnonzero(tau < 2.0 * _BAND_Z * s)
     gauss = []
-    for centre, amp, is_surface in ((t_s, la_s, True), (t_s + tau, la_b, False)):
+    for centre, amp, is_surface in ((t_s, la_s, True), (t_s + tau, None, False)):
         cols = _band(centre, e, s, dt)
         ub = edges[cols] - t_s[:, None]
         own_u = ub if is_surface else ub - tt
@@ -250,7 +261,13 @@ def expected_waveform(
             c_other[near] = ndtr(ou / s) - _psi(ou, rr[near], s)
         c_s, c_b = (c_own, c_other) if is_surface else (c_other, c_own)
         cum[rows, cols] = c_s - fall * c_b
-        gauss.append((cols[:, :-1], np.exp(amp)[:, None] * np.diff(phi_own, axis=1)))
+        if is_surface:
+            gauss.append((cols[:, :-1], np.exp(amp)[:, None] * np.diff(phi_own, axis=1)))
+    # the bottom echo at its own width (its own band, as wide as the widest row needs)
+    s_b = s * np.exp(lw)
+    cols = _band(t_s + tau, e, float(np.max(s_b)), dt)
+    phi_b = ndtr((edges[cols] - (t_s + tau)[:, None]) / s_b[:, None])
+    gauss.append((cols[:, :-1], np.exp(la_b)[:, None] * np.diff(phi_b, axis=1)))
     # normalised to the column's total counts: C_tau(inf) = 1 - exp(-r tau)
     mu = np.diff(cum, axis=1) * (np.exp(la_c) / -np.expm1(-r * tau))[:, None]
     mu += (system.offset_counts + bg)[:, None]
@@ -311,7 +328,7 @@ def jacobian(
 
     Parameters
     ----------
-    theta : (7,) or (P, 7) array_like
+    theta : (8,) or (P, 8) array_like
     n_samples : int
     system : WaveformSystem
     cos_water : float or (P,) array_like
@@ -319,12 +336,12 @@ def jacobian(
     Returns
     -------
     mu : (n_samples,) or (P, n_samples) ndarray
-    jac : (n_samples, 7) or (P, n_samples, 7) ndarray
+    jac : (n_samples, 8) or (P, n_samples, 8) ndarray
         ``d mu / d theta_j``.
     """
     th, single = _as_2d(theta)
     p = th.shape[0]
-    h = _FD_STEP * np.maximum(1.0, np.abs(th) * np.array([1, 0.01, 0, 0, 0, 0, 1]))
+    h = _FD_STEP * np.maximum(1.0, np.abs(th) * np.array([1, 0.01, 0, 0, 0, 0, 1, 0]))
     eye = np.eye(N_PARAMS)
     pert = np.concatenate(
         [
@@ -333,7 +350,7 @@ def jacobian(
             th[:, None, :] - h[:, :, None] * eye,
         ],
         axis=1,
-    )  # (P, 15, 7)
+    )  # (P, 17, 8)
     cw = np.repeat(np.broadcast_to(np.asarray(cos_water, dtype=np.float64), (p,)), 2 * N_PARAMS + 1)
     mu = expected_waveform(pert.reshape(-1, N_PARAMS), n_samples, system, cw)
     mu = mu.reshape(p, 2 * N_PARAMS + 1, n_samples)
@@ -356,7 +373,7 @@ def _weights(mu, system):
 def fisher_information(
     theta: Any, n_samples: int, system: WaveformSystem, cos_water: Any = 1.0, valid: Any = None
 ) -> np.ndarray:
-    """Expected Fisher information (7, 7) (or (P, 7, 7)) of waveform(s) at ``theta``.
+    """Expected Fisher information (8, 8) (or (P, 8, 8)) of waveform(s) at ``theta``.
 
     Poisson: ``J^T diag(1/mu) J``. Gaussian with a mean-dependent variance ``v(mu)``:
     ``J^T diag(1/v + v'^2 / (2 v^2)) J`` with ``v' = F G`` above the offset. ``valid``
@@ -377,8 +394,8 @@ def score(
 ) -> tuple[Any, np.ndarray, np.ndarray]:
     """Log-likelihood, its gradient and the Fisher information at ``theta``.
 
-    ``samples`` (m,) with ``theta`` (7,), or (P, m) with (P, 7); ``valid`` masks padding.
-    Returns ``(ll, grad, info)``: a float, (7,), (7, 7), or (P,), (P, 7), (P, 7, 7).
+    ``samples`` (m,) with ``theta`` (8,), or (P, m) with (P, 8); ``valid`` masks padding.
+    Returns ``(ll, grad, info)``: a float, (8,), (8, 8), or (P,), (P, 8), (P, 8, 8).
     """
     y = np.asarray(samples, dtype=np.float64)
     mu, jac = jacobian(theta, y.shape[-1], system, cos_water)
@@ -412,7 +429,7 @@ def depth_crb_m(
 
 
 def covariance(info: np.ndarray) -> np.ndarray:
-    """Inverse of an information matrix (7, 7), pseudo-inverse if singular.
+    """Inverse of an information matrix (8, 8), pseudo-inverse if singular.
 
     Scaled to a unit diagonal first: the parameters have very different units.
     """

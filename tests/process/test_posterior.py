@@ -62,8 +62,8 @@ PC = WaveformSystem(sample_interval_s=1e-9, pulse_fwhm_s=3e-9, receiver="photon_
 FAST = PosteriorSettings(max_steps=2500)
 
 
-def theta(depth=4.0, t_ns=10.0, a_s=2000.0, a_c=600.0, a_b=800.0, k=0.2, bg=4.0):
-    return np.array([depth, t_ns, math.log(a_s), math.log(a_c), math.log(a_b), math.log(k), bg])
+def theta(depth=4.0, t_ns=10.0, a_s=2000.0, a_c=600.0, a_b=800.0, k=0.2, bg=4.0, lw=0.0):
+    return np.array([depth, t_ns, math.log(a_s), math.log(a_c), math.log(a_b), math.log(k), bg, lw])
 
 
 def window(th, dt=1e-9, cos_w=1.0, after_ns=12.0):
@@ -74,8 +74,9 @@ def window(th, dt=1e-9, cos_w=1.0, after_ns=12.0):
 def slow_model(th, m, system, cos_w=1.0):
     """The same model written out plainly: no bands, the simulator's log_ndtr form of psi."""
     dt, s = system.sample_interval_s, system.pulse_sigma_s
-    depth, t_ns, la_s, la_c, la_b, lk, bg = th
+    depth, t_ns, la_s, la_c, la_b, lk, bg, lw = th
     t_s = t_ns * 1e-9
+    s_b = s * math.exp(lw)
     r = math.exp(lk) * C / system.group_index
     tau = 2.0 * system.group_index * depth / (C * cos_w)
     edges = (np.arange(m + 1) - 0.5) * dt
@@ -86,7 +87,7 @@ def slow_model(th, m, system, cos_w=1.0):
     cum = cdf(edges - t_s) - math.exp(-r * tau) * cdf(edges - t_s - tau)
     column = math.exp(la_c) / (1.0 - math.exp(-r * tau)) * np.diff(cum)
     surface = math.exp(la_s) * np.diff(ndtr((edges - t_s) / s))
-    bottom = math.exp(la_b) * np.diff(ndtr((edges - t_s - tau) / s))
+    bottom = math.exp(la_b) * np.diff(ndtr((edges - t_s - tau) / s_b))
     return system.offset_counts + bg + surface + column + bottom
 
 
@@ -94,9 +95,10 @@ def slow_model(th, m, system, cos_w=1.0):
 @pytest.mark.parametrize("depth", [0.01, 1.0, 2.5, 8.0])  # bands overlapping, touching, apart
 @pytest.mark.parametrize("k", [0.005, 0.2, 5.0])
 @pytest.mark.parametrize("fwhm", [1e-9, 3e-9, 8e-9])
-def test_model_matches_the_plain_formula(depth, k, fwhm):
+@pytest.mark.parametrize("lw", [0.0, 1.5])
+def test_model_matches_the_plain_formula(depth, k, fwhm, lw):
     system = WaveformSystem(sample_interval_s=1e-9, pulse_fwhm_s=fwhm, electronic_noise_counts=1.0)
-    th = theta(depth=depth, t_ns=40.3, k=k)
+    th = theta(depth=depth, t_ns=40.3, k=k, lw=lw)
     m = window(th, after_ns=60.0)
     fast = expected_waveform(th, m, system)
     ref = slow_model(th, m, system)
@@ -254,7 +256,9 @@ def draw_truths(n, rng, *, pc=False):
         areas = np.exp(rng.uniform(np.log([500, 100, 150]), np.log([5000, 2000, 3000]), (n, 3)))
         bg = rng.uniform(0.5, 10.0, n)
     k = np.exp(rng.uniform(np.log(0.08), np.log(0.5), n))
-    th = np.column_stack([depth, t_ns, np.log(areas), np.log(k), bg])
+    # bottom echoes from the system response alone up to twice its width (pulse stretching)
+    lw = np.log(rng.uniform(1.0, 2.0, n))
+    th = np.column_stack([depth, t_ns, np.log(areas), np.log(k), bg, lw])
     system = PC if pc else FW
     waves = [draw_waveform(t, window(t), system, rng) for t in th]
     return th, waves
@@ -303,9 +307,9 @@ def test_intervals_are_calibrated(fw_batch):
 def test_chains_are_converged(fw_batch):
     th, all_chains = fw_batch
     ok = all_chains.converged[:120]
-    # weak water columns (log k barely constrained) mix slowly: those are flagged, not hidden;
-    # 85-95 % converge within 2500 steps in this set
-    assert np.mean(ok) >= 0.8
+    # weak water columns (log k barely constrained) and the free bottom width mix slowly:
+    # those are flagged, not hidden; 67-80 % converge within 2500 steps in this set
+    assert np.mean(ok) >= 0.6
     c = all_chains
     assert np.all(c.n_steps[:120][ok] >= 50 * c.tau_steps[:120][ok].max(axis=1))
     acc = c.acceptance[:120][ok]
