@@ -71,7 +71,8 @@ def draw_truths(n, rng, pc=False, depth=(1.0, 10.0)):
         bg = rng.uniform(0.5, 10.0, n)
     k = np.exp(rng.uniform(np.log(0.08), np.log(0.5), n))
     lw = np.log(rng.uniform(1.0, 2.0, n))  # bottom echo up to twice the response (stretching)
-    th = np.column_stack([d, t_ns, np.log(areas), np.log(k), bg, lw])
+    lws = np.log(rng.uniform(1.0, 1.3, n))  # surface echo widened by the footprint
+    th = np.column_stack([d, t_ns, np.log(areas), np.log(k), bg, lw, lws])
     system = PC if pc else FW
     return th, [draw_waveform(t, window(t), system, rng) for t in th]
 

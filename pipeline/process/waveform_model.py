@@ -5,7 +5,7 @@ instrument (sample clock, system response, noise law, water group index) and the
 the pulse (the in-water angle from the measured beam and the fitted surface), nothing of the
 simulated world.
 
-Parameters ``theta`` (:data:`PARAM_NAMES`, last axis of length 8)
+Parameters ``theta`` (:data:`PARAM_NAMES`, last axis of length 9)
 -----------------------------------------------------------------
 ``depth_m``
     Vertical depth of the bottom below the entry point along the refracted ray, metres.
@@ -30,6 +30,10 @@ Parameters ``theta`` (:data:`PARAM_NAMES`, last axis of length 8)
     exactly, so the width is a nuisance parameter. A log ratio keeps ``lambda = 0`` (the
     response alone) inside the prior rather than on its edge, where a sampler would pile up.
     The spread is taken symmetric about the centre, which is the depth.
+``log_surface_width``
+    The same for the surface echo: a beam off nadir meets the water across its footprint
+    (a 0.4 m footprint at 20° spreads the echo by ~0.25 ns rms) and waves spread it further.
+    The water column's onset keeps the system response (the column is a sum over the path).
 
 Model
 -----
@@ -39,8 +43,8 @@ simulator convention; the detector's times are ``i dt``). With the system respon
 
 * in-water two-way time ``tau = 2 n_g depth / (c cos(theta_w))`` (group speed along a slant
   path of length ``L = depth / cos(theta_w)``), bottom time ``t_b = t_s + tau``;
-* surface and bottom: ``A [Phi((hi - t)/sigma) - Phi((lo - t)/sigma)]`` (``sigma_b`` for the
-  bottom);
+* surface and bottom: ``A [Phi((hi - t)/sigma_e) - Phi((lo - t)/sigma_e)]`` with each echo's
+  own width ``sigma_e``;
 * water column: backscatter from path ``l = c x / (2 n_g)`` (``x = t - t_s``) decays as
   ``exp(-2 k l) = exp(-r x)`` with ``r = k c / n_g`` per second, from the surface to the
   bottom, blurred by the system response. Its cumulative counts
@@ -102,6 +106,7 @@ PARAM_NAMES = (
     "log_attenuation_per_m",
     "background",
     "log_bottom_width",
+    "log_surface_width",
 )
 N_PARAMS = len(PARAM_NAMES)
 FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
@@ -111,7 +116,7 @@ _SQRT1_2 = math.sqrt(0.5)
 _BAND_Z = 8.5
 #: Finite-difference step per parameter, in the parameter's own unit (central differences:
 #: error ~ h^2 f''' / 6, far below the noise for these smooth functions).
-_FD_STEP = np.array([1e-5, 1e-5, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6])
+_FD_STEP = np.array([1e-5, 1e-5, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6])
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -208,7 +213,7 @@ def expected_waveform(
 
     Parameters
     ----------
-    theta : (8,) or (n_walkers, 8) array_like
+    theta : (9,) or (n_walkers, 9) array_like
         Parameters in :data:`PARAM_NAMES` order.
     n_samples : int
         Samples in the window; sample ``i`` is centred at ``i dt``.
@@ -225,7 +230,7 @@ def expected_waveform(
     dt, s = system.sample_interval_s, system.pulse_sigma_s
     n = th.shape[0]
     cw = np.broadcast_to(np.asarray(cos_water, dtype=np.float64), (n,))
-    depth, t_ns, la_s, la_c, la_b, lk, bg, lw = th.T
+    depth, t_ns, la_s, la_c, la_b, lk, bg, lw, lws = th.T
     t_s = t_ns * 1e-9
     r = np.exp(lk) * _C / system.group_index  # two-way decay rate of the column, 1/s
     tau = in_water_delay_s(depth, cw, system.group_index)
@@ -246,7 +251,7 @@ def expected_waveform(
     # bands closer than 2 x 8.5 sigma overlap: there both parts are exact everywhere
     near = np.flatnonzero(tau < 2.0 * _BAND_Z * s)
     gauss = []
-    for centre, amp, is_surface in ((t_s, la_s, True), (t_s + tau, None, False)):
+    for centre, is_surface in ((t_s, True), (t_s + tau, False)):
         cols = _band(centre, e, s, dt)
         ub = edges[cols] - t_s[:, None]
         own_u = ub if is_surface else ub - tt
@@ -261,13 +266,13 @@ def expected_waveform(
             c_other[near] = ndtr(ou / s) - _psi(ou, rr[near], s)
         c_s, c_b = (c_own, c_other) if is_surface else (c_other, c_own)
         cum[rows, cols] = c_s - fall * c_b
-        if is_surface:
-            gauss.append((cols[:, :-1], np.exp(amp)[:, None] * np.diff(phi_own, axis=1)))
-    # the bottom echo at its own width (its own band, as wide as the widest row needs)
-    s_b = s * np.exp(lw)
-    cols = _band(t_s + tau, e, float(np.max(s_b)), dt)
-    phi_b = ndtr((edges[cols] - (t_s + tau)[:, None]) / s_b[:, None])
-    gauss.append((cols[:, :-1], np.exp(la_b)[:, None] * np.diff(phi_b, axis=1)))
+    # the surface and bottom echoes at their own widths (own bands, as wide as the widest
+    # row needs)
+    for centre, log_area, log_width in ((t_s, la_s, lws), (t_s + tau, la_b, lw)):
+        s_e = s * np.exp(log_width)
+        cols = _band(centre, e, float(np.max(s_e)), dt)
+        phi = ndtr((edges[cols] - centre[:, None]) / s_e[:, None])
+        gauss.append((cols[:, :-1], np.exp(log_area)[:, None] * np.diff(phi, axis=1)))
     # normalised to the column's total counts: C_tau(inf) = 1 - exp(-r tau)
     mu = np.diff(cum, axis=1) * (np.exp(la_c) / -np.expm1(-r * tau))[:, None]
     mu += (system.offset_counts + bg)[:, None]
@@ -328,7 +333,7 @@ def jacobian(
 
     Parameters
     ----------
-    theta : (8,) or (P, 8) array_like
+    theta : (9,) or (P, 9) array_like
     n_samples : int
     system : WaveformSystem
     cos_water : float or (P,) array_like
@@ -336,12 +341,12 @@ def jacobian(
     Returns
     -------
     mu : (n_samples,) or (P, n_samples) ndarray
-    jac : (n_samples, 8) or (P, n_samples, 8) ndarray
+    jac : (n_samples, 9) or (P, n_samples, 9) ndarray
         ``d mu / d theta_j``.
     """
     th, single = _as_2d(theta)
     p = th.shape[0]
-    h = _FD_STEP * np.maximum(1.0, np.abs(th) * np.array([1, 0.01, 0, 0, 0, 0, 1, 0]))
+    h = _FD_STEP * np.maximum(1.0, np.abs(th) * np.array([1, 0.01, 0, 0, 0, 0, 1, 0, 0]))
     eye = np.eye(N_PARAMS)
     pert = np.concatenate(
         [
@@ -350,7 +355,7 @@ def jacobian(
             th[:, None, :] - h[:, :, None] * eye,
         ],
         axis=1,
-    )  # (P, 17, 8)
+    )  # (P, 19, 9)
     cw = np.repeat(np.broadcast_to(np.asarray(cos_water, dtype=np.float64), (p,)), 2 * N_PARAMS + 1)
     mu = expected_waveform(pert.reshape(-1, N_PARAMS), n_samples, system, cw)
     mu = mu.reshape(p, 2 * N_PARAMS + 1, n_samples)
@@ -373,7 +378,7 @@ def _weights(mu, system):
 def fisher_information(
     theta: Any, n_samples: int, system: WaveformSystem, cos_water: Any = 1.0, valid: Any = None
 ) -> np.ndarray:
-    """Expected Fisher information (8, 8) (or (P, 8, 8)) of waveform(s) at ``theta``.
+    """Expected Fisher information (9, 9) (or (P, 9, 9)) of waveform(s) at ``theta``.
 
     Poisson: ``J^T diag(1/mu) J``. Gaussian with a mean-dependent variance ``v(mu)``:
     ``J^T diag(1/v + v'^2 / (2 v^2)) J`` with ``v' = F G`` above the offset. ``valid``
@@ -394,8 +399,8 @@ def score(
 ) -> tuple[Any, np.ndarray, np.ndarray]:
     """Log-likelihood, its gradient and the Fisher information at ``theta``.
 
-    ``samples`` (m,) with ``theta`` (8,), or (P, m) with (P, 8); ``valid`` masks padding.
-    Returns ``(ll, grad, info)``: a float, (8,), (8, 8), or (P,), (P, 8), (P, 8, 8).
+    ``samples`` (m,) with ``theta`` (9,), or (P, m) with (P, 9); ``valid`` masks padding.
+    Returns ``(ll, grad, info)``: a float, (9,), (9, 9), or (P,), (P, 9), (P, 9, 9).
     """
     y = np.asarray(samples, dtype=np.float64)
     mu, jac = jacobian(theta, y.shape[-1], system, cos_water)
@@ -429,7 +434,7 @@ def depth_crb_m(
 
 
 def covariance(info: np.ndarray) -> np.ndarray:
-    """Inverse of an information matrix (8, 8), pseudo-inverse if singular.
+    """Inverse of an information matrix (9, 9), pseudo-inverse if singular.
 
     Scaled to a unit diagonal first: the parameters have very different units.
     """

@@ -163,7 +163,7 @@ def test_timing_sigma_is_the_cramer_rao_bound_of_a_gaussian_return():
         electronic_noise_counts=3.0,
         quantisation_step_counts=0.0,
     )
-    th = np.array([50.0, 30.0, math.log(400.0), -700.0, -700.0, math.log(0.1), 0.0, 0.0])
+    th = np.array([50.0, 30.0, math.log(400.0), -700.0, -700.0, math.log(0.1), 0.0, 0.0, 0.0])
     m = 240
     mu = expected_waveform(th, m, system)
     snr = math.sqrt(np.sum(mu**2)) / 3.0  # matched-filter SNR of the samples
