@@ -1,0 +1,249 @@
+"""Depth posteriors of pulses carried to the refraction-corrected seabed point.
+
+The posterior draws of ``(depth, t_s)`` (:func:`pipeline.process.posterior.sample_batch`)
+become round-trip times ``t0 + t_s`` and ``t0 + t_s + tau(depth)`` and go through
+:func:`pipeline.process.refraction.seabed_points` (all draws of a pulse in one call), so the
+reported posterior is on the 3-D seabed point (and its depth below the fitted surface), with
+the processing's own refraction.
+
+Cost: see ``benchmarks/RESULTS_posterior.md`` (a few tenths of a second per pulse).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from pipeline.process.detect import DetectSettings
+from pipeline.process.posterior import interval_summary, sample_batch
+from pipeline.process.posterior_settings import PosteriorFlag, PosteriorSettings
+from pipeline.process.refraction import RefractionSettings, seabed_points
+from pipeline.process.returns import DetectedReturns
+from pipeline.process.surface_fit import WaterSurface
+from pipeline.process.waveform_model import WaveformSystem, in_water_delay_s
+
+__all__ = [
+    "SeabedPosteriors",
+    "water_cosine",
+    "take_surface",
+    "draws_to_seabed",
+    "seabed_posteriors",
+]
+
+
+def water_cosine(direction: Any, normal: Any, air_index: float, phase_index: float) -> np.ndarray:
+    """Cosine of the refracted beam's angle to the surface normal, by Snell's law.
+
+    ``direction`` and ``normal`` are (n, 3) unit vectors; grazing or totally reflected beams
+    give the smallest positive cosine rather than NaN.
+    """
+    d = np.asarray(direction, dtype=np.float64)
+    n = np.asarray(normal, dtype=np.float64)
+    cos_i = np.abs(np.sum(d * n, axis=-1))
+    sin_w = air_index / phase_index * np.sqrt(np.maximum(1.0 - cos_i**2, 0.0))
+    return np.sqrt(np.maximum(1.0 - sin_w**2, 1e-12))
+
+
+_SURFACE_ROWS = (
+    "entry_m",
+    "range_to_entry_m",
+    "normal",
+    "is_water",
+    "is_land",
+    "surface_point_m",
+    "surface_residual_m",
+    "fit_sigma_m",
+    "height_sigma_m",
+    "normal_sigma_rad",
+    "n_used",
+    "flags",
+)
+
+
+def take_surface(surface: WaterSurface, index: Any) -> WaterSurface:
+    """The rows ``index`` of a fitted surface (repeats allowed), as a new object."""
+    kw = {name: getattr(surface, name)[index] for name in _SURFACE_ROWS}
+    return WaterSurface(
+        **kw,
+        global_plane=surface.global_plane,
+        global_sigma_m=surface.global_sigma_m,
+        air_index=surface.air_index,
+    )
+
+
+@dataclass(frozen=True)
+class SeabedPosteriors:
+    """Posterior summaries of the refraction-corrected seabed point per sampled pulse.
+
+    Attributes
+    ----------
+    pulse_id : (n,) int64
+    row : (n,) int64
+        Row of the pulse in the input arrays.
+    depth_m : dict of (n,) ndarray
+        :func:`interval_summary` of the depth below the fitted surface (``median``, ``lo68``,
+        ``hi68``, ``lo95``, ``hi95``, ``std``), metres.
+    xyz_median_m : (n, 3) ndarray
+        Per-coordinate posterior median of the seabed point.
+    xyz_std_m : (n, 3) ndarray
+        Per-coordinate posterior standard deviation.
+    sigma_h_m : (n,) ndarray
+        Horizontal per-axis (circular) standard deviation ``sqrt((var_x + var_y) / 2)``.
+    acceptance, tau_max_steps : (n,) ndarray
+    n_steps : (n,) int64
+    flags : (n,) uint16
+        :class:`PosteriorFlag` bits.
+    """
+
+    pulse_id: np.ndarray
+    row: np.ndarray
+    depth_m: dict[str, np.ndarray]
+    xyz_median_m: np.ndarray
+    xyz_std_m: np.ndarray
+    sigma_h_m: np.ndarray
+    acceptance: np.ndarray
+    tau_max_steps: np.ndarray
+    n_steps: np.ndarray
+    flags: np.ndarray
+
+    @property
+    def converged(self) -> np.ndarray:
+        """(n,) bool: neither NOT_CONVERGED nor ACCEPTANCE (nor NO_START)."""
+        bad = PosteriorFlag.NOT_CONVERGED | PosteriorFlag.ACCEPTANCE | PosteriorFlag.NO_START
+        return (self.flags & np.uint16(bad)) == 0
+
+
+def draws_to_seabed(
+    chain_draws: np.ndarray,
+    row: int,
+    t0_s: float,
+    returns: DetectedReturns,
+    surface: WaterSurface,
+    system: WaveformSystem,
+    cos_water: float,
+    refraction_settings: RefractionSettings | None = None,
+):
+    """Refraction-corrected seabed points (``Points``) of every posterior draw of one pulse."""
+    k = chain_draws.shape[0]
+    ts = t0_s + chain_draws[:, 1] * 1e-9
+    tb = ts + in_water_delay_s(chain_draws[:, 0], cos_water, system.group_index)
+    idx = np.full(k, row)
+    ones = np.ones(k, dtype=bool)
+    ret = DetectedReturns(
+        pulse_id=np.full(k, returns.pulse_id[row]),
+        origin_meas_m=returns.origin_meas_m[idx],
+        direction_meas=returns.direction_meas[idx],
+        has_surface=ones,
+        t_surface_s=ts,
+        has_bottom=ones,
+        t_bottom_s=tb,
+        surface_confidence=np.full(k, max(returns.surface_confidence[row], 1e-6)),
+        bottom_confidence=np.full(k, max(returns.bottom_confidence[row], 1e-6)),
+        flags=returns.flags[idx],
+    )
+    return seabed_points(ret, take_surface(surface, idx), refraction_settings)
+
+
+def seabed_posteriors(
+    samples: Any,
+    t0_s: Any,
+    returns: DetectedReturns,
+    surface: WaterSurface,
+    system: WaveformSystem,
+    settings: PosteriorSettings | None = None,
+    refraction_settings: RefractionSettings | None = None,
+    *,
+    rows: Any = None,
+    seed: int = 0,
+    detect_settings: DetectSettings | None = None,
+    detect_noise: tuple[int | None, float] | None = None,
+) -> SeabedPosteriors:
+    """Sample the depth posterior of pulses and carry it to the refracted seabed point.
+
+    Parameters
+    ----------
+    samples : (n_pulses, m) array_like
+        Waveforms, rows aligned with ``returns`` and ``surface``.
+    t0_s : (n_pulses,) array_like
+        Round-trip time of the centre of each waveform's sample 0, seconds.
+    returns : DetectedReturns
+        Measured navigation (origin, direction), confidences and flags of the pulses.
+    surface : WaterSurface
+        The fitted water surface of the same pulses.
+    system : WaveformSystem
+    settings : PosteriorSettings, optional
+    refraction_settings : RefractionSettings, optional
+        Water indices for :func:`~pipeline.process.refraction.seabed_points`.
+    rows : array_like of int, optional
+        Pulses to sample (default: all). Cost is linear in their number (see
+        ``benchmarks/RESULTS_posterior.md``).
+    seed : int
+        Batch ``b`` (``settings.batch_size`` pulses side by side) is seeded ``seed + b0``.
+    detect_settings, detect_noise : optional
+        The survey detector's, for the starts (see :func:`sample_batch`).
+
+    Returns
+    -------
+    SeabedPosteriors
+    """
+    st = settings or PosteriorSettings()
+    rst = refraction_settings or RefractionSettings()
+    y = np.asarray(samples, dtype=np.float64)
+    t0 = np.asarray(t0_s, dtype=np.float64)
+    n = len(returns)
+    if y.ndim != 2 or y.shape[0] != n or t0.shape != (n,) or len(surface) != n:
+        raise ValueError(
+            f"`samples` {y.shape}, `t0_s` {t0.shape}, `surface` ({len(surface)}) must have "
+            f"one row per pulse of `returns` ({n})"
+        )
+    rows = np.arange(n) if rows is None else np.asarray(rows, dtype=np.int64)
+    cosw = water_cosine(returns.direction_meas, surface.normal, surface.air_index, rst.phase_index)
+    m = len(rows)
+    keys = ("median", "lo68", "hi68", "lo95", "hi95", "std")
+    depth = {k: np.zeros(m) for k in keys}
+    xyz_med, xyz_std, sig_h = np.zeros((m, 3)), np.zeros((m, 3)), np.zeros(m)
+    acc, tau_max = np.zeros(m), np.zeros(m)
+    n_steps, flags = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.uint16)
+    for b0 in range(0, m, st.batch_size):
+        part = rows[b0 : b0 + st.batch_size]
+        chains = sample_batch(
+            y[part],
+            system,
+            st,
+            cos_water=cosw[part],
+            seed=seed + b0,
+            detect_settings=detect_settings,
+            detect_noise=detect_noise,
+        )
+        for k, r in enumerate(part):
+            j = b0 + k
+            acc[j], tau_max[j] = chains.acceptance[k], float(np.max(chains.tau_steps[k]))
+            n_steps[j], flags[j] = chains.n_steps[k], chains.flags[k]
+            if not surface.is_water[r]:
+                flags[j] |= np.uint16(PosteriorFlag.NO_START)
+            if flags[j] & PosteriorFlag.NO_START:
+                continue
+            pts = draws_to_seabed(
+                chains.draws[k], int(r), float(t0[r]), returns, surface, system, float(cosw[r]), rst
+            )
+            summ = interval_summary(pts.depth_m)
+            for key in keys:
+                depth[key][j] = summ[key]
+            xyz_med[j] = np.median(pts.xyz_m, axis=0)
+            xyz_std[j] = np.std(pts.xyz_m, axis=0, ddof=1)
+            sig_h[j] = math.sqrt(0.5 * (xyz_std[j, 0] ** 2 + xyz_std[j, 1] ** 2))
+    return SeabedPosteriors(
+        pulse_id=returns.pulse_id[rows],
+        row=rows,
+        depth_m=depth,
+        xyz_median_m=xyz_med,
+        xyz_std_m=xyz_std,
+        sigma_h_m=sig_h,
+        acceptance=acc,
+        tau_max_steps=tau_max,
+        n_steps=n_steps,
+        flags=flags,
+    )
