@@ -234,7 +234,7 @@ def main() -> None:
     crb(
         "full waveform",
         np.array(
-            [4.0, 15.0, math.log(2000), math.log(500), math.log(1200), math.log(0.2), 4.0, 0.0]
+            [4.0, 15.0, math.log(2000), math.log(500), math.log(1200), math.log(0.2), 4.0, 0.0, 0.0]
         ),
         FW,
         st,
@@ -242,7 +242,7 @@ def main() -> None:
     crb(
         "photon counting",
         np.array(
-            [4.0, 15.0, math.log(1000), math.log(1000), math.log(400), math.log(0.2), 0.5, 0.0]
+            [4.0, 15.0, math.log(1000), math.log(1000), math.log(400), math.log(0.2), 0.5, 0.0, 0.0]
         ),
         PC,
         st,
