@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.outputs.atomic import write_json
-from pipeline.process.detect import WaveformDetections, detect_full_waveform
+from pipeline.process.detect import detect_full_waveform
 from pipeline.process.detect_photons import detect_photon_events
 from pipeline.process.refraction import RefractionSettings
 from pipeline.process.returns import Points
@@ -42,32 +42,68 @@ def _system_fwhm_s(scene) -> float:
     return math.hypot(scene.system.pulse_fwhm_s, scene.detector.impulse_response_fwhm_s)
 
 
-def _detect_chunk(scene, paths) -> WaveformDetections:
-    """Run the receiver on one chunk of traced pulses and detect its returns."""
+def detect_noise(scene) -> tuple[int, float]:
+    """``(noise_samples, shot_noise_counts)`` of the survey's full-waveform detector.
+
+    The range gate opens ``pre_trigger_s`` before the first echo: those samples, less two
+    system FWHM (so the echo's leading edge stays out of the baseline), are noise only.
+    """
+    det = scene.detector
+    quiet_s = det.pre_trigger_s - 2.0 * _system_fwhm_s(scene)
+    return (
+        max(4, int(quiet_s * det.sample_rate_hz)),
+        det.excess_noise_factor * det.counts_per_photoelectron,
+    )
+
+
+def kept_for_posterior(pulse_id: np.ndarray, fraction: float, seed: int) -> np.ndarray:
+    """Pulses whose waveforms are kept for posteriors: a fixed share, by pulse id alone.
+
+    A multiplicative (Weyl) hash of the id spreads the kept pulses evenly over the survey and
+    does not depend on the chunking.
+    """
+    if fraction <= 0.0:
+        return np.zeros(pulse_id.shape, dtype=bool)
+    golden = np.uint64(0x9E3779B97F4A7C15)
+    with np.errstate(over="ignore"):
+        h = (pulse_id.astype(np.uint64) + np.uint64(seed)) * golden
+    return (h >> np.uint64(11)).astype(np.float64) / 2.0**53 < fraction
+
+
+def _detect_chunk(scene, paths, keep_fraction: float = 0.0):
+    """Run the receiver on one chunk of traced pulses and detect its returns.
+
+    Returns ``(photon events or None, detections or None, kept waveforms or None)``; the kept
+    waveforms (full waveform only) are ``(pulse_id, t0_s, samples)`` of the pulses
+    :func:`kept_for_posterior` selects.
+    """
     from pipeline.simulate.waveform import simulate_photon_events, simulate_waveforms
 
     det = scene.detector
     if det.mode == "photon_counting":
         ev = simulate_photon_events(paths, scene, det, scene.returns)
-        return ev, None
+        return ev, None, None
     wf = simulate_waveforms(paths, scene, det, scene.returns)
-    # the range gate opens pre_trigger_s before the first echo: those samples are noise only
-    # (less one system FWHM, so the echo's leading edge stays out of the baseline)
-    quiet_s = det.pre_trigger_s - 2.0 * _system_fwhm_s(scene)
+    n_noise, shot = detect_noise(scene)
     found = detect_full_waveform(
         wf.samples,
         wf.sample_interval_s,
         _system_fwhm_s(scene),
         scene.process.detect,
-        noise_samples=max(4, int(quiet_s / wf.sample_interval_s)),
-        shot_noise_counts=det.excess_noise_factor * det.counts_per_photoelectron,
+        noise_samples=n_noise,
+        shot_noise_counts=shot,
     )
+    keep = kept_for_posterior(wf.pulse_id, keep_fraction, scene.scene.seed)
+    kept = (wf.pulse_id[keep], wf.t0_s[keep], wf.samples[keep]) if keep.any() else None
     # detection times are from sample 0; sample 0 is t0_s after emission
     shift = np.where(found.has_surface, wf.t0_s, 0.0)
     shift_b = np.where(found.has_bottom, wf.t0_s, 0.0)
-    return None, dataclasses.replace(
+    shift_c = np.where(found.has_column, wf.t0_s, 0.0)
+    found = dataclasses.replace(found, t_column_s=found.t_column_s + shift_c)
+    found = dataclasses.replace(
         found, t_surface_s=found.t_surface_s + shift, t_bottom_s=found.t_bottom_s + shift_b
     )
+    return None, found, kept
 
 
 def simulate_detections(scene, log=print) -> dict[str, Any]:
@@ -77,7 +113,8 @@ def simulate_detections(scene, log=print) -> dict[str, Any]:
     -------
     dict
         ``returns`` (DetectedReturns), ``truth`` (for evaluation only), ``lines``, ``extent``,
-        ``timings_s``, ``subray_flags`` and ``pulse_flags`` counts.
+        ``timings_s``, ``subray_flags`` and ``pulse_flags`` counts, and ``kept_waveforms``:
+        ``(pulse_id, t0_s, samples)`` of the pulses kept for posteriors (or None).
     """
     from pipeline.process.returns import DetectedReturns
     from pipeline.simulate import paths as P
@@ -120,6 +157,14 @@ def simulate_detections(scene, log=print) -> dict[str, Any]:
     sub_flags: dict[str, int] = {}
     pulse_flags: dict[str, int] = {}
     parts: list[dict[str, np.ndarray]] = []
+    kept: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    # waveforms of a bounded share of the pulses are kept for posteriors (a few times the
+    # pulses sampled, so the cells that matter can be chosen among them)
+    from pipeline.survey_posterior import posterior_budget
+
+    xmin, xmax, ymin, ymax = extent
+    n_post = posterior_budget(scene, (xmax - xmin) * (ymax - ymin) / 1e6)
+    keep_fraction = min(1.0, 4.0 * n_post / max(lines.n_pulses_total, 1))
     n_chunk = survey.n_chunks(lines, chunk)
     for c in range(n_chunk):
         t1 = time.perf_counter()
@@ -136,7 +181,9 @@ def simulate_detections(scene, log=print) -> dict[str, Any]:
         t2 = time.perf_counter()
         paths = trace(pulses, world, scene.trace, div_rad, scene.scanner.polarisation)
         t3 = time.perf_counter()
-        events, found = _detect_chunk(scene, paths)
+        events, found, kept_wf = _detect_chunk(scene, paths, keep_fraction)
+        if kept_wf is not None:
+            kept.append(kept_wf)
         t4 = time.perf_counter()
         if photon:
             found = detect_photon_events(
@@ -186,6 +233,8 @@ def simulate_detections(scene, log=print) -> dict[str, Any]:
         flags=cat["flags"],
         surface_amplitude=cat["surface_amplitude"],
         bottom_amplitude=cat["bottom_amplitude"],
+        # in-column returns (full waveform only; photon detections leave them empty)
+        **{k: cat[k] for k in DetectedReturns.COLUMN_FIELDS if k in cat},
     )
     return {
         "returns": returns,
@@ -195,6 +244,9 @@ def simulate_detections(scene, log=print) -> dict[str, Any]:
         "timings_s": timings,
         "subray_flags": sub_flags,
         "pulse_flags": pulse_flags,
+        "kept_waveforms": (
+            tuple(np.concatenate([k[j] for k in kept]) for j in range(3)) if kept else None
+        ),
     }
 
 
@@ -208,7 +260,7 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
     evaluation : dict
         The error report (also written to ``evaluation.json``).
     """
-    from pipeline.evaluate import evaluate, tpu_coverage
+    from pipeline.evaluate import evaluate, tpu_coverage, water_column_report
     from pipeline.outputs.las import write_points_laz
     from pipeline.outputs.raster import write_grid_tif
     from pipeline.process.grid import grid_seabed, snap_bounds_m
@@ -235,6 +287,9 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
             [processed.points, _no_bottom_points(scene, sim["returns"], processed, refr)]
         ),
     )
+    from pipeline.process.water_column import add_water_column_points
+
+    processed = add_water_column_points(processed, sim["returns"], refr, ps.classify)
     fr = scene.frame
     origin = (fr.origin_easting_m, fr.origin_northing_m, 0.0)
     xmin, xmax, ymin, ymax = sim["extent"]
@@ -247,7 +302,15 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
     timings["process_s"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     unc = _uncertainty(scene, sim["returns"], processed, refr, grid)
+    processed = dataclasses.replace(
+        processed, points=_with_tpu(processed.points, unc["is40"], unc["tpu40"])
+    )
     timings["uncertainty_s"] = time.perf_counter() - t1
+    t2 = time.perf_counter()
+    from pipeline.survey_posterior import survey_posteriors
+
+    post = survey_posteriors(scene, sim, processed, refr, unc, grid)
+    timings["posterior_s"] = time.perf_counter() - t2
     files = {
         "points": write_points_laz(
             out / "points.laz", processed.points, crs=fr.crs, origin_m=origin
@@ -263,13 +326,28 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
         # height errors common to the surface and the seabed returns cancel in it
         truth_depth_m=truth.depth_m,
     ).to_dict()
-    coverage = tpu_coverage(unc["points40"], unc["tpu40"].sigma_v_m, truth_depth_m=truth.depth_m)
+    # the depth's sigma (below the measured surface, at the measured position) against the
+    # true depth there; a photon-counting window's shots share one detection (one draw)
+    group = None
+    if scene.detector.mode == "photon_counting":
+        group = unc["points40"].pulse_id // scene.process.photon_detect.shots_per_window
+    coverage = tpu_coverage(
+        unc["points40"], unc["tpu40"].sigma_depth_m, truth_depth_m=truth.depth_m, group=group
+    )
+    post_eval = None
+    if post is not None:
+        from pipeline.evaluate import posterior_coverage
+
+        post_eval = posterior_coverage(post["posteriors"], truth_depth_m=truth.depth_m)
+        post_eval["seconds_per_pulse"] = post["cost_s"] / max(len(post["point_index"]), 1)
     evaluation = {
         "pulses": int(sim["returns"].pulse_id.size),
+        "posterior_against_truth": post_eval,
         "iho_orders_from_uncertainty": unc["summary"],
-        "tpu_95_coverage_against_truth": coverage,
+        "tpu_coverage_against_truth": coverage,
         "receiver": scene.detector.mode,
         "bottom_detected_fraction": float(np.mean(sim["returns"].has_bottom)),
+        "water_column": water_column_report(processed.points, scene.water.layer_depth_m),
         "subray_flags": sim["subray_flags"],
         "receiver_pulse_flags": sim["pulse_flags"],
         "error": report,
@@ -287,8 +365,20 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
     )
     if coverage["fraction_within"] is not None:
         log(
-            f"  TPU check: the truth lies within ±1.96 σ_v for {coverage['fraction_within']:.1%}"
-            f" of {coverage['n']} points"
+            "  TPU check (true depth within ±k σ_depth): "
+            + ", ".join(
+                f"k={c['k']:g}: {c['fraction_within']:.1%} ± {c['standard_error']:.1%}"
+                f" (nominal {c['nominal']:.1%})"
+                for c in coverage["intervals"]
+            )
+            + f" of {coverage['n']} points"
+        )
+    if post_eval is not None and post_eval.get("n"):
+        log(
+            f"  depth posteriors (emcee) of {post_eval['n']} points: the true depth lies in the"
+            f" 68 % interval for {post_eval['coverage_68']:.1%}, in the 95 % for "
+            f"{post_eval['coverage_95']:.1%}; {post_eval['converged_fraction']:.0%} converged, "
+            f"{post_eval['seconds_per_pulse']:.2f} s per pulse"
         )
     return files, timings, evaluation
 
@@ -317,12 +407,30 @@ def _log_report(report: dict, log) -> None:
 
 
 def _uncertainty(scene, returns, processed, refr, grid) -> dict[str, Any]:
-    """TPU of the bathymetric points, cell uncertainty and the IHO order met per cell."""
+    """TPU of the bathymetric points, cell uncertainty and the IHO order met per cell.
+
+    Measured data only: the seabed gradient under every bottom point (which couples the
+    horizontal errors into the depth compared at the measured position) is a local plane
+    through the neighbouring bathymetric soundings (:func:`~pipeline.process.tpu.
+    seabed_gradient`); the water plane's tilt uncertainty is the larger of the fit's and the
+    one measured over the soundings (:func:`~pipeline.process.tpu.surface_tilt_sigma`). When
+    the detector reports no per-return timing sigma, the timing terms are set from the
+    scatter of successive soundings (:func:`~pipeline.process.tpu.pair_scatter`,
+    :func:`~pipeline.process.tpu.timing_from_scatter`). A photon-counting window's shots
+    share one detection: they count as one sounding.
+    """
     from pipeline import iho
     from pipeline.process.cell_uncertainty import cell_uncertainty
     from pipeline.process.classify import BATHYMETRIC_POINT
+    from pipeline.process.refraction import seabed_points
     from pipeline.process.returns import ReturnKind
-    from pipeline.process.tpu import point_tpu
+    from pipeline.process.tpu import (
+        pair_scatter,
+        point_tpu,
+        seabed_gradient,
+        surface_tilt_sigma,
+        timing_from_scatter,
+    )
 
     # the navigation solution's own quality figures (as an SBET reports them) are what the
     # survey's GNSS/INS error model draws from; the system's beam and wavelength are known
@@ -336,10 +444,49 @@ def _uncertainty(scene, returns, processed, refr, grid) -> dict[str, Any]:
         attitude_sigma_deg=max(nav.ins_roll_sigma_deg, nav.ins_pitch_sigma_deg),
         heading_sigma_deg=nav.ins_heading_sigma_deg,
     )
-    tpu = point_tpu(returns, processed.surface, refr, st)
     pts = processed.points
     is40 = (pts.classification == BATHYMETRIC_POINT) & (pts.kind == ReturnKind.BOTTOM)
     points40 = pts.select(is40)
+    bottom_xy = seabed_points(returns, processed.surface, refr).xyz_m[:, :2]
+    xy40, d40 = points40.xyz_m[:, :2], points40.depth_m
+    group = None
+    if scene.detector.mode == "photon_counting":  # a window's shots share one detection
+        group = points40.pulse_id // scene.process.photon_detect.shots_per_window
+    near = {"neighbours": st.gradient_neighbours, "radius_m": st.gradient_radius_m}
+    grad = seabed_gradient(xy40, d40, bottom_xy, group=group, **near)
+    # the water surface measured over each sounding against its pulse's plane there: the
+    # plane's tilt uncertainty, averaged over the bathymetric points
+    bottom_ids = returns.pulse_id[returns.has_bottom]
+    by_id = np.argsort(bottom_ids)
+    rows40 = by_id[np.searchsorted(bottom_ids[by_id], points40.pulse_id)]
+    tilt = surface_tilt_sigma(returns, processed.surface, bottom_xy, pool=rows40)
+    if returns.t_bottom_sigma_s is None:
+        # no timing sigma from the detector: from the scatter of successive soundings
+        scatter = pair_scatter(
+            xy40,
+            d40,
+            order=points40.pulse_id,
+            group=group,
+            query_xy_m=bottom_xy,
+            max_separation_m=st.pair_max_separation_m,
+            neighbours=st.scatter_neighbours,
+        )
+        returns = timing_from_scatter(
+            returns,
+            processed.surface,
+            refr,
+            st,
+            depth_scatter_m=scatter,
+            seabed_gradient=grad,
+        )
+    tpu = point_tpu(
+        returns,
+        processed.surface,
+        refr,
+        st,
+        seabed_gradient=grad,
+        surface_tilt_sigma_rad=tilt,
+    )
     # TPU rows are per pulse with a bottom; keep those of the bathymetric points, same order
     order = np.argsort(tpu.pulse_id)
     pos = order[np.searchsorted(tpu.pulse_id[order], points40.pulse_id)]
@@ -348,9 +495,24 @@ def _uncertainty(scene, returns, processed, refr, grid) -> dict[str, Any]:
     return {
         "tpu40": tpu40,
         "points40": points40,
+        "is40": is40,
         "cells": cells,
         "summary": iho.order_summary(cells.order).to_dict(),
     }
+
+
+def _with_tpu(points, is40, tpu40):
+    """``points`` whose bathymetric points carry their TPU as the per-point uncertainty.
+
+    ``uncertainty_v_m`` := ``PointTpu.sigma_v_m``, the one-sigma of the point's elevation ``z``
+    (the LAS z; what IHO S-44's TVU bounds), and ``uncertainty_h_m`` := ``sigma_h_m``, per
+    horizontal axis; the other points keep the a-priori values of
+    :mod:`pipeline.process.refraction`. The depth's own sigma (below the measured water surface,
+    smaller) is ``PointTpu.sigma_depth_m``, checked against the truth in ``evaluation.json``.
+    """
+    v, h = points.uncertainty_v_m.copy(), points.uncertainty_h_m.copy()
+    v[is40], h[is40] = tpu40.sigma_v_m, tpu40.sigma_h_m
+    return points.replace(uncertainty_v_m=v, uncertainty_h_m=h)
 
 
 def _take_tpu(tpu, index: np.ndarray):

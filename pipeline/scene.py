@@ -103,6 +103,40 @@ class WaterSettings:
     wind_speed_m_s: float = setting(
         0.0, ge=0.0, le=40.0, doc="wind at 12.5 m; sets Cox-Munk slopes and whitecaps"
     )
+    # an optional horizontal scattering layer (plankton, turbidity, thermocline): a uniform
+    # slab whose extra backscatter gives an in-column echo (pipeline.simulate.returns)
+    layer_depth_m: float = setting(
+        0.0, ge=0.0, le=11000.0, doc="scattering layer's centre below the mean water level; 0: none"
+    )
+    layer_thickness_m: float = setting(
+        1.0, gt=0.0, le=1000.0, doc="vertical thickness of the scattering layer"
+    )
+    layer_backscatter_per_m_sr: float = setting(
+        0.0, ge=0.0, le=10.0, doc="extra volume scattering function at 180 degrees in the layer"
+    )
+
+    @property
+    def has_layer(self) -> bool:
+        """True when the scene has a scattering layer (``layer_depth_m > 0``)."""
+        return self.layer_depth_m > 0.0
+
+    def __post_init__(self) -> None:
+        d, t, b = self.layer_depth_m, self.layer_thickness_m, self.layer_backscatter_per_m_sr
+        if d > 0.0 and b <= 0.0:
+            raise SceneError(
+                f"`water.layer_backscatter_per_m_sr` must be > 0 when `water.layer_depth_m` > 0 "
+                f"(a layer needs backscatter); got {b}."
+            )
+        if d == 0.0 and b > 0.0:
+            raise SceneError(
+                f"`water.layer_depth_m` must be > 0 when `water.layer_backscatter_per_m_sr` is "
+                f"set (0 means no layer); got {d}."
+            )
+        if d > 0.0 and t > 2.0 * d:
+            raise SceneError(
+                f"`water.layer_thickness_m` must be <= 2 x `water.layer_depth_m` = {2.0 * d} m "
+                f"(the layer lies below the surface); got {t}."
+            )
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -12,6 +12,7 @@ from pipeline.evaluate import (
     evaluate,
     grid_errors_m,
     iho_fractions,
+    tpu_coverage,
     tvu_allowance_m,
 )
 from pipeline.process.grid import grid_points
@@ -138,6 +139,59 @@ def test_evaluate_needs_one_truth():
         evaluate(pts)
     with pytest.raises(ValueError, match="exactly one"):
         evaluate(pts, truth_depth_m=truth_depth, truth_z_m=truth_z)
+
+
+def test_tpu_coverage_of_normal_errors_and_its_standard_errors():
+    """Errors drawn with the stated sigma: the 68 % and 95 % fractions within their binomial
+    standard errors; a sigma half too small or too large is caught."""
+    rng = np.random.default_rng(8)
+    n = 20000
+    x, y = rng.uniform(0, 50, n), rng.uniform(0, 50, n)
+    sig = rng.uniform(0.01, 0.2, n)
+    d = truth_depth(x, y) + rng.normal(size=n) * sig
+    pts = make_points(np.column_stack([x, y, -d]), d, [40] * n)
+    cov = tpu_coverage(pts, sig, truth_depth_m=truth_depth)
+    assert cov["n"] == n and cov["n_groups"] == n and cov["k"] == 1.96
+    (c68, c95) = cov["intervals"]
+    assert (c68["k"], c95["k"]) == (1.0, 1.96)
+    assert c68["nominal"] == pytest.approx(0.682689, abs=1e-6)
+    assert c95["nominal"] == pytest.approx(0.950004, abs=1e-6)
+    for c in (c68, c95):
+        p = c["fraction_within"]
+        assert c["standard_error"] == pytest.approx(math.sqrt(p * (1 - p) / n), rel=1e-12)
+        assert abs(p - c["nominal"]) < 4 * c["standard_error"]
+    # the headline (k = 1.96) is the 95 % interval's, as before
+    assert cov["fraction_within"] == c95["fraction_within"]
+    assert cov["standard_error"] == c95["standard_error"]
+    assert cov["median_abs_error_over_sigma"] == pytest.approx(0.6745, abs=0.02)
+    for scale, low in ((0.5, True), (2.0, False)):
+        c68 = tpu_coverage(pts, scale * sig, truth_depth_m=truth_depth)["intervals"][0]
+        assert (c68["fraction_within"] < 0.5) if low else (c68["fraction_within"] > 0.9)
+    json.dumps(cov, allow_nan=False)
+
+
+def test_tpu_coverage_counts_shared_measurements_once():
+    """Shots of one window share one error: the fraction is the same, its standard error is
+    that of the windows (cluster-robust), not of the shots."""
+    rng = np.random.default_rng(9)
+    n_win, shots = 400, 50
+    err = np.repeat(rng.normal(0, 0.05, n_win), shots)
+    x = rng.uniform(0, 50, n_win * shots)
+    d = truth_depth(x, 0) + err
+    pts = make_points(np.column_stack([x, np.zeros_like(x), -d]), d, [40] * x.size)
+    sig = np.full(x.size, 0.05)
+    group = np.repeat(np.arange(n_win), shots)
+    shots_cov = tpu_coverage(pts, sig, truth_depth_m=truth_depth)
+    win_cov = tpu_coverage(pts, sig, truth_depth_m=truth_depth, group=group)
+    assert win_cov["n_groups"] == n_win
+    p = win_cov["intervals"][0]["fraction_within"]
+    assert p == shots_cov["intervals"][0]["fraction_within"]
+    se = win_cov["intervals"][0]["standard_error"]
+    assert se == pytest.approx(math.sqrt(p * (1 - p) / n_win), rel=0.01)
+    assert se > 6 * shots_cov["intervals"][0]["standard_error"]
+    # points without a finite positive sigma are left out
+    sig[:shots] = 0.0
+    assert tpu_coverage(pts, sig, truth_depth_m=truth_depth, group=group)["n_groups"] == n_win - 1
 
 
 def test_end_to_end_noisy_survey(tmp_path):

@@ -37,6 +37,14 @@ def test_default_scene_runs(tmp_path, monkeypatch):
     assert main(["run"]) == 0
     manifest = json.loads((tmp_path / "out" / "default" / "manifest.json").read_text())
     assert manifest["scene"]["scene"]["name"] == "default"
+    # the emcee depth posteriors of a bounded sample of points hold the truth as often as
+    # their intervals say (48 pulses: 99.9 % binomial bands around 68 % and 95 %)
+    ev = json.loads((tmp_path / "out" / "default" / "evaluation.json").read_text())
+    post = ev["posterior_against_truth"]
+    assert post["n"] == 48  # the scene asks for the minimum only
+    assert 0.46 <= post["coverage_68"] <= 0.90
+    assert post["coverage_95"] >= 0.84
+    assert post["median_posterior_sd_m"] < 0.05  # centimetre posteriors, not prior-wide
 
 
 @pytest.fixture
@@ -83,3 +91,28 @@ def test_photon_counting_profiler_end_to_end(tmp_path):
     # 2-4 m of water under a 50 nJ beamlet, 400-shot windows: centimetre depths
     assert ev["error"]["points"]["rmse_m"] < 0.10
     assert ev["error"]["points_uncorrected"]["rmse_m"] > 0.5
+
+
+def test_tpu_depth_sigma_is_calibrated_end_to_end(tmp_path):
+    """A short dense Palmer line over the rough sloping seabed (~12 000 bathymetric points,
+    ~9 s): the true depth lies within the 68 % and 95 % intervals of the propagated depth
+    sigma about as often as it should, and the LAS carries the TPU's elevation sigma."""
+    data = tomllib.loads((ROOT / "data_synthetic" / "scenes" / "palmer_survey.toml").read_text())
+    data["flight"].update(area_m=[0.0, 60.0, 0.0, 60.0], run_in_m=0.0, n_lines=1)
+    data["process"].update(posterior_pulses_per_km2=0.0, posterior_min_pulses=0)
+    run_scene(parse_scene(data), tmp_path, log=lambda _: None)
+    ev = json.loads((tmp_path / "evaluation.json").read_text())
+    cov = ev["tpu_coverage_against_truth"]
+    assert cov["n"] > 5000
+    c68, c95 = cov["intervals"]
+    # measured 71.3 % and 95.9 % (n = 11 614, standard errors 0.4 % and 0.2 %); the elevation
+    # sigma (the vertical navigation included, which cancels in the depth) gives 97 % and 100 %
+    assert 0.64 < c68["fraction_within"] < 0.75, c68
+    assert 0.925 < c95["fraction_within"] < 0.975, c95
+    from pipeline.outputs.las import read_points_laz
+
+    pts = read_points_laz(tmp_path / "points.laz").points
+    sv = pts.uncertainty_v_m[pts.classification == 40]
+    # the TPU's elevation sigma: the scene's 5 cm GNSS height and the rest; refraction.py's
+    # a-priori value starts at its own 8 cm
+    assert np.all(sv > 0.05) and np.median(sv) < 0.08

@@ -8,6 +8,11 @@ Layout
   1 mm). The exact origin is kept in a ``bathy`` VLR (JSON) so the reader returns the same local
   frame.
 * CRS: an OGC WKT VLR (``header.add_crs``; the WKT bit of the global encoding is set).
+* Class meanings: the LAS 1.4 Classification Lookup VLR (``LASF_Spec``, record 0) names every
+  class code present in the file, so readers see that the user-definable code 64 is "water
+  column" next to the topo-bathy classes 40-45 (:mod:`pipeline.process.classify`). Its
+  descriptions are at most 15 ASCII letters, digits and spaces (the record's size, and what
+  laspy reads back).
 * Standard fields: classification (ASPRS codes of :mod:`pipeline.process.classify`), return
   number / number of returns, synthetic flag for derived (synthetic) points, point source id 0,
   GPS time 0 (no timing in points), intensity 0.
@@ -20,18 +25,37 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import laspy
 import numpy as np
 import pyproj
+from laspy.vlrs.known import ClassificationLookupVlr
 
 from pipeline.outputs.atomic import atomic_path
+from pipeline.process.classify import CLASS_NAMES
 from pipeline.process.returns import PointFlag, Points
 
-__all__ = ["LazContents", "write_points_laz", "read_points_laz"]
+__all__ = ["LOOKUP_NAMES", "LazContents", "write_points_laz", "read_points_laz"]
+
+#: Classification Lookup VLR descriptions of the classes of :mod:`pipeline.process.classify`
+#: (15 bytes each; laspy keeps only letters, digits and spaces when reading them).
+LOOKUP_NAMES: dict[int, str] = {
+    0: "not classified",
+    1: "unclassified",
+    2: "ground",
+    7: "low noise",
+    18: "high noise",
+    40: "bathymetry",
+    41: "water surface",
+    42: "derived surface",
+    43: "submerged obj",
+    44: "IHO S57 object",
+    45: "no bottom found",
+    64: "water column",
+}
 
 _VLR_USER = "bathy"
 _VLR_RECORD = 1
@@ -41,7 +65,7 @@ _EXTRA = (
     ("uncertainty_h_m", "f4", "horiz. 1-sigma uncertainty (m)"),
     ("confidence", "f4", "detection confidence 0-1"),
     ("pulse_id", "i8", "global pulse number"),
-    ("kind", "u1", "1 surface 2 bottom 3 derived"),
+    ("kind", "u1", "1 surf 2 bot 3 derived 4 column"),
     ("process_flags", "u2", "processing flag bits"),
     ("detector_flags", "u2", "detector flag bits"),
 )
@@ -57,6 +81,24 @@ class LazContents:
     origin_m: np.ndarray
     scales: np.ndarray
     offsets: np.ndarray
+    #: Class code -> description from the Classification Lookup VLR (empty if none).
+    class_names: dict[int, str] = field(default_factory=dict)
+
+
+def _lookup_name(code: int) -> str:
+    """A Classification Lookup description of ``code``: <= 15 letters, digits and spaces."""
+    if code in LOOKUP_NAMES:
+        return LOOKUP_NAMES[code]
+    text = CLASS_NAMES.get(code, f"class {code}")
+    return "".join(ch for ch in text if ch.isalnum() or ch == " ")[:15]
+
+
+def _classification_lookup(classes: np.ndarray) -> ClassificationLookupVlr:
+    """The Classification Lookup VLR naming every class code present in ``classes``."""
+    vlr = ClassificationLookupVlr()
+    for code in np.unique(classes).tolist():
+        vlr[int(code)] = _lookup_name(int(code))
+    return vlr
 
 
 def write_points_laz(
@@ -115,6 +157,7 @@ def write_points_laz(
         [laspy.ExtraBytesParams(name=n, type=t, description=desc) for n, t, desc in extras]
     )
     header.add_crs(crs)
+    header.vlrs.append(_classification_lookup(points.classification))
     meta = {"origin_m": origin.tolist(), "frame": "local = world - origin_m; z up; metres"}
     header.vlrs.append(
         laspy.VLR(
@@ -166,6 +209,8 @@ def read_points_laz(path: str | Path) -> LazContents:
     for vlr in hdr.vlrs:
         if vlr.user_id == _VLR_USER and vlr.record_id == _VLR_RECORD:
             origin = np.asarray(json.loads(bytes(vlr.record_data).decode())["origin_m"], float)
+    lookup = hdr.vlrs.get("ClassificationLookupVlr")
+    class_names = dict(lookup[0].lookups) if lookup else {}
     world = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
     xyz = world - origin
     n = len(xyz)
@@ -195,4 +240,5 @@ def read_points_laz(path: str | Path) -> LazContents:
         origin_m=origin,
         scales=np.asarray(hdr.scales, dtype=np.float64),
         offsets=np.asarray(hdr.offsets, dtype=np.float64),
+        class_names=class_names,
     )

@@ -5,8 +5,15 @@ Class codes
 LAS 1.4 R15 standard classes used here: 1 unclassified, 2 ground, 7 low noise, 18 high noise.
 The ASPRS Topo-Bathy Lidar Domain Profile adds 40 bathymetric point (seabed), 41 water surface,
 42 derived water surface (synthetic, where refraction was computed), 43 submerged object,
-44 IHO S-57 object and 45 no-bottom-found-at. 43-45 are defined for completeness; the rules below
-do not produce them.
+44 IHO S-57 object and 45 no-bottom-found-at. 43 and 44 are defined for completeness; the rules
+below do not produce them, and 45 is made by the survey run (:mod:`pipeline.run_survey`).
+
+Water column: LAS 1.4 R15 has no class for a return from inside the water column (a
+scattering layer, fish, turbidity). Code 45 is sometimes used for it in USGS/NOAA deliveries,
+but R15 defines 45 as no-bottom-found-at, which this pipeline also emits, so the two would be
+confused. Water-column returns therefore get :data:`WATER_COLUMN` = 64, the first
+user-definable code (64-255), and ``points.laz`` names it (and the bathymetric classes) in its
+LAS 1.4 Classification Lookup VLR (:mod:`pipeline.outputs.las`), so readers see the meaning.
 
 Rules (:func:`classify_points`), first match wins
 -------------------------------------------------
@@ -35,6 +42,10 @@ surface return still times the surface):
    birds), below -> 7 low noise.
 5. Otherwise -> 41 water surface.
 
+Water-column returns (``ReturnKind.WATER_COLUMN``): the bottom rules 1-6 (their timing and
+geometry are those of a bottom return, earlier), with ``LAND`` -> 1 (no water column over
+land), otherwise -> 64 water column.
+
 Derived water-surface points (``ReturnKind.DERIVED_SURFACE``) -> 42.
 """
 
@@ -59,6 +70,7 @@ __all__ = [
     "SUBMERGED_OBJECT",
     "IHO_S57_OBJECT",
     "NO_BOTTOM_FOUND_AT",
+    "WATER_COLUMN",
     "CLASS_NAMES",
     "ClassifySettings",
     "classify_points",
@@ -75,6 +87,11 @@ DERIVED_WATER_SURFACE = 42
 SUBMERGED_OBJECT = 43
 IHO_S57_OBJECT = 44
 NO_BOTTOM_FOUND_AT = 45
+#: Water-column return (scattering layer, fish, turbidity): user-definable code 64, because
+#: LAS 1.4 R15 has no water-column class and its 45 means no-bottom-found-at (some USGS/NOAA
+#: deliveries used 45 for the water column, which would clash); named in the file's
+#: Classification Lookup VLR.
+WATER_COLUMN = 64
 
 CLASS_NAMES: dict[int, str] = {
     NEVER_CLASSIFIED: "never classified",
@@ -88,6 +105,7 @@ CLASS_NAMES: dict[int, str] = {
     SUBMERGED_OBJECT: "submerged object",
     IHO_S57_OBJECT: "IHO S-57 object",
     NO_BOTTOM_FOUND_AT: "no-bottom-found-at",
+    WATER_COLUMN: "water column",
 }
 
 _FLAG_NAMES = tuple(f.name for f in DetectorFlag)
@@ -179,9 +197,18 @@ def classify_points(points: Points, settings: ClassifySettings | None = None) ->
         [UNCLASSIFIED, GROUND, UNCLASSIFIED, LOW_NOISE, HIGH_NOISE, LOW_NOISE],
         default=WATER_SURFACE,
     )
+    # a column return is timed and refracted like a bottom: the same rules, another class
+    # (over land there is no water column: the bottom rules' ground becomes unclassified)
+    column = np.select(
+        [bottom == BATHYMETRIC_POINT, bottom == GROUND], [WATER_COLUMN, UNCLASSIFIED], bottom
+    )
     cls = np.select(
-        [points.kind == ReturnKind.BOTTOM, points.kind == ReturnKind.SURFACE],
-        [bottom, surface],
+        [
+            points.kind == ReturnKind.BOTTOM,
+            points.kind == ReturnKind.SURFACE,
+            points.kind == ReturnKind.WATER_COLUMN,
+        ],
+        [bottom, surface, column],
         default=np.where(
             points.kind == ReturnKind.DERIVED_SURFACE, DERIVED_WATER_SURFACE, UNCLASSIFIED
         ),

@@ -12,12 +12,21 @@ Per waveform, vectorised over the batch:
    filtered waveform minus its running median over ``trend_fwhm`` system widths: the
    water-column return decays smoothly over tens of ns and the median follows it, while a
    bottom echo a few samples wide stands out of it. No peak above the threshold: no bottom.
+   With ``bottom_pick = "last"`` the bottom is the strongest candidate within
+   ``min_separation`` of the latest one instead. A candidate more than ``min_separation``
+   after the reported bottom sets MULTIPLE_BOTTOM_CANDIDATES.
 4. **Sub-sample timing**: a parabola through the logarithm of the three samples around the peak
    (exact for a Gaussian peak).
 5. **Shallow regime**: where the bottom is closer than ``min_separation`` the two returns merge
    into one peak; a two-Gaussian fit (:func:`fit_merged`) separates them when the merged peak is
    measurably wider than the system pulse, otherwise the pulse is flagged MERGED with no bottom.
-6. **Confidence**: ``1 − exp(−(SNR / threshold)^4 / 2)``, 0.4 at the threshold and → 1 above it.
+6. **In-column return** (``column_returns``): the strongest other candidate of step 3 that lies
+   between ``surface + min_separation`` and ``bottom − min_separation`` (a scattering layer,
+   a fish school, a thermocline): the same residual, the same signal-dependent threshold and the
+   same sub-sample timing as the bottom, so noise alone makes one only as often as it makes a
+   false bottom. With the default ``bottom_pick`` a layer echo stronger than a deeper bottom
+   is reported as the bottom (flagged MULTIPLE_BOTTOM_CANDIDATES; the real bottom is lost).
+7. **Confidence**: ``1 − exp(−(SNR / threshold)^4 / 2)``, 0.4 at the threshold and → 1 above it.
 """
 
 from __future__ import annotations
@@ -65,6 +74,15 @@ class DetectSettings:
     trend_fwhm: float = setting(
         8.0, ge=2.0, le=100.0, doc="running-median width (system FWHMs) of the column trend"
     )
+    column_returns: bool = setting(
+        True, doc="report the strongest significant in-column return between surface and bottom"
+    )
+    bottom_pick: str = setting(
+        "strongest",
+        choices=("strongest", "last"),
+        doc="bottom among the candidates: the strongest, or the last (a scattering layer "
+        "stronger than the seabed then stays an in-column return)",
+    )
 
 
 @dataclass(frozen=True)
@@ -72,7 +90,8 @@ class WaveformDetections:
     """Detected returns per waveform, shapes ``(n_pulses,)``.
 
     Times are from the start of each waveform's time axis (``t0_s``): round-trip times.
-    Absent returns have their mask False and 0 in the other fields (never NaN).
+    Absent returns have their mask False and 0 in the other fields (never NaN). The in-column
+    return (``has_column`` ...) is optional: left out (None), it is filled with "none found".
     """
 
     has_surface: np.ndarray
@@ -85,6 +104,20 @@ class WaveformDetections:
     bottom_confidence: np.ndarray
     noise_sigma: np.ndarray
     flags: np.ndarray
+    has_column: np.ndarray | None = None
+    t_column_s: np.ndarray | None = None
+    column_amplitude: np.ndarray | None = None
+    column_confidence: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        # detectors without column returns (photon counting) leave them out; concatenating
+        # chunks needs arrays in every field
+        n = np.shape(self.has_surface)[0]
+        if self.has_column is None:
+            object.__setattr__(self, "has_column", np.zeros(n, dtype=bool))
+        for name in ("t_column_s", "column_amplitude", "column_confidence"):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, np.zeros(n))
 
 
 def _confidence(snr: np.ndarray, threshold: float) -> np.ndarray:
@@ -271,12 +304,22 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     local_thr = s.threshold_sigma * np.sqrt(local_var)
     cand = rpeak & after & has_s[:, None] & (resid > local_thr)
     has_b = cand.any(axis=1)
-    i_b = np.where(has_b, np.argmax(np.where(cand, resid, -np.inf), axis=1), 0)
+    pick = cand
+    if s.bottom_pick == "last":
+        # the strongest candidate near the latest one (not the latest itself: noise bumps on
+        # the trailing flank of a wide bottom echo would bias it late)
+        last = m - 1 - np.argmax(cand[:, ::-1], axis=1)
+        pick = cand & (cols >= (last - sep)[:, None])
+    i_b = np.where(has_b, np.argmax(np.where(pick, resid, -np.inf), axis=1), 0)
     t_idx_b, _, _ = _parabolic_peak(resid, i_b)
     amp_b = resid[np.arange(n), i_b]
     snr_b_local = amp_b / np.sqrt(local_var[np.arange(n), i_b])
 
     flags = np.zeros(n, dtype=np.uint16)
+    # another significant return clearly after the reported bottom: a layer or object above
+    # the seabed may have been taken for it (bottom_pick = "last" reports the later one)
+    later = has_b & np.any(cand & (cols > (i_b + sep)[:, None]), axis=1)
+    flags[later] |= np.uint16(DetectorFlag.MULTIPLE_BOTTOM_CANDIDATES)
     # a surface peak wider than the system response hides a bottom just below it
     # (the filtered system response has σ √2 samples; 15 % wider means a second return)
     merged = has_s & ~has_b & (width_s > 1.15 * math.sqrt(2.0) * sigma_samples)
@@ -297,6 +340,25 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     snr_b = np.where(has_b, snr_b_local, amp_b / noise_f)
     flags[has_s & (snr_s < 2 * s.threshold_sigma)] |= np.uint16(DetectorFlag.LOW_SNR)
     zero = np.zeros(n)
+    rows = np.arange(n)
+    if s.column_returns:
+        # the other candidates, clear of the bottom as the bottom is clear of the surface
+        # (a merged, fitted bottom leaves no room: its candidates list is empty)
+        ccand = cand & has_b[:, None] & (cols < (t_idx_b - sep)[:, None])
+        has_c = ccand.any(axis=1)
+        i_c = np.where(has_c, np.argmax(np.where(ccand, resid, -np.inf), axis=1), 0)
+        # timed on the filtered waveform's own peak (within 2 samples): a layer echo wider
+        # than the trend's gap raises its own flank trend, which would pull a residual peak
+        # early; the column's slope under it moves the filtered peak far less
+        near = np.clip(i_c[:, None] + np.arange(-2, 3), 0, m - 1)
+        i_f = near[rows, np.argmax(np.take_along_axis(filt, near, axis=1), axis=1)]
+        t_idx_c, _, _ = _parabolic_peak(filt, i_f)
+        # (with a separation under 2 samples that peak could pass a neighbour: keep the order)
+        has_c &= (t_idx_c > t_idx_s) & (t_idx_c < t_idx_b)
+        amp_c = resid[rows, i_c]
+        snr_c = amp_c / np.sqrt(local_var[rows, i_c])
+    else:
+        has_c, t_idx_c, amp_c, snr_c = np.zeros(n, dtype=bool), zero, zero, zero
     return WaveformDetections(
         has_surface=has_s,
         t_surface_s=np.where(has_s, t_idx_s * dt_s, zero),
@@ -308,6 +370,10 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
         bottom_confidence=np.where(has_b, _confidence(snr_b, s.threshold_sigma), zero),
         noise_sigma=noise_f,
         flags=flags,
+        has_column=has_c,
+        t_column_s=np.where(has_c, t_idx_c * dt_s, zero),
+        column_amplitude=np.where(has_c, amp_c, zero),
+        column_confidence=np.where(has_c, _confidence(snr_c, s.threshold_sigma), zero),
     )
 
 

@@ -26,7 +26,7 @@ import dataclasses
 import enum
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -83,6 +83,8 @@ class ReturnKind(enum.IntEnum):
     SURFACE = 1
     BOTTOM = 2
     DERIVED_SURFACE = 3
+    #: A return from inside the water column, between the surface and the bottom.
+    WATER_COLUMN = 4
 
 
 def _array(name: str, value: Any, dtype: Any, shape: tuple[int, ...]) -> np.ndarray:
@@ -147,6 +149,13 @@ class DetectedReturns:
     t_surface_sigma_s, t_bottom_sigma_s : (n,) float64, optional
         One-sigma timing uncertainty of each return (> 0 where the return exists); when absent
         processing uses its default timing uncertainty.
+    has_column : (n,) bool, optional
+        Whether an in-column return (between the surface and the bottom: a scattering layer,
+        fish) was detected; left out (None), it is all False: no detector output is required
+        to have one. Always an array after construction.
+    t_column_s, column_confidence, column_amplitude : (n,) float64, optional
+        Its round-trip time (``t_surface_s < t_column_s < t_bottom_s`` where those exist),
+        confidence in [0, 1] and strength >= 0; 0 where ``has_column`` is False.
     """
 
     pulse_id: np.ndarray
@@ -163,6 +172,18 @@ class DetectedReturns:
     bottom_amplitude: np.ndarray | None = None
     t_surface_sigma_s: np.ndarray | None = None
     t_bottom_sigma_s: np.ndarray | None = None
+    has_column: np.ndarray | None = None
+    t_column_s: np.ndarray | None = None
+    column_confidence: np.ndarray | None = None
+    column_amplitude: np.ndarray | None = None
+
+    #: The fields of the in-column return (a detector's output passes them on by these names).
+    COLUMN_FIELDS: ClassVar[tuple[str, ...]] = (
+        "has_column",
+        "t_column_s",
+        "column_confidence",
+        "column_amplitude",
+    )
 
     def __post_init__(self) -> None:
         pid = np.asarray(self.pulse_id)
@@ -170,6 +191,12 @@ class DetectedReturns:
             raise ValueError(f"`pulse_id` must be one-dimensional; got shape {pid.shape}")
         n = pid.shape[0]
         s = object.__setattr__
+        # no column returns unless given: callers that predate them need not know of them
+        if self.has_column is None:
+            s(self, "has_column", np.zeros(n, dtype=bool))
+        for name in ("t_column_s", "column_confidence", "column_amplitude"):
+            if getattr(self, name) is None:
+                s(self, name, np.zeros(n))
         s(self, "pulse_id", _array("pulse_id", pid, np.int64, (n,)))
         s(self, "origin_meas_m", _array("origin_meas_m", self.origin_meas_m, np.float64, (n, 3)))
         d = _array("direction_meas", self.direction_meas, np.float64, (n, 3))
@@ -183,6 +210,7 @@ class DetectedReturns:
         for mask, t, conf in (
             ("has_surface", "t_surface_s", "surface_confidence"),
             ("has_bottom", "t_bottom_s", "bottom_confidence"),
+            ("has_column", "t_column_s", "column_confidence"),
         ):
             m = _array(mask, getattr(self, mask), bool, (n,))
             tv = _array(t, getattr(self, t), np.float64, (n,))
@@ -198,12 +226,19 @@ class DetectedReturns:
         both = self.has_surface & self.has_bottom
         if np.any(self.t_bottom_s[both] <= self.t_surface_s[both]):
             raise ValueError("`t_bottom_s` must be > `t_surface_s` where both returns exist")
+        col_s = self.has_column & self.has_surface
+        if np.any(self.t_column_s[col_s] <= self.t_surface_s[col_s]):
+            raise ValueError("`t_column_s` must be > `t_surface_s` where both returns exist")
+        col_b = self.has_column & self.has_bottom
+        if np.any(self.t_column_s[col_b] >= self.t_bottom_s[col_b]):
+            raise ValueError("`t_column_s` must be < `t_bottom_s` where both returns exist")
         s(self, "flags", _array("flags", self.flags, np.uint16, (n,)))
         for opt, mask in (
             ("surface_amplitude", "has_surface"),
             ("bottom_amplitude", "has_bottom"),
             ("t_surface_sigma_s", "has_surface"),
             ("t_bottom_sigma_s", "has_bottom"),
+            ("column_amplitude", "has_column"),
         ):
             v = getattr(self, opt)
             if v is None:
@@ -252,7 +287,8 @@ class Points:
     detector_flags : (n,) uint16
         :class:`DetectorFlag` bits of the pulse.
     return_number, number_of_returns : (n,) uint8
-        LAS return numbering within the pulse (surface 1, bottom 2 when both exist).
+        LAS return numbering within the pulse, in time order: surface 1, then the in-column
+        return and the bottom (surface 1, column 2, bottom 3 when all three exist).
     confidence : (n,) float64
         Detector confidence of the return, in [0, 1].
     uncertainty_v_m, uncertainty_h_m : (n,) float64

@@ -28,6 +28,15 @@ Returns
   reciprocity at the entry facet (unpolarised T air→water at the same angle pair), because the
   trace stage only gives ``T_up`` for bottom returns. NO_BOTTOM sub-rays scatter until the end
   of the window.
+* **Scattering layer** (optional, ``water.layer_depth_m > 0``): a horizontal slab of thickness
+  ``T`` centred ``layer_depth_m`` below the mean water level (``water_surface.level_m``) that adds
+  ``beta_L`` to the volume backscatter at 180°. Each wet sub-ray crosses it along its refracted
+  ray between the in-water paths ``l1`` (top, or the surface) and ``l2`` (bottom of the slab, or
+  the seabed when that comes first: a layer below the seabed gives no echo); its echo is the
+  column integral over that segment, ``T_down T_up beta_L ∫_l1^l2 exp(-2 c l) dOmega_w(l) dl``
+  (same reciprocity ``T_up``), one Gaussian per sub-ray. Model choices: the layer's own
+  extinction is neglected (optically thin layer: the bottom and column below it are not
+  dimmed), and its echo's time shape is a Gaussian with the segment's mean and variance.
 
 Time: echoes at ``2 n_air R / c0`` and ``+ 2 n_g L / c0`` (group index in water). Gaussian
 widths ``sigma^2 = sigma_pulse^2 + sigma_detector^2 (+ sigma_fs^2)``; forward-scattering
@@ -35,7 +44,20 @@ stretching of the bottom echo (model choice, from the small-angle multiple-scatt
 excess ``b <theta^2> L^2 / 4`` per way): ``sigma_fs = xi (c L) (2 n_g L / c0)`` with
 ``xi = (b/c) <theta^2> / 4 ~ 0.01`` for ``b/c ~ 0.8`` and ``<theta^2> ~ 0.05 rad^2``; it keeps
 the echo symmetric (the real stretched echo is skewed late). The column of a pulse is one
-component: N-weighted mean start, decay rate ``2c + d ln(dOmega_w)/dl`` and duration.
+component: N-weighted mean start, decay rate ``2c + d ln(dOmega_w)/dl`` and duration. The
+layer echo of a sub-ray is centred at ``t_surface + 2 n_g l_mean / c0`` with
+``sigma^2 = sigma_pulse^2 + sigma_detector^2 + (2 n_g / c0)^2 var(l) + sigma_fs(l_mean)^2``,
+``l_mean`` and ``var(l)`` the moments of the path under ``exp(-2 c l) dOmega_w(l)`` on the segment
+(a uniform slab of 1 m at nadir: ``sigma = 2 n_g / (c0 sqrt 12)`` = 2.6 ns before blurring).
+
+Layer integral (:func:`layer_echo`): with ``y = 2 c (l2 - l1)``,
+``∫ exp(-2 c l) h dl = exp(-2 c l1) (1 - e^-y) / (2 c) E[h]``, the expectation over the
+truncated exponential on the segment taken by Gauss-Legendre in its probability (6 nodes at
+its inverse CDF, as :func:`~pipeline.simulate.shapes.column_depth_time`): ``h = dOmega_w / A``
+changes by ``(l2 - l1) / S`` across it (``S`` the virtual-source distance, >= the air range),
+so the rule is exact to rounding for any layer and any extinction, and nothing overflows. The
+path's mean and variance are the truncated exponential's, in closed form, plus the small shift
+the slope of ``h`` gives them (from the same nodes).
 """
 
 from __future__ import annotations
@@ -67,12 +89,17 @@ __all__ = [
     "log_surface_backscatter_per_sr",
     "land_power_reflectance",
     "forward_scatter_sigma_s",
+    "LayerEcho",
+    "layer_echo",
     "return_budget",
 ]
 
 C0 = optics.SPEED_OF_LIGHT_M_S
 #: Cox & Munk (1954) clean-surface slope variance at zero wind: the unresolved floor.
 MIN_MEAN_SQUARE_SLOPE = le.COX_MUNK_INTERCEPT
+#: Gauss-Legendre rule on (0, 1) for the layer integral's expectation (see module Notes).
+_LAYER_X, _LAYER_W = np.polynomial.legendre.leggauss(6)
+_LAYER_X, _LAYER_W = 0.5 * (_LAYER_X + 1.0), 0.5 * _LAYER_W
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -153,6 +180,118 @@ def forward_scatter_sigma_s(xi, extinction_per_m, water_path_m, group_index):
 
 
 @dataclass(frozen=True)
+class LayerEcho:
+    """The scattering layer as each sub-ray crosses it, shapes ``(n_pulses, n_sub)``.
+
+    Attributes
+    ----------
+    present : bool
+        The sub-ray is in water and crosses the layer above the seabed.
+    log_integral : float64
+        ``ln ∫_l1^l2 exp(-2 c l) (dOmega_w / A)(l) dl`` (ln of 1/m), ``LOG_ZERO`` where absent.
+    path_mean_m, path_var_m2 : float64
+        Mean (m) and variance (m²) of the in-water path of the echo's photons, 0 where absent.
+    """
+
+    present: np.ndarray
+    log_integral: np.ndarray
+    path_mean_m: np.ndarray
+    path_var_m2: np.ndarray
+
+
+def _truncated_exponential_moments(rate, width):
+    """Mean and variance of ``rate exp(-rate x)`` truncated to ``[0, width]``, no cancellation.
+
+    With ``y = rate width``: mean ``width (1/y - e^-y / (1 - e^-y))`` and variance
+    ``width^2 (1/y^2 - e^-y / (1 - e^-y)^2)``; below ``y = 0.1`` their series
+    ``1/2 - y/12 + y^3/720 - y^5/30240`` and ``1/12 - y^2/240 + y^4/6048`` (error < 1e-10).
+    """
+    y = rate * np.asarray(width, dtype=np.float64)
+    small = y < 0.1
+    yl = np.where(small, 1.0, y)
+    e = np.exp(-yl)
+    d = -np.expm1(-yl)  # 1 - e^-y
+    m = np.where(small, 0.5 - y / 12.0 + y**3 / 720.0 - y**5 / 30240.0, 1.0 / yl - e / d)
+    v = np.where(small, 1.0 / 12.0 - y**2 / 240.0 + y**4 / 6048.0, 1.0 / yl**2 - e / d**2)
+    return width * m, width**2 * np.maximum(v, 0.0)
+
+
+def layer_echo(paths, water, level_m: float, n_air: float) -> LayerEcho:
+    """Where each sub-ray crosses the scattering layer, and the layer's column integral.
+
+    Parameters
+    ----------
+    paths : Paths
+        Traced geometry, ``(n_pulses, n_sub)``.
+    water : WaterSettings
+        ``extinction_per_m``, ``phase_index`` and the ``layer_*`` keys.
+    level_m : float
+        Mean water level (local z) the layer depth is measured from.
+    n_air : float
+        Phase index of air.
+
+    Returns
+    -------
+    LayerEcho
+        See the module docstring ("Layer integral"); finite for any extinction (log space).
+    """
+    flags = np.asarray(paths.flags)
+    wet = (flags & (P.MISS | P.LAND)) == 0
+    cos_v = -np.asarray(paths.refracted_dir)[..., 2]  # the refracted ray's downward cosine
+    ok = wet & (cos_v > 1e-12)
+    inv = 1.0 / np.where(ok, cos_v, 1.0)
+    surf_z = np.asarray(paths.surface_xyz_m)[..., 2]
+    centre_z = level_m - water.layer_depth_m
+    half = 0.5 * water.layer_thickness_m
+    l1 = np.maximum((surf_z - (centre_z + half)) * inv, 0.0)  # a wave trough inside the layer
+    l2 = (surf_z - (centre_z - half)) * inv
+    known = (flags & P.NO_BOTTOM) == 0  # the seabed was hit: the segment ends there at most
+    l2 = np.where(known, np.minimum(l2, paths.water_path_m), l2)
+    present = ok & (l2 > l1)
+    width = np.where(present, l2 - l1, 0.0)
+    l1 = np.where(present, l1, 0.0)
+
+    s = 2.0 * water.extinction_per_m
+    cos_a = np.where(ok, np.cos(np.clip(paths.incidence_rad, 0.0, 0.5 * np.pi)), 1.0)
+    r_air = np.where(present, paths.air_range_m, 1.0)
+    # nodes: paths at the Gauss-Legendre probabilities u of the truncated exponential
+    # exp(-s x) on [0, width], x = -log1p(u expm1(-s width)) / s (accurate for any s width > 0;
+    # :func:`~pipeline.simulate.shapes.column_depth_time` is the same inverse), (nodes, n, k)
+    u = _LAYER_X[:, None, None]
+    x = -np.log1p(u * np.expm1(-s * width)) / s if s > 0.0 else u * width
+    # h(l1 + x) / h(l1) = S_t S_s at l1 over S_t S_s at l1 + x (S = R + k l, :mod:`.geometry`):
+    # a ratio near 1 (the layer is thin against the range), no logarithm per node
+    k_t, k_s = virtual_source_slopes(cos_a, n_air, water.phase_index)
+    s_t1, s_s1 = r_air + k_t * l1, r_air + k_s * l1
+    w = _LAYER_W[:, None, None] * (s_t1 * s_s1) / ((s_t1 + k_t * x) * (s_s1 + k_s * x))
+    wsum = w.sum(axis=0)
+    # moments of x: exact for the truncated exponential, plus the (tiny) shift by h's slope
+    # as the rule sees it (the rule alone misses the exponential's moments by 1-14 % when
+    # s width > 5: its inverse CDF has a log singularity there)
+    mean_h = (w * x).sum(axis=0) / wsum
+    var_h = (w * (x - mean_h) ** 2).sum(axis=0) / wsum
+    mean_0 = (_LAYER_W[:, None, None] * x).sum(axis=0)
+    var_0 = (_LAYER_W[:, None, None] * (x - mean_0) ** 2).sum(axis=0)
+    exact_mean, exact_var = _truncated_exponential_moments(s, width)
+    mean_x = exact_mean + (mean_h - mean_0)
+    var = exact_var + (var_h - var_0)
+    # ∫_l1^l2 exp(-s l) dl = exp(-s l1) (1 - exp(-s w)) / s, and w itself when s = 0
+    if s > 0.0:
+        log_seg = -s * l1 + safe_log(-np.expm1(-s * width)) - math.log(s)
+    else:
+        log_seg = safe_log(width)
+    log_h1 = log_aperture_factor(r_air, l1, cos_a, n_air, water.phase_index)
+    log_int = np.where(present, np.maximum(log_seg + log_h1 + np.log(wsum), LOG_ZERO), LOG_ZERO)
+    mean = l1 + mean_x
+    return LayerEcho(
+        present=present,
+        log_integral=log_int,
+        path_mean_m=np.where(present, mean, 0.0),
+        path_var_m2=np.where(present, np.maximum(var, 0.0), 0.0),
+    )
+
+
+@dataclass(frozen=True)
 class ReturnBudget:
     """Expected photoelectrons (log) and time shapes, shapes ``(n_pulses, n_sub)`` unless stated.
 
@@ -177,6 +316,10 @@ class ReturnBudget:
         The pulse's water column as one truncated-exponential-plus-Gaussian component.
     background_rate_hz : (n_pulses,) float64
         Solar background plus dark counts, photoelectrons per second.
+    log_layer, t_layer_s, sigma_layer_s : float64 or None
+        ln expected photoelectrons, centre and sigma of each sub-ray's scattering-layer echo
+        (``LOG_ZERO`` / 0 where a sub-ray has none); None when the scene has no layer, so a
+        layer-free budget builds exactly the components it always did.
     """
 
     pulse_id: np.ndarray
@@ -198,6 +341,14 @@ class ReturnBudget:
     column_rate_per_s: np.ndarray
     column_sigma_s: np.ndarray
     background_rate_hz: np.ndarray
+    log_layer: np.ndarray | None = None
+    t_layer_s: np.ndarray | None = None
+    sigma_layer_s: np.ndarray | None = None
+
+    @property
+    def has_layer(self) -> bool:
+        """Whether the budget carries scattering-layer echoes (the scene has a layer)."""
+        return self.log_layer is not None
 
     @property
     def n_pulses(self) -> int:
@@ -221,10 +372,12 @@ class ReturnBudget:
             m = np.max(a, axis=1)
             return m + np.log(np.sum(np.exp(a - m[:, None]), axis=1))
 
+        no_layer = np.full(self.n_pulses, LOG_ZERO)
         out = {
             "surface": lse(self.log_surface),
             "land": lse(self.log_land),
             "bottom": lse(self.log_bottom),
+            "layer": lse(self.log_layer) if self.has_layer else no_layer,
             "column": self.column_log_pe,
         }
         out = {k: np.exp(np.maximum(v, -745.0)) * (v > LOG_ZERO / 2) for k, v in out.items()}
@@ -334,6 +487,28 @@ def return_budget(paths, scene, detector, settings: ReturnSettings | None = None
     log_col = np.where(wet & (col_len > 0.0), np.maximum(log_col, LOG_ZERO), LOG_ZERO)
     col = _column_aggregate(log_col, t_surf, col_len, r_air, cos_a, c_w, n_a, n_w, n_g, sig_sys2)
 
+    # scattering layer: only when the scene has one, so layer-free budgets stay as they were
+    layer = {}
+    if water.has_layer:
+        lay = layer_echo(paths, water, scene.water_surface.level_m, n_a)
+        log_lay = (
+            base
+            + 2.0 * safe_log(np.where(lay.present, t_entry, 0.0))  # T_down, T_up (reciprocity)
+            + safe_log(water.layer_backscatter_per_m_sr)
+            + lay.log_integral
+        )
+        to_time = 2.0 * n_g / C0
+        sig_fs_l = forward_scatter_sigma_s(
+            rs.forward_scatter_coefficient, c_w, lay.path_mean_m, n_g
+        )
+        layer = {
+            "log_layer": np.where(lay.present, np.maximum(log_lay, LOG_ZERO), LOG_ZERO),
+            "t_layer_s": np.where(lay.present, t_surf + to_time * lay.path_mean_m, 0.0),
+            "sigma_layer_s": np.where(
+                lay.present, np.sqrt(sig_sys2 + to_time**2 * lay.path_var_m2 + sig_fs_l**2), 0.0
+            ),
+        }
+
     # background: sunlight off water or land seen through the air, plus dark counts
     w = np.asarray(paths.subray_weight)[None, :] * hit
     wsum = np.maximum(w.sum(axis=1), 1e-300)
@@ -363,6 +538,7 @@ def return_budget(paths, scene, detector, settings: ReturnSettings | None = None
         sigma_bottom_s=sig_bot,
         background_rate_hz=np.asarray(bg, dtype=np.float64),
         **col,
+        **layer,
     )
 
 

@@ -3,8 +3,9 @@
 ``paths`` (:class:`~pipeline.simulate.paths.Paths`) → :func:`~.returns.return_budget` (expected
 photoelectrons of every return, in log space, with its time shape) → per pulse a set of
 components: one Gaussian per sub-ray for the surface or land echo, one per sub-ray for the
-bottom echo, one water-column component and one uniform background (sunlight + dark counts)
-over the window. Then
+bottom echo, one per sub-ray for the scattering layer's echo (only when the scene has a layer),
+one water-column component and one uniform background (sunlight + dark counts) over the window.
+Then
 
 * :func:`simulate_waveforms` (full-waveform receiver): weak components are drawn as
   photoelectrons (:mod:`.photon`) and binned on the digitiser clock, strong ones (at least
@@ -78,8 +79,9 @@ SLICE_PULSES = 1024
 """Pulses processed at once inside a chunk (bounds the (pulses x samples) temporaries)."""
 STREAM_PHOTONS = 101
 STREAM_SAMPLES = 102
-#: Return types, in component order: surface-or-land, bottom, column, background.
-TYPES = ("surface", "bottom", "column", "background")
+#: Return types (the index is a component's type); components are ordered surface-or-land,
+#: bottom, layer (scenes with a scattering layer only), column, background.
+TYPES = ("surface", "bottom", "column", "background", "layer")
 
 
 @dataclass(frozen=True)
@@ -147,11 +149,15 @@ def _exp(log_pe):
 
 
 #: Every return the components can hold (land echoes share the surface slot of their sub-ray).
-RETURNS = ("surface", "land", "bottom", "column", "background")
+RETURNS = ("surface", "land", "bottom", "layer", "column", "background")
 
 
 def build_components(budget: ReturnBudget, include=RETURNS) -> tuple[Components, np.ndarray]:
-    """Components ``(n_pulses, 2 n_sub + 2)`` of every pulse, and the type of each component.
+    """Components ``(n_pulses, g n_sub + 2)`` of every pulse, and the type of each component.
+
+    ``g`` is 2 (surface-or-land and bottom Gaussians per sub-ray), or 3 when the budget has a
+    scattering layer (its Gaussians follow the bottom's). The column and the background stay
+    the last two components.
 
     Parameters
     ----------
@@ -162,7 +168,7 @@ def build_components(budget: ReturnBudget, include=RETURNS) -> tuple[Components,
     Returns
     -------
     comps : Components
-    ctype : (2 n_sub + 2,) int64
+    ctype : (g n_sub + 2,) int64
         Index into :data:`TYPES` of each component.
     """
     n, k = budget.log_surface.shape
@@ -171,43 +177,38 @@ def build_components(budget: ReturnBudget, include=RETURNS) -> tuple[Components,
     bottom = _exp(budget.log_bottom) * ("bottom" in include)
     column = _exp(budget.column_log_pe) * ("column" in include)
     bg = budget.background_rate_hz * budget.window_length_s * ("background" in include)
-    expected = np.concatenate([surf, bottom, column[:, None], bg[:, None]], axis=1)
-    kind = np.r_[np.full(2 * k, KIND_GAUSS), KIND_COLUMN, KIND_UNIFORM].astype(np.int8)
+    gauss_pe = [surf, bottom]
+    centres = [budget.t_surface_s, budget.t_bottom_s]
+    sigmas = [
+        budget.sigma_surface_s,
+        np.where(budget.sigma_bottom_s > 0, budget.sigma_bottom_s, 1.0),
+    ]
+    types = [np.zeros(k), np.ones(k)]
+    if budget.has_layer:
+        gauss_pe.append(_exp(budget.log_layer) * ("layer" in include))
+        centres.append(budget.t_layer_s)
+        sigmas.append(np.where(budget.sigma_layer_s > 0, budget.sigma_layer_s, 1.0))
+        types.append(np.full(k, TYPES.index("layer")))
+    g = len(gauss_pe) * k
+    expected = np.concatenate([*gauss_pe, column[:, None], bg[:, None]], axis=1)
+    kind = np.r_[np.full(g, KIND_GAUSS), KIND_COLUMN, KIND_UNIFORM].astype(np.int8)
     zeros = np.zeros((n, 1))
     comps = Components(
         expected=expected,
-        kind=np.broadcast_to(kind, (n, 2 * k + 2)),
+        kind=np.broadcast_to(kind, (n, g + 2)),
         centre_s=np.concatenate(
-            [
-                budget.t_surface_s,
-                budget.t_bottom_s,
-                budget.column_start_s[:, None],
-                budget.window_start_s[:, None],
-            ],
-            axis=1,
+            [*centres, budget.column_start_s[:, None], budget.window_start_s[:, None]], axis=1
         ),
-        sigma_s=np.concatenate(
-            [
-                budget.sigma_surface_s,
-                np.where(budget.sigma_bottom_s > 0, budget.sigma_bottom_s, 1.0),
-                budget.column_sigma_s[:, None],
-                zeros + 1.0,
-            ],
-            axis=1,
-        ),
+        sigma_s=np.concatenate([*sigmas, budget.column_sigma_s[:, None], zeros + 1.0], axis=1),
         rate_per_s=np.concatenate(
-            [np.zeros((n, 2 * k)), budget.column_rate_per_s[:, None], zeros], axis=1
+            [np.zeros((n, g)), budget.column_rate_per_s[:, None], zeros], axis=1
         ),
         width_s=np.concatenate(
-            [
-                np.zeros((n, 2 * k)),
-                budget.column_width_s[:, None],
-                zeros + budget.window_length_s,
-            ],
+            [np.zeros((n, g)), budget.column_width_s[:, None], zeros + budget.window_length_s],
             axis=1,
         ),
     )
-    ctype = np.r_[np.zeros(k), np.ones(k), 2, 3].astype(np.int64)
+    ctype = np.r_[np.concatenate(types), 2, 3].astype(np.int64)
     return comps, ctype
 
 
@@ -217,7 +218,8 @@ def expected_waveform(budget: ReturnBudget) -> dict[str, np.ndarray]:
     Returns
     -------
     dict of str to (n_pulses, n_samples) float64
-        ``surface``, ``land``, ``bottom``, ``column``, ``background`` and ``total``.
+        ``surface``, ``land``, ``bottom``, ``layer`` (zeros without a layer), ``column``,
+        ``background`` and ``total``.
     """
     out = {}
     m, dt = budget.n_samples, budget.sample_interval_s
@@ -290,7 +292,7 @@ def simulate_waveforms(
             mean = expected_samples(comps, sb.t0_s, dt, m)
             samples[s], sat = digitise(detector, mean)
         else:
-            totals = np.stack([comps.expected[:, ctype == t].sum(1) for t in range(4)], 1)
+            totals = np.stack([comps.expected[:, ctype == t].sum(1) for t in range(len(TYPES))], 1)
             strong = (totals >= thr)[:, ctype]
             weak = comps.with_expected(np.where(strong, 0.0, comps.expected))
             keys = pulse_keys(seed, STREAM_PHOTONS, sb.pulse_id)

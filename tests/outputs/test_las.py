@@ -80,3 +80,34 @@ def test_too_far_for_int32(tmp_path):
         # 800 m / 1e-7 m > 2**31
         write_points_laz(tmp_path / "p.laz", pts, crs=32633, origin_m=ORIGIN, scale_m=1e-7)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_classification_lookup_names_the_classes_present(tmp_path):
+    # water column (64, user-definable: LAS 1.4 has no water-column class) and the bathy classes
+    pts = sample_points(n=300, amplitude=False)
+    cls = np.asarray(pts.classification).copy()
+    cls[:50] = 64
+    cls[50:60] = 45
+    pts = pts.replace(classification=cls)
+    path = write_points_laz(tmp_path / "points.laz", pts, crs=32633, origin_m=ORIGIN)
+    las = laspy.read(path)
+    (vlr,) = las.header.vlrs.get("ClassificationLookupVlr")
+    assert vlr.user_id == "LASF_Spec" and vlr.record_id == 0  # the LAS 1.4 record
+    assert set(vlr.lookups) == set(np.unique(cls).tolist())
+    assert vlr.lookups[64] == "water column"
+    assert vlr.lookups[40] == "bathymetry" and vlr.lookups[41] == "water surface"
+    assert vlr.lookups[45] == "no bottom found"
+    back = read_points_laz(path)
+    assert back.class_names[64] == "water column"
+    np.testing.assert_array_equal(back.points.classification, cls)
+
+
+def test_every_class_has_a_lookup_name_that_fits():
+    from pipeline.outputs.las import LOOKUP_NAMES
+    from pipeline.process.classify import CLASS_NAMES
+
+    assert set(CLASS_NAMES) <= set(LOOKUP_NAMES)
+    for name in LOOKUP_NAMES.values():
+        # 15 bytes in the record; laspy drops anything but letters, digits and spaces
+        assert len(name.encode("ascii")) <= 15
+        assert all(ch.isalnum() or ch == " " for ch in name)

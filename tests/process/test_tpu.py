@@ -1,5 +1,7 @@
-"""Propagated uncertainty: analytic terms at nadir, Monte Carlo through refraction.py, rigid
-navigation, the timing sigma against the waveform model's Fisher information."""
+"""Propagated uncertainty: analytic terms at nadir, Monte Carlo through refraction.py (the
+elevation and the depth below the measured surface), rigid navigation, the timing sigma
+against the waveform model's Fisher information, and the estimators from measured soundings
+(seabed gradient, pair scatter, timing from scatter, tilt of the plane over the sounding)."""
 
 import dataclasses
 import hashlib
@@ -15,11 +17,17 @@ from pipeline.process.surface_fit import SurfaceFitSettings, fit_water_surface
 from pipeline.process.tpu import (
     CORRELATED_TERMS,
     RANDOM_TERMS,
+    TIMING_TERMS,
     TpuSettings,
     cox_munk_slope_sigma,
     index_derivatives,
     monte_carlo_points,
+    pair_scatter,
     point_tpu,
+    seabed_gradient,
+    surface_over_sounding,
+    surface_tilt_sigma,
+    timing_from_scatter,
     timing_sigma_s,
 )
 from pipeline.process.waveform_model import WaveformSystem, expected_waveform, fisher_information
@@ -71,28 +79,59 @@ def test_nadir_terms_by_hand():
     tpu = point_tpu(ret, surf, RST, st)
     t = {k: v[0] for k, v in tpu.terms.items()}  # pulse 0 points straight down
     r_air = float(surf.range_to_entry_m[0])
-    # one return's timing moves the bottom along the vertical beam by c sigma / (2 n_g)
-    assert abs(t["timing_bottom"][2]) == pytest.approx(C * 2e-10 / (2 * N_G), rel=1e-4)
-    assert abs(t["timing_surface"][2]) == pytest.approx(C * 2e-10 / (2 * N_G), rel=1e-4)
-    np.testing.assert_allclose(t["navigation"], [0.05, 0.05, 0.08])
-    # a roll about x turns the 412 m lever arm (0, 0, -R) into a y shift sigma R
+    # one return's timing moves the bottom along the vertical beam by c sigma / (2 n_g), and
+    # its depth by as much
+    for k in TIMING_TERMS:
+        assert abs(t[k][2]) == pytest.approx(C * 2e-10 / (2 * N_G), rel=1e-4)
+        assert t[k][3] == pytest.approx(-t[k][2], rel=1e-4)
+    # navigation: a translation moves surface and seabed alike; the depth (flat seabed) keeps
+    np.testing.assert_allclose(t["navigation"], [0.05, 0.05, 0.08, 0.0])
+    # a roll about x turns the 412 m lever arm (0, 0, -R) into a y shift sigma R; the depth
+    # below the turned plane keeps (second order)
     lever = ALT + 12.0
     np.testing.assert_allclose(
-        np.abs(t["attitude_x"]), [0, np.radians(0.005) * lever, 0], atol=1e-6
+        np.abs(t["attitude_x"]), [0, np.radians(0.005) * lever, 0, 0], atol=1e-5
     )
     # nadir: heading turns nothing (the noisy fitted plane tilts the beam by ~1e-8 rad)
     np.testing.assert_allclose(t["heading"], 0.0, atol=1e-5)
-    # footprint of a 1 mrad beam: 1e-3 (r_air + L / n_w) / 4 per axis, times tan 10° up
+    # the fitted surface's height moves the point, not its depth (own surface return)
+    assert abs(t["surface_height"][2]) > 1e-4 and abs(t["surface_height"][3]) < 1e-9
+    # footprint of a 1 mrad beam: 1e-3 (r_air + L / n_w) / 4 per axis, times tan 10° up;
+    # over a plane the return's centroid is the beam centre's range: no depth term
     fp = 1e-3 * (r_air + 12.0 / N_W) / 4.0
     # (the noisy fitted surface sits millimetres off z = 0: 1e-4)
     np.testing.assert_allclose(
-        np.abs(t["footprint"]), [fp, fp, fp * math.tan(math.radians(10))], rtol=1e-4
+        np.abs(t["footprint"]), [fp, fp, fp * math.tan(math.radians(10)), 0.0], rtol=1e-4
     )
-    # the split adds up
+    # the splits add up; the depth's sigma is the elevation's less the vertical navigation
     np.testing.assert_allclose(
         tpu.sigma_v_m**2, tpu.sigma_v_random_m**2 + tpu.sigma_v_correlated_m**2, rtol=1e-12
     )
+    np.testing.assert_allclose(
+        tpu.sigma_depth_m**2,
+        tpu.sigma_depth_random_m**2 + tpu.sigma_depth_correlated_m**2,
+        rtol=1e-12,
+    )
+    assert np.all(tpu.sigma_depth_m < tpu.sigma_v_m - 0.05)
     assert set(tpu.terms) == set(RANDOM_TERMS) | set(CORRELATED_TERMS)
+
+
+def test_slope_couples_horizontal_errors_into_depth():
+    """Over a seabed of gradient g a point moved by (dx, dy) is compared with the depth at
+    where it was put: ``-g . (dx, dy)`` more; a translation's horizontal sigmas give
+    ``|g| s_h``."""
+    ret, surf = survey(n_side=4)
+    flat = point_tpu(ret, surf, RST)
+    g = np.tile([0.12, -0.05], (len(ret), 1))
+    tilted = point_tpu(ret, surf, RST, seabed_gradient=g)
+    for k in ("attitude_x", "attitude_y", "pointing_a", "timing_bottom"):
+        want = flat.terms[k][:, 3] - np.sum(g * flat.terms[k][:, :2], axis=1)
+        np.testing.assert_allclose(tilted.terms[k][:, 3], want, rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(tilted.terms["navigation"][:, 3], 0.05 * 0.13, rtol=1e-12)
+    # x, y, z are those of the flat case
+    np.testing.assert_allclose(tilted.sigma_v_m, flat.sigma_v_m, rtol=1e-12)
+    with pytest.raises(ValueError, match="seabed_gradient"):
+        point_tpu(ret, surf, RST, seabed_gradient=np.zeros((3, 2)))
 
 
 def test_index_derivatives_of_quan_and_fry():
@@ -105,12 +144,17 @@ def test_index_derivatives_of_quan_and_fry():
     assert cox_munk_slope_sigma(5.0) == pytest.approx(math.sqrt(0.0286 / 2.0), rel=1e-12)
 
 
+#: a seabed gradient for the Monte Carlo checks: the depth at the measured position
+GRAD = (0.1, -0.06)
+
+
 @pytest.fixture(scope="module")
 def wavy():
     ret, surf = survey(wave_m=0.05)
     st = TpuSettings(wave_slope_sigma_rad=0.02, seabed_slope_deg=5.0)
-    tpu = point_tpu(ret, surf, RST, st)
-    mc = monte_carlo_points(ret, surf, RST, st, n_draws=1000, seed=7)
+    g = np.tile(GRAD, (len(ret), 1))
+    tpu = point_tpu(ret, surf, RST, st, seabed_gradient=g)
+    mc = monte_carlo_points(ret, surf, RST, st, n_draws=1000, seed=7, seabed_gradient=g)
     return ret, surf, tpu, mc
 
 
@@ -119,15 +163,38 @@ def test_tpu_matches_monte_carlo_through_refraction(wavy):
     # 5 cm waves: the fit residual is mostly wave height, not ranging noise
     assert np.mean(surf.fit_sigma_m) > 0.03 and np.mean(tpu.terms["wave_height"][:, 2] != 0) > 0.9
     sd = mc.std(axis=0)
-    for axis, sig in enumerate((tpu.sigma_x_m, tpu.sigma_y_m, tpu.sigma_v_m)):
+    sigmas = (tpu.sigma_x_m, tpu.sigma_y_m, tpu.sigma_v_m, tpu.sigma_depth_m)
+    for axis, sig in enumerate(sigmas):
         ratio = sd[:, axis] / sig
         # 1000 draws: each ratio has a 2.2 % sampling sigma; the mean of 144 within 2 %
         # (linearisation error included), each within 12 % (5 sigma)
         assert abs(np.mean(ratio) - 1.0) < 0.02, (axis, np.mean(ratio))
         assert np.all(np.abs(ratio - 1.0) < 0.12), (axis, ratio.min(), ratio.max())
-    # and the means: no bias from the full-size perturbations (within 4 standard errors)
-    err = mc.mean(axis=0) - tpu.xyz_m
-    assert np.all(np.abs(err) < 4 * sd / np.sqrt(1000) + 1e-4)
+    # and the means: no bias from the full-size perturbations (within 4 standard errors);
+    # the depth has a second-order one: a plane tilted by a (both ways) refracts the beam by
+    # k a, k = 1 - n_air / n_w, and the depth L (cos(t + k a) + a sin(t + k a)) gains
+    # L a² (k - k² / 2) cos t on average: 12 m x 2 axes x 0.0215² x 0.22 = 2.4 mm
+    nominal = np.column_stack([tpu.xyz_m, surf.surface_z_m(tpu.row, *tpu.xyz_m[:, :2].T)])
+    nominal[:, 3] -= tpu.xyz_m[:, 2]
+    err = mc.mean(axis=0) - nominal
+    assert np.all(np.abs(err[:, :3]) < 4 * sd[:, :3] / np.sqrt(1000) + 1e-4)
+    k = 1.0 - N_AIR / N_W
+    second = 12.0 * 2 * (0.008**2 + 0.02**2) * (k - k**2 / 2)
+    assert np.all(np.abs(err[:, 3] - second) < 4 * sd[:, 3] / np.sqrt(1000) + 1e-3)
+
+
+def test_depth_sigma_is_not_the_elevation_sigma(wavy):
+    """The vertical navigation (8 cm) moves z, not the depth below the measured surface; the
+    slope (11.7 %) brings the horizontal errors into the depth."""
+    _, _, tpu, mc = wavy
+    assert np.mean(tpu.sigma_v_m) > 0.08 > 2.0 * np.mean(tpu.sigma_depth_m)
+    # the depth's draws are not the elevation's: their correlation is weak
+    dz = mc[:, :, 2] - mc[:, :, 2].mean(axis=0)
+    dd = mc[:, :, 3] - mc[:, :, 3].mean(axis=0)
+    corr = np.sum(dz * dd, axis=0) / np.sqrt(np.sum(dz**2, axis=0) * np.sum(dd**2, axis=0))
+    assert np.median(np.abs(corr)) < 0.5
+    nav = tpu.terms["navigation"][:, 3]
+    np.testing.assert_allclose(nav, 0.05 * math.hypot(*GRAD), rtol=1e-12)
 
 
 def test_tpu_interval_coverage(wavy):
@@ -136,9 +203,14 @@ def test_tpu_interval_coverage(wavy):
     cover_v = np.mean(dz <= 1.96 * tpu.sigma_v_m)
     dx = np.abs(mc[:, :, 0] - tpu.xyz_m[:, 0])
     cover_x = np.mean(dx <= 1.96 * tpu.sigma_x_m)
+    dd = np.abs(mc[:, :, 3] - mc[:, :, 3].mean(axis=0))
+    cover_d68 = np.mean(dd <= tpu.sigma_depth_m)
+    cover_d95 = np.mean(dd <= 1.96 * tpu.sigma_depth_m)
     # 144 000 draws, but the 1000 water-index draws are shared by all points: +-1 %
     assert 0.94 < cover_v < 0.96, cover_v
     assert 0.94 < cover_x < 0.96, cover_x
+    assert 0.67 < cover_d68 < 0.70, cover_d68
+    assert 0.94 < cover_d95 < 0.96, cover_d95
 
 
 def test_navigation_error_moves_everything_rigidly():
@@ -185,6 +257,114 @@ def test_inputs_are_not_modified():
         for a in (ret.origin_meas_m, ret.t_bottom_s, surf.entry_m, surf.normal)
     ]
     assert before == after
+
+
+def test_seabed_gradient_of_a_noisy_plane_and_of_a_track():
+    rng = np.random.default_rng(3)
+    xy = rng.uniform(0, 60, (4000, 2))
+    depth = 5.0 + 0.08 * xy[:, 0] - 0.03 * xy[:, 1] + rng.normal(0, 0.02, len(xy))
+    depth[::97] += 3.0  # blunders: the robust pass drops them
+    g = seabed_gradient(xy, depth, neighbours=24)
+    inner = np.all((xy > 8) & (xy < 52), axis=1)
+    np.testing.assert_allclose(np.median(g[inner], axis=0), [0.08, -0.03], atol=2e-3)
+    assert np.percentile(np.abs(g[inner, 0] - 0.08), 90) < 0.03
+    # a profiler's track (collinear soundings): the slope along it, none across
+    y = np.linspace(0, 100, 500)
+    track = np.column_stack([np.zeros_like(y), y])
+    g = seabed_gradient(track, 2.0 + 0.03 * y, np.array([[0.0, 50.0]]), neighbours=24)
+    np.testing.assert_allclose(g[0], [0.0, 0.03], atol=1e-4)
+    # one depth per group: the shots of a window count as one sounding at their mean
+    shots = np.repeat(track, 40, axis=0) + rng.normal(0, 0.01, (40 * len(y), 2))
+    win = np.repeat(np.arange(len(y)), 40)
+    g = seabed_gradient(shots, np.repeat(2.0 + 0.03 * y, 40), track[250:251], group=win)
+    np.testing.assert_allclose(g[0, 1], 0.03, atol=1e-3)
+    assert np.all(seabed_gradient(xy[:2], depth[:2]) == 0.0)
+
+
+def test_pair_scatter_recovers_the_random_error_not_the_shared_one():
+    """Soundings along scan lines over a slope, each with its own noise (growing eastward) and
+    a shared offset per scan line (navigation-like): successive soundings see the noise only."""
+    rng = np.random.default_rng(5)
+    n_line, per_line = 200, 150
+    x = np.tile(np.linspace(0, 60, per_line), n_line) + rng.normal(0, 0.05, n_line * per_line)
+    y = np.repeat(np.linspace(0, 80, n_line), per_line)
+    sigma = 0.01 + 0.001 * x
+    shared = np.repeat(rng.normal(0, 0.2, n_line), per_line)
+    depth = 4 + 0.1 * x + 0.02 * y + shared + rng.normal(size=x.size) * sigma
+    order = np.arange(x.size)
+    xy = np.column_stack([x, y])
+    est = pair_scatter(xy, depth, order=order, max_separation_m=1.0)
+    for lo, hi in ((5, 15), (25, 35), (45, 55)):
+        m = (x > lo) & (x < hi)
+        assert np.median(est[m]) == pytest.approx(np.sqrt(np.mean(sigma[m] ** 2)), rel=0.08)
+    # nearest pairs mix scan lines: the shared offsets show
+    near = pair_scatter(xy, depth, max_separation_m=1.0)
+    assert np.median(near) > 1.8 * np.median(est)
+    # groups sharing one detection are one sounding each
+    rep = np.repeat(np.arange(x.size), 3)
+    grouped = pair_scatter(
+        np.repeat(xy, 3, axis=0), np.repeat(depth, 3), order=rep, group=rep, max_separation_m=1.0
+    )
+    np.testing.assert_allclose(grouped[::3], est, rtol=1e-9)
+    assert np.all(np.isnan(pair_scatter(xy[:1], depth[:1])))
+
+
+def test_timing_from_scatter_explains_the_scatter():
+    ret, surf = survey(n_side=6)
+    n = len(ret)
+    amp = dict(surface_amplitude=np.full(n, 100.0), bottom_amplitude=np.linspace(20, 2000, n))
+    ret = dataclasses.replace(ret, **amp)
+    scatter = np.linspace(0.005, 0.06, n)
+    scatter[3] = np.nan  # no pair: the a-priori sigma stays
+    out = timing_from_scatter(ret, surf, RST, depth_scatter_m=scatter)
+    tpu = point_tpu(out, surf, RST)
+    ok = np.isfinite(scatter)
+    np.testing.assert_allclose(tpu.sigma_depth_random_m[ok], scatter[ok], rtol=1e-3)
+    # variance shared in proportion to 1 / amplitude: the weak bottoms take the larger share
+    share = out.t_bottom_sigma_s**2 / out.t_surface_sigma_s**2
+    np.testing.assert_allclose(share[ok], (100.0 / amp["bottom_amplitude"])[ok], rtol=1e-9)
+    assert out.t_bottom_sigma_s[3] == TpuSettings().timing_sigma_s
+    with pytest.raises(ValueError, match="depth_scatter_m"):
+        timing_from_scatter(ret, surf, RST, depth_scatter_m=scatter[:-1])
+
+
+def test_surface_tilt_is_measured_over_the_sounding():
+    """Planes turned at random by ``tau`` per axis and raised at random (heights that differ
+    between the fits do not matter): the plane over each sounding turns against the pulse's
+    by both tilts times the offset."""
+    ret, surf = survey(n_side=24)
+    rng = np.random.default_rng(11)
+    tau = 0.01
+    ex, ey = np.eye(3)[0], np.eye(3)[1]
+
+    def turn(v, axis, a):
+        axis = np.broadcast_to(axis, v.shape)
+        c, s = np.cos(a)[:, None], np.sin(a)[:, None]
+        return v * c + np.cross(axis, v) * s + axis * np.sum(axis * v, 1)[:, None] * (1 - c)
+
+    n = len(ret)
+    nrm = turn(turn(surf.normal, ex, rng.normal(0, tau, n)), ey, rng.normal(0, tau, n))
+    entry = surf.entry_m + np.column_stack([np.zeros((n, 2)), rng.normal(0, 0.05, n)])
+    turned = dataclasses.replace(surf, normal=nrm, entry_m=entry)
+    xy = seabed_points(ret, turned, RST).xyz_m[:, :2]
+    t, delta = surface_over_sounding(ret, turned, xy)
+    far = delta > 1.5
+    assert np.all(np.isfinite(t)) and far.sum() > 150
+    assert np.sqrt(np.mean(t[far] ** 2) / np.mean(2 * delta[far] ** 2)) == pytest.approx(
+        tau, rel=0.15
+    )
+    tilt = surface_tilt_sigma(ret, turned, xy)
+    # the total sigma of the turn, sqrt(2) tau
+    assert np.median(tilt[far]) == pytest.approx(math.sqrt(2) * tau, rel=0.2)
+    # the TPU takes the larger of it and the fit's own
+    tpu = point_tpu(ret, turned, RST, surface_tilt_sigma_rad=tilt)
+    fit_only = point_tpu(ret, turned, RST)
+    assert np.all(tpu.sigma_depth_m >= fit_only.sigma_depth_m - 1e-12)
+
+    def tilt_depth(p):
+        return np.hypot(p.terms["surface_tilt_x"][:, 3], p.terms["surface_tilt_y"][:, 3])
+
+    assert np.median(tilt_depth(tpu)[far]) > 3 * np.median(tilt_depth(fit_only)[far])
 
 
 def test_detector_sigmas_are_used():

@@ -1,0 +1,191 @@
+"""Calibration of the propagated depth uncertainty against the truth, with a breakdown.
+
+Runs a survey scene's simulation (cached with ``--cache``), processes it as ``bathy run`` does
+(:func:`pipeline.run_survey.run_survey`'s steps, without the water-column points and the
+posteriors, which do not touch the bathymetric points) and prints, for the bathymetric points,
+how often the true depth lies within ``±sigma`` and ``±1.96 sigma`` of the measured depth, by
+depth, with the error's bias and RMS against the RMS sigma, and the RMS of the main TPU terms
+(depth column) per depth bin. ``--truth-terms`` (full-waveform scenes) also reprocesses with
+the true navigation, to show the navigation's share of the realised depth error.
+
+    .venv/bin/python benchmarks/tpu_calibration.py data_synthetic/scenes/palmer_survey.toml \\
+        --cache /tmp/palmer.pkl
+
+This script meets the truth (it is an evaluation tool, like :mod:`pipeline.evaluate`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import pickle
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.process.grid import grid_seabed
+from pipeline.process.refraction import RefractionSettings, georeference, seabed_points
+from pipeline.process.returns import Points
+from pipeline.run_survey import _no_bottom_points, _uncertainty, simulate_detections
+from pipeline.scene import load_scene, parse_scene
+
+EDGES = (0.0, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 20.0, 30.0, 40.0)
+
+
+def _scene(path: str, line_length: float | None, n_lines: int | None):
+    if line_length is None and n_lines is None:
+        return load_scene(path)
+    data = tomllib.loads(Path(path).read_text())
+    if line_length is not None:
+        data["flight"]["line_length_m"] = line_length
+    if n_lines is not None:
+        data["flight"]["n_lines"] = n_lines
+    return parse_scene(data)
+
+
+def _simulate(scene, cache: Path | None):
+    if cache is not None and cache.exists():
+        with cache.open("rb") as f:
+            return pickle.load(f)
+    sim = simulate_detections(scene, log=lambda s: None)
+    if cache is not None:
+        with cache.open("wb") as f:
+            pickle.dump(sim, f)
+    return sim
+
+
+def _true_pulses(scene, sim, pulse_id):
+    """True origins and directions of the given pulses (full-waveform: one row per pulse)."""
+    from pipeline.simulate import survey
+
+    lines = sim["lines"]
+    out_o = np.empty((len(pulse_id), 3))
+    out_d = np.empty((len(pulse_id), 3))
+    order = np.argsort(pulse_id)
+    ids = pulse_id[order]
+    lo = 0
+    while lo < len(ids):
+        hi = min(lo + 200_000, len(ids))
+        p = survey.pulses_for_range(
+            scene.flight,
+            scene.attitude,
+            scene.navigation,
+            scene.scanner,
+            lines,
+            int(ids[lo]),
+            int(ids[hi - 1]) + 1,
+            scene.scene.seed,
+        )
+        k = ids[lo:hi] - int(ids[lo])
+        out_o[order[lo:hi]] = p.origin_m[k]
+        out_d[order[lo:hi]] = p.direction[k]
+        lo = hi
+    return out_o, out_d
+
+
+def _row(name, err, sig):
+    z = np.abs(err) / sig
+    return (
+        f"| {name} | {len(err)} | {np.mean(z <= 1.0):.1%} | {np.mean(z <= 1.96):.1%} "
+        f"| {np.mean(err):+.4f} | {np.sqrt(np.mean(err**2)):.4f} | "
+        f"{np.sqrt(np.mean(sig**2)):.4f} |"
+    )
+
+
+def process(scene, sim):
+    """The bathymetric points, their TPU and the processed survey, as ``bathy run`` makes them."""
+    ps = scene.process
+    refr = RefractionSettings(
+        phase_index=ps.assumed_phase_index or scene.water.phase_index,
+        group_index=ps.assumed_group_index or scene.water.group_index,
+    )
+    fit = dataclasses.replace(ps.surface_fit, air_index=scene.atmosphere.refractive_index)
+    processed = georeference(
+        sim["returns"],
+        surface_settings=fit,
+        refraction_settings=refr,
+        classify_settings=ps.classify,
+    )
+    processed = dataclasses.replace(
+        processed,
+        points=Points.concatenate(
+            [processed.points, _no_bottom_points(scene, sim["returns"], processed, refr)]
+        ),
+    )
+    grid = grid_seabed(processed.points, ps.grid_resolution_m)
+    unc = _uncertainty(scene, sim["returns"], processed, refr, grid)
+    return unc, processed, refr, fit
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser()
+    ap.add_argument("scene")
+    ap.add_argument("--line-length", type=float)
+    ap.add_argument("--n-lines", type=int)
+    ap.add_argument("--cache", type=Path)
+    ap.add_argument("--truth-terms", action="store_true")
+    a = ap.parse_args(argv)
+    scene = _scene(a.scene, a.line_length, a.n_lines)
+    t0 = time.perf_counter()
+    sim = _simulate(scene, a.cache)
+    print(f"simulation {time.perf_counter() - t0:.1f} s, {len(sim['returns'])} pulses")
+    t1 = time.perf_counter()
+    unc, processed, refr, fit = process(scene, sim)
+    print(f"processing and uncertainty {time.perf_counter() - t1:.1f} s")
+    p40, tpu = unc["points40"], unc["tpu40"]
+    truth = sim["truth"]
+    err = p40.depth_m - truth.depth_m(p40.xyz_m[:, 0], p40.xyz_m[:, 1])
+    sig = tpu.sigma_depth_m
+    d = p40.depth_m
+    print("\n| subset | n | within 1 σ | within 1.96 σ | bias (m) | RMS error (m) | RMS σ (m) |")
+    print("|---|---|---|---|---|---|---|")
+    print(_row("all, depth sigma", err, sig))
+    print(_row("all, elevation sigma (sigma_v_m)", err, tpu.sigma_v_m))
+    for lo, hi in zip(EDGES[:-1], EDGES[1:], strict=True):
+        m = (d >= lo) & (d < hi)
+        if m.sum() >= 50:
+            print(_row(f"depth {lo:g}-{hi:g} m", err[m], sig[m]))
+    names = sorted(tpu.terms, key=lambda k: -np.mean(tpu.terms[k][:, 3] ** 2))[:6]
+    print("\nRMS one-sigma depth change per term (m):\n")
+    print("| depth | " + " | ".join(names) + " | total |")
+    print("|---" * (len(names) + 2) + "|")
+    for lo, hi in zip(EDGES[:-1], EDGES[1:], strict=True):
+        m = (d >= lo) & (d < hi)
+        if m.sum() >= 50:
+            cells = [f"{np.sqrt(np.mean(tpu.terms[k][m, 3] ** 2)):.4f}" for k in names]
+            total = np.sqrt(np.mean(sig[m] ** 2))
+            print(f"| {lo:g}-{hi:g} m | " + " | ".join(cells) + f" | {total:.4f} |")
+    if a.truth_terms and scene.detector.mode != "photon_counting":
+        _truth_terms(scene, sim, refr, p40, err, sig, fit)
+
+
+def _truth_terms(scene, sim, refr, p40, err, sig, fit):
+    """Realised depth error of the navigation: process again with the true navigation."""
+    from pipeline.process.surface_fit import fit_water_surface
+
+    ret = sim["returns"]
+    o_true, d_true = _true_pulses(scene, sim, ret.pulse_id)
+    truth = sim["truth"]
+    order = np.argsort(ret.pulse_id)
+    rows = order[np.searchsorted(ret.pulse_id[order], p40.pulse_id)]
+    print("\n| reprocessed with | RMS error (m) | RMS of the change (m) |")
+    print("|---|---|---|")
+    for name, o, d in (
+        ("true position", o_true, ret.direction_meas),
+        ("true attitude", ret.origin_meas_m, d_true),
+        ("true navigation", o_true, d_true),
+    ):
+        r2 = dataclasses.replace(ret, origin_meas_m=o, direction_meas=d)
+        s2 = fit_water_surface(r2, fit)
+        p2 = seabed_points(r2, s2, refr)
+        pos = np.searchsorted(np.flatnonzero(ret.has_bottom), rows)
+        e2 = p2.depth_m[pos] - truth.depth_m(p2.xyz_m[pos, 0], p2.xyz_m[pos, 1])
+        print(
+            f"| {name} | {np.sqrt(np.mean(e2**2)):.4f} | {np.sqrt(np.mean((err - e2) ** 2)):.4f} |"
+        )
+
+
+if __name__ == "__main__":
+    main()
