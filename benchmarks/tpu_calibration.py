@@ -126,7 +126,9 @@ def main(argv=None):
     ap.add_argument("--n-lines", type=int)
     ap.add_argument("--cache", type=Path)
     ap.add_argument("--truth-terms", action="store_true")
+    ap.add_argument("--edges", help="depth bin edges, comma-separated (m)")
     a = ap.parse_args(argv)
+    edges = EDGES if a.edges is None else tuple(float(e) for e in a.edges.split(","))
     scene = _scene(a.scene, a.line_length, a.n_lines)
     t0 = time.perf_counter()
     sim = _simulate(scene, a.cache)
@@ -143,18 +145,35 @@ def main(argv=None):
     print("|---|---|---|---|---|---|---|")
     print(_row("all, depth sigma", err, sig))
     print(_row("all, elevation sigma (sigma_v_m)", err, tpu.sigma_v_m))
-    for lo, hi in zip(EDGES[:-1], EDGES[1:], strict=True):
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
         m = (d >= lo) & (d < hi)
         if m.sum() >= 50:
             print(_row(f"depth {lo:g}-{hi:g} m", err[m], sig[m]))
-    names = sorted(tpu.terms, key=lambda k: -np.mean(tpu.terms[k][:, 3] ** 2))[:6]
+    groups = {k: (k,) for k in tpu.terms}
+    groups.update(
+        surface_tilt=("surface_tilt_x", "surface_tilt_y"),
+        water_indices=("temperature", "salinity"),
+        attitude=("attitude_x", "attitude_y", "heading"),
+        pointing=("pointing_a", "pointing_b"),
+        wave_slope=("wave_slope_x", "wave_slope_y"),
+    )
+    for parts in list(groups.values()):
+        if len(parts) > 1:
+            for k in parts:
+                groups.pop(k, None)
+
+    def rms(names, m):
+        return np.sqrt(np.mean(sum(tpu.terms[k][m, 3] ** 2 for k in names)))
+
+    every = np.ones(len(d), dtype=bool)
+    names = sorted(groups, key=lambda g: -rms(groups[g], every))[:7]
     print("\nRMS one-sigma depth change per term (m):\n")
     print("| depth | " + " | ".join(names) + " | total |")
     print("|---" * (len(names) + 2) + "|")
-    for lo, hi in zip(EDGES[:-1], EDGES[1:], strict=True):
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
         m = (d >= lo) & (d < hi)
         if m.sum() >= 50:
-            cells = [f"{np.sqrt(np.mean(tpu.terms[k][m, 3] ** 2)):.4f}" for k in names]
+            cells = [f"{rms(groups[g], m):.4f}" for g in names]
             total = np.sqrt(np.mean(sig[m] ** 2))
             print(f"| {lo:g}-{hi:g} m | " + " | ".join(cells) + f" | {total:.4f} |")
     if a.truth_terms and scene.detector.mode != "photon_counting":

@@ -338,8 +338,11 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
     if post is not None:
         from pipeline.evaluate import posterior_coverage
 
-        post_eval = posterior_coverage(post["posteriors"], truth_depth_m=truth.depth_m)
-        post_eval["seconds_per_pulse"] = post["cost_s"] / max(len(post["point_index"]), 1)
+        post_eval = {"n": 0}
+        if post["posteriors"] is not None:
+            post_eval = posterior_coverage(post["posteriors"], truth_depth_m=truth.depth_m)
+            post_eval["seconds_per_pulse"] = post["cost_s"] / max(len(post["point_index"]), 1)
+        post_eval["skipped_in_column_return"] = post["skipped_column"]
     evaluation = {
         "pulses": int(sim["returns"].pulse_id.size),
         "posterior_against_truth": post_eval,
@@ -379,6 +382,11 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
             f" 68 % interval for {post_eval['coverage_68']:.1%}, in the 95 % for "
             f"{post_eval['coverage_95']:.1%}; {post_eval['converged_fraction']:.0%} converged, "
             f"{post_eval['seconds_per_pulse']:.2f} s per pulse"
+        )
+    if post_eval is not None and post_eval["skipped_in_column_return"]:
+        log(
+            f"  {post_eval['skipped_in_column_return']} candidate points got no posterior: their"
+            " pulses have an in-column return, which the posterior's waveform model lacks"
         )
     return files, timings, evaluation
 

@@ -111,9 +111,11 @@ def survey_posteriors(scene, sim: dict, processed, refr, unc: dict, grid) -> dic
     Returns
     -------
     dict or None
-        ``posteriors`` (:class:`SeabedPosteriors`), ``point_index`` (rows of ``points40``),
-        ``cost_s``; None when nothing is sampled (photon counting, a zero budget or no kept
-        waveform of a bathymetric point).
+        ``posteriors`` (:class:`SeabedPosteriors`, or None when every candidate has an
+        in-column return), ``point_index`` (rows of ``points40``), ``cost_s`` and
+        ``skipped_column`` (kept points left out for an in-column return, which the
+        posterior's model lacks); None when nothing is sampled (photon counting, a zero budget
+        or no kept waveform of a bathymetric point).
     """
     from pipeline.run_survey import detect_noise
 
@@ -123,15 +125,22 @@ def survey_posteriors(scene, sim: dict, processed, refr, unc: dict, grid) -> dic
         return None
     pid_k, t0_k, samples_k = kept
     pts = unc["points40"]
-    cand = np.flatnonzero(np.isin(pts.pulse_id, pid_k))
+    ret = sim["returns"]
+    # the posterior's waveform model has no in-column echo (a scattering layer): pulses with
+    # one would be sampled under a wrong model, so they are left out and counted
+    if ret.has_column is not None and ret.has_column.any():
+        pid_kept = np.setdiff1d(pid_k, ret.pulse_id[ret.has_column])
+    else:
+        pid_kept = pid_k
+    cand = np.flatnonzero(np.isin(pts.pulse_id, pid_kept))
+    n_column = int(np.count_nonzero(np.isin(pts.pulse_id, pid_k))) - cand.size
     if cand.size == 0:
-        return None
+        return {"posteriors": None, "point_index": cand, "cost_s": 0.0, "skipped_column": n_column}
     preferred = select_posterior_pulses(
         grid, unc["cells"], unc["tpu40"], max_pulses=max(n, 1), seed=scene.scene.seed
     )
     sel = choose_points(cand, preferred, n, scene.scene.seed)
     pid = pts.pulse_id[sel]
-    ret = sim["returns"]
     order = np.argsort(ret.pulse_id)
     rows = order[np.searchsorted(ret.pulse_id[order], pid)]
     korder = np.argsort(pid_k)
@@ -149,4 +158,9 @@ def survey_posteriors(scene, sim: dict, processed, refr, unc: dict, grid) -> dic
         detect_settings=scene.process.detect,
         detect_noise=detect_noise(scene),
     )
-    return {"posteriors": post, "point_index": sel, "cost_s": time.perf_counter() - t0}
+    return {
+        "posteriors": post,
+        "point_index": sel,
+        "cost_s": time.perf_counter() - t0,
+        "skipped_column": n_column,
+    }

@@ -113,6 +113,8 @@ def test_layer_scene_end_to_end(tmp_path):
     depths = _check_laz(tmp_path / "points.laz", ev["pulses"])
     # the bottoms are as good as without a layer
     assert ev["error"]["points"]["rmse_m"] < 0.06
-    wc = ev.get("water_column")
-    if wc is not None:  # the evaluation's section, when the run reports it
-        assert wc["n"] == depths.size and abs(wc["median_error_m"]) < 0.03
+    wc = ev["water_column"]
+    assert wc["n"] == depths.size and abs(wc["median_error_m"]) < 0.03
+    # the posterior's waveform model has no layer echo: those pulses are not sampled, and said
+    post = ev["posterior_against_truth"]
+    assert post["n"] == 0 and post["skipped_in_column_return"] > 0
