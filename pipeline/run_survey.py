@@ -310,6 +310,8 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
     from pipeline.survey_posterior import survey_posteriors
 
     post = survey_posteriors(scene, sim, processed, refr, unc, grid)
+    if post is not None and post["posteriors"] is not None:
+        unc = _cells_with_posteriors(unc, grid, post)
     timings["posterior_s"] = time.perf_counter() - t2
     files = {
         "points": write_points_laz(
@@ -343,6 +345,7 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
             post_eval = posterior_coverage(post["posteriors"], truth_depth_m=truth.depth_m)
             post_eval["seconds_per_pulse"] = post["cost_s"] / max(len(post["point_index"]), 1)
         post_eval["skipped_in_column_return"] = post["skipped_column"]
+        post_eval["cells_with_posterior"] = int(np.count_nonzero(unc["cells"].n_posterior))
     evaluation = {
         "pulses": int(sim["returns"].pulse_id.size),
         "posterior_against_truth": post_eval,
@@ -521,6 +524,27 @@ def _with_tpu(points, is40, tpu40):
     v, h = points.uncertainty_v_m.copy(), points.uncertainty_h_m.copy()
     v[is40], h[is40] = tpu40.sigma_v_m, tpu40.sigma_h_m
     return points.replace(uncertainty_v_m=v, uncertainty_h_m=h)
+
+
+def _cells_with_posteriors(unc: dict, grid, post: dict) -> dict:
+    """Cell uncertainty again, the converged posteriors' depth sigma in place of the timing.
+
+    The posterior covers the waveform timing of both returns (and its nuisances), which the
+    TPU's timing terms approximate; in the cells where points were sampled their variance
+    replaces those terms (:func:`pipeline.process.cell_uncertainty.cell_uncertainty`).
+    """
+    from pipeline import iho
+    from pipeline.process.cell_uncertainty import cell_uncertainty
+
+    n = len(unc["points40"])
+    sampled = np.zeros(n, dtype=bool)
+    sigma = np.zeros(n)
+    ps = post["posteriors"]
+    ok = ps.converged
+    sampled[post["point_index"][ok]] = True
+    sigma[post["point_index"][ok]] = ps.depth_m["std"][ok]
+    cells = cell_uncertainty(grid, unc["tpu40"], posterior_sigma_v_m=sigma, has_posterior=sampled)
+    return {**unc, "cells": cells, "summary": iho.order_summary(cells.order).to_dict()}
 
 
 def _take_tpu(tpu, index: np.ndarray):

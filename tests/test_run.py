@@ -45,6 +45,8 @@ def test_default_scene_runs(tmp_path, monkeypatch):
     assert 0.46 <= post["coverage_68"] <= 0.90
     assert post["coverage_95"] >= 0.84
     assert post["median_posterior_sd_m"] < 0.05  # centimetre posteriors, not prior-wide
+    # their cells' uncertainty takes the posterior's timing variance
+    assert 0 < post["cells_with_posterior"] <= 48
 
 
 @pytest.fixture
