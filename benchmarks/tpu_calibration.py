@@ -26,9 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.process.grid import grid_seabed
-from pipeline.process.refraction import RefractionSettings, georeference, seabed_points
-from pipeline.process.returns import Points
-from pipeline.run_survey import _no_bottom_points, _uncertainty, simulate_detections
+from pipeline.process.refraction import seabed_points
+from pipeline.run_survey import _uncertainty, process_detections, simulate_detections
 from pipeline.scene import load_scene, parse_scene
 
 EDGES = (0.0, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 20.0, 30.0, 40.0)
@@ -97,25 +96,10 @@ def _row(name, err, sig):
 def process(scene, sim):
     """The bathymetric points, their TPU and the processed survey, as ``bathy run`` makes them."""
     ps = scene.process
-    refr = RefractionSettings(
-        phase_index=ps.assumed_phase_index or scene.water.phase_index,
-        group_index=ps.assumed_group_index or scene.water.group_index,
-    )
-    fit = dataclasses.replace(ps.surface_fit, air_index=scene.atmosphere.refractive_index)
-    processed = georeference(
-        sim["returns"],
-        surface_settings=fit,
-        refraction_settings=refr,
-        classify_settings=ps.classify,
-    )
-    processed = dataclasses.replace(
-        processed,
-        points=Points.concatenate(
-            [processed.points, _no_bottom_points(scene, sim["returns"], processed, refr)]
-        ),
-    )
+    processed, refr = process_detections(scene, sim["returns"])
     grid = grid_seabed(processed.points, ps.grid_resolution_m)
     unc = _uncertainty(scene, sim["returns"], processed, refr, grid)
+    fit = dataclasses.replace(ps.surface_fit, air_index=scene.atmosphere.refractive_index)
     return unc, processed, refr, fit
 
 

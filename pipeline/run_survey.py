@@ -22,7 +22,7 @@ from pipeline.process.detect_photons import detect_photon_events
 from pipeline.process.refraction import RefractionSettings
 from pipeline.process.returns import Points
 
-__all__ = ["survey_extent_m", "simulate_detections", "run_survey"]
+__all__ = ["survey_extent_m", "simulate_detections", "process_detections", "run_survey"]
 
 
 def survey_extent_m(scene, lines) -> tuple[float, float, float, float]:
@@ -250,6 +250,40 @@ def simulate_detections(scene, log=print) -> dict[str, Any]:
     }
 
 
+def process_detections(scene, returns):
+    """Points from the detections, as ``bathy run`` makes them: measured data only.
+
+    Surface fit, refraction correction and classes (:func:`~pipeline.process.refraction.
+    georeference`), then the no-bottom-found-at and water-column points.
+
+    Returns
+    -------
+    processed : Processed
+    refraction_settings : RefractionSettings
+        The water indices the processing assumed.
+    """
+    from pipeline.process.refraction import georeference
+    from pipeline.process.water_column import add_water_column_points
+
+    ps = scene.process
+    refr = RefractionSettings(
+        phase_index=ps.assumed_phase_index or scene.water.phase_index,
+        group_index=ps.assumed_group_index or scene.water.group_index,
+    )
+    fit = dataclasses.replace(ps.surface_fit, air_index=scene.atmosphere.refractive_index)
+    processed = georeference(
+        returns, surface_settings=fit, refraction_settings=refr, classify_settings=ps.classify
+    )
+    processed = dataclasses.replace(
+        processed,
+        points=Points.concatenate(
+            [processed.points, _no_bottom_points(scene, returns, processed, refr)]
+        ),
+    )
+    processed = add_water_column_points(processed, returns, refr, ps.classify)
+    return processed, refr
+
+
 def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, float], dict]:
     """Simulate, process, grid, write and evaluate a survey scene.
 
@@ -264,32 +298,12 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
     from pipeline.outputs.las import write_points_laz
     from pipeline.outputs.raster import write_grid_tif
     from pipeline.process.grid import grid_seabed, snap_bounds_m
-    from pipeline.process.refraction import georeference
 
     sim = simulate_detections(scene, log)
     timings = sim["timings_s"]
     ps = scene.process
     t0 = time.perf_counter()
-    refr = RefractionSettings(
-        phase_index=ps.assumed_phase_index or scene.water.phase_index,
-        group_index=ps.assumed_group_index or scene.water.group_index,
-    )
-    fit = dataclasses.replace(ps.surface_fit, air_index=scene.atmosphere.refractive_index)
-    processed = georeference(
-        sim["returns"],
-        surface_settings=fit,
-        refraction_settings=refr,
-        classify_settings=ps.classify,
-    )
-    processed = dataclasses.replace(
-        processed,
-        points=Points.concatenate(
-            [processed.points, _no_bottom_points(scene, sim["returns"], processed, refr)]
-        ),
-    )
-    from pipeline.process.water_column import add_water_column_points
-
-    processed = add_water_column_points(processed, sim["returns"], refr, ps.classify)
+    processed, refr = process_detections(scene, sim["returns"])
     fr = scene.frame
     origin = (fr.origin_easting_m, fr.origin_northing_m, 0.0)
     xmin, xmax, ymin, ymax = sim["extent"]
