@@ -52,7 +52,11 @@ class SeabedSettings:
     """The seabed: a plane or beach, plus roughness and features; or a GeoTIFF DEM."""
 
     kind: str = setting("plane", choices=("plane", "beach", "dem"), doc="base surface")
-    depth_m: float = setting(ge=-50.0, le=11000.0, doc="depth below the water level at (0, 0)")
+    depth_m: float = setting(
+        ge=-50.0,
+        le=11000.0,
+        doc="plane/beach: depth below the water level at (0, 0); dem: unused (z is absolute)",
+    )
     reflectance: float = setting(ge=0.0, le=1.0, doc="Lambertian bottom reflectance")
     slope_deg: float = setting(0.0, ge=0.0, lt=60.0, doc="plane: seabed slope")
     aspect_deg: float = setting(0.0, ge=-360.0, le=360.0, doc="plane: downslope azimuth")
@@ -150,12 +154,13 @@ def build_truth(scene, extent_m: tuple[float, float, float, float]) -> Truth:
     frame = terrain.LocalFrame(fr.origin_easting_m, fr.origin_northing_m, fr.crs)
     level = ws.level_m
     if sb.kind == "plane":
+        # `depth_m` is below the water level, so the seabed sits at z = level - depth at (0, 0):
+        # the tide enters once, here (adding Plane(level) as well counted it twice).
         base = terrain.plane_seabed(
             sb.depth_m - level,
             slope_rad=math.radians(sb.slope_deg),
             aspect_rad=math.radians(sb.aspect_deg),
         )
-        base = base + terrain.Plane(level) if level else base
     elif sb.kind == "beach":
         base = terrain.Beach(
             0.0,
