@@ -91,8 +91,12 @@ def _type_name(tp: Any) -> str:
     return str(tp)
 
 
-def _coerce(tp: Any, value: Any, key: str) -> Any:
-    """Check ``value`` against the annotation ``tp`` and return the stored form."""
+def _coerce(tp: Any, value: Any, key: str, default: Any = _MISSING) -> Any:
+    """Check ``value`` against the annotation ``tp`` and return the stored form.
+
+    A table given for a field whose default is a settings instance starts from that instance,
+    so keys left out keep the parent's default (``bathy keys`` shows the same).
+    """
     origin = typing.get_origin(tp)
     if origin in (typing.Union, types.UnionType):
         args = [a for a in typing.get_args(tp) if a is not type(None)]
@@ -102,7 +106,8 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, Mapping):
             raise SceneError(f"`{key}` must be a table; got {_fmt(value)}.")
-        return from_mapping(tp, value, key)
+        base = default if dataclasses.is_dataclass(default) else None
+        return from_mapping(tp, value, key, base=base)
     if origin is tuple:
         if not isinstance(value, (list, tuple)):
             raise SceneError(f"`{key}` must be an array; got {_fmt(value)}.")
@@ -159,7 +164,7 @@ def _check_bounds(meta: Mapping[str, Any], value: Any, key: str) -> None:
                 raise SceneError(f"`{key}` must be {word} {bound}; got {got}.")
 
 
-def from_mapping(cls: type, data: Mapping[str, Any], path: str) -> Any:
+def from_mapping(cls: type, data: Mapping[str, Any], path: str, *, base: Any = None) -> Any:
     """Build the settings dataclass ``cls`` from ``data``, validating every key.
 
     Parameters
@@ -170,6 +175,9 @@ def from_mapping(cls: type, data: Mapping[str, Any], path: str) -> Any:
         Parsed TOML table.
     path : str
         Dotted key of the table, used in error messages (``""`` at the top level).
+    base : cls instance, optional
+        Values for the keys ``data`` leaves out (a parent setting's default instance);
+        without it the class defaults.
 
     Returns
     -------
@@ -195,6 +203,9 @@ def from_mapping(cls: type, data: Mapping[str, Any], path: str) -> Any:
     for name, fld in fields.items():
         key = f"{prefix}{name}"
         if name not in data:
+            if base is not None:
+                kwargs[name] = getattr(base, name)
+                continue
             if fld.default is _MISSING and fld.default_factory is _MISSING:
                 doc = fld.metadata.get("doc", "")
                 what = f" ({doc})" if doc else ""
@@ -202,7 +213,7 @@ def from_mapping(cls: type, data: Mapping[str, Any], path: str) -> Any:
                     f"Missing key `{key}`{what}: {_type_name(hints[name])} is required."
                 )
             continue
-        value = _coerce(hints[name], data[name], key)
+        value = _coerce(hints[name], data[name], key, fld.default)
         _check_bounds(fld.metadata, value, key)
         kwargs[name] = value
     try:
@@ -213,8 +224,18 @@ def from_mapping(cls: type, data: Mapping[str, Any], path: str) -> Any:
         raise SceneError(f"`{path or 'scene'}`: {exc}") from exc
 
 
-def describe(cls: type, path: str = "") -> list[str]:
+def describe(cls: type, path: str = "", defaults: Any = None) -> list[str]:
     """List every key of ``cls`` (recursively) with its default, bounds and description.
+
+    Parameters
+    ----------
+    cls : type
+        A settings dataclass.
+    path : str
+        Dotted key of ``cls``'s table.
+    defaults : cls instance, optional
+        The instance a scene gets when it leaves the table out (a parent field's default);
+        its values are the defaults shown, so they are the ones a run uses.
 
     Returns
     -------
@@ -226,8 +247,20 @@ def describe(cls: type, path: str = "") -> list[str]:
     prefix = f"{path}." if path else ""
     for fld in dataclasses.fields(cls):
         tp = hints[fld.name]
+        table, how = _table_of(tp)
+        if table is not None:
+            # an optional table, or an array of tables: its line says so, then its keys
+            doc = fld.metadata.get("doc", "")
+            lines.append(f"{prefix}{fld.name} = {_fmt(fld.default)}  [{how}]  {doc}".rstrip())
+            name = f"{prefix}{fld.name}" + ("[]" if how.startswith("array") else "")
+            lines.extend(describe(table, name))
+            continue
         if dataclasses.is_dataclass(tp):
-            lines.extend(describe(tp, f"{prefix}{fld.name}"))
+            if defaults is not None:
+                sub = getattr(defaults, fld.name)
+            else:
+                sub = fld.default if dataclasses.is_dataclass(fld.default) else None
+            lines.extend(describe(tp, f"{prefix}{fld.name}", sub))
             continue
         meta = fld.metadata
         bounds = [
@@ -237,7 +270,23 @@ def describe(cls: type, path: str = "") -> list[str]:
         ]
         if meta.get("choices"):
             bounds.append("one of " + ", ".join(_fmt(c) for c in meta["choices"]))
-        default = "required" if fld.default is _MISSING else _fmt(fld.default)
+        if defaults is not None:
+            default = _fmt(getattr(defaults, fld.name))
+        else:
+            default = "required" if fld.default is _MISSING else _fmt(fld.default)
         extra = f"  [{'; '.join(bounds)}]" if bounds else ""
         lines.append(f"{prefix}{fld.name} = {default}{extra}  {meta.get('doc', '')}".rstrip())
     return lines
+
+
+def _table_of(tp: Any) -> tuple[type | None, str]:
+    """The settings dataclass inside ``X | None`` or ``tuple[X, ...]``, and how it is given."""
+    origin = typing.get_origin(tp)
+    args = [a for a in typing.get_args(tp) if a is not type(None)]
+    if origin in (typing.Union, types.UnionType) and len(args) == 1:
+        if dataclasses.is_dataclass(args[0]):
+            return args[0], "optional table"
+    if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
+        if dataclasses.is_dataclass(args[0]):
+            return args[0], "array of tables"
+    return None, ""
