@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.process.context import processing_context
 from pipeline.process.grid import grid_seabed
 from pipeline.process.refraction import seabed_points
 from pipeline.run_survey import _uncertainty, process_detections, simulate_detections
@@ -96,11 +97,11 @@ def _row(name, err, sig):
 def process(scene, sim):
     """The bathymetric points, their TPU and the processed survey, as ``bathy run`` makes them."""
     ps = scene.process
-    processed, refr = process_detections(scene, sim["returns"])
+    ctx = processing_context(scene)
+    processed, refr = process_detections(scene, sim["returns"], ctx)
     grid = grid_seabed(processed.points, ps.grid_resolution_m)
-    unc = _uncertainty(scene, sim["returns"], processed, refr, grid)
-    fit = dataclasses.replace(ps.surface_fit, air_index=scene.atmosphere.refractive_index)
-    return unc, processed, refr, fit
+    unc = _uncertainty(scene, sim["returns"], processed, ctx, grid)
+    return unc, processed, refr, ctx.surface_fit
 
 
 def main(argv=None):

@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 
 from pipeline.outputs.atomic import write_json
+from pipeline.process.context import processing_context
 from pipeline.process.detect import detect_full_waveform
 from pipeline.process.detect_photons import detect_photon_events
-from pipeline.process.refraction import RefractionSettings
 from pipeline.process.returns import Points
 
 __all__ = ["survey_extent_m", "simulate_detections", "process_detections", "run_survey"]
@@ -250,11 +250,19 @@ def simulate_detections(scene, log=print) -> dict[str, Any]:
     }
 
 
-def process_detections(scene, returns):
+def process_detections(scene, returns, ctx=None):
     """Points from the detections, as ``bathy run`` makes them: measured data only.
 
     Surface fit, refraction correction and classes (:func:`~pipeline.process.refraction.
     georeference`), then the no-bottom-found-at and water-column points.
+
+    Parameters
+    ----------
+    scene : Scene
+    returns : DetectedReturns
+    ctx : ProcessingContext, optional
+        What processing assumes (:func:`pipeline.process.context.processing_context` of the
+        scene by default).
 
     Returns
     -------
@@ -266,13 +274,13 @@ def process_detections(scene, returns):
     from pipeline.process.water_column import add_water_column_points
 
     ps = scene.process
-    refr = RefractionSettings(
-        phase_index=ps.assumed_phase_index or scene.water.phase_index,
-        group_index=ps.assumed_group_index or scene.water.group_index,
-    )
-    fit = dataclasses.replace(ps.surface_fit, air_index=scene.atmosphere.refractive_index)
+    ctx = ctx or processing_context(scene)
+    refr = ctx.refraction
     processed = georeference(
-        returns, surface_settings=fit, refraction_settings=refr, classify_settings=ps.classify
+        returns,
+        surface_settings=ctx.surface_fit,
+        refraction_settings=refr,
+        classify_settings=ps.classify,
     )
     processed = dataclasses.replace(
         processed,
@@ -303,7 +311,8 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
     timings = sim["timings_s"]
     ps = scene.process
     t0 = time.perf_counter()
-    processed, refr = process_detections(scene, sim["returns"])
+    ctx = processing_context(scene)
+    processed, refr = process_detections(scene, sim["returns"], ctx)
     fr = scene.frame
     origin = (fr.origin_easting_m, fr.origin_northing_m, 0.0)
     xmin, xmax, ymin, ymax = sim["extent"]
@@ -315,7 +324,7 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
     )
     timings["process_s"] = time.perf_counter() - t0
     t1 = time.perf_counter()
-    unc = _uncertainty(scene, sim["returns"], processed, refr, grid)
+    unc = _uncertainty(scene, sim["returns"], processed, ctx, grid)
     processed = dataclasses.replace(
         processed, points=_with_tpu(processed.points, unc["is40"], unc["tpu40"])
     )
@@ -323,7 +332,7 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
     t2 = time.perf_counter()
     from pipeline.survey_posterior import survey_posteriors
 
-    post = survey_posteriors(scene, sim, processed, refr, unc, grid)
+    post = survey_posteriors(scene, sim, processed, ctx, unc, grid)
     if post is not None and post["posteriors"] is not None:
         unc = _cells_with_posteriors(unc, grid, post)
     timings["posterior_s"] = time.perf_counter() - t2
@@ -372,6 +381,7 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
         "receiver_pulse_flags": sim["pulse_flags"],
         "error": report,
         "timings_s": timings,
+        "processing_context": ctx.to_dict(),
     }
     files["evaluation"] = out / "evaluation.json"
     write_json(files["evaluation"], evaluation)
@@ -431,7 +441,7 @@ def _log_report(report: dict, log) -> None:
         log(f"  grid cells within IHO S-44 TVU: {frac}")
 
 
-def _uncertainty(scene, returns, processed, refr, grid) -> dict[str, Any]:
+def _uncertainty(scene, returns, processed, ctx, grid) -> dict[str, Any]:
     """TPU of the bathymetric points, cell uncertainty and the IHO order met per cell.
 
     Measured data only: the seabed gradient under every bottom point (which couples the
@@ -457,18 +467,8 @@ def _uncertainty(scene, returns, processed, refr, grid) -> dict[str, Any]:
         timing_from_scatter,
     )
 
-    # the navigation solution's own quality figures (as an SBET reports them) are what the
-    # survey's GNSS/INS error model draws from; the system's beam and wavelength are known
-    nav = scene.navigation
-    st = dataclasses.replace(
-        scene.process.tpu,
-        beam_divergence_mrad=scene.scanner.beam_divergence_mrad,
-        wavelength_nm=scene.system.wavelength_nm,
-        position_sigma_h_m=nav.gnss_horizontal_sigma_m,
-        position_sigma_v_m=nav.gnss_vertical_sigma_m,
-        attitude_sigma_deg=max(nav.ins_roll_sigma_deg, nav.ins_pitch_sigma_deg),
-        heading_sigma_deg=nav.ins_heading_sigma_deg,
-    )
+    # navigation quality, beam and wavelength: the user's values, else the scene's records
+    st, refr = ctx.tpu, ctx.refraction
     pts = processed.points
     is40 = (pts.classification == BATHYMETRIC_POINT) & (pts.kind == ReturnKind.BOTTOM)
     points40 = pts.select(is40)

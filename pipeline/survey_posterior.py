@@ -39,10 +39,12 @@ def posterior_budget(scene, area_km2: float) -> int:
     return int(max(ps.posterior_min_pulses, round(ps.posterior_pulses_per_km2 * area)))
 
 
-def waveform_system(scene) -> WaveformSystem:
+def waveform_system(scene, group_index: float) -> WaveformSystem:
     """The instrument as the processing knows it: the scene's system and detector values.
 
-    Nothing of the water or the seabed: those are the posterior's parameters.
+    Nothing of the water or the seabed: those are the posterior's parameters, but for
+    ``group_index``, the one processing assumes (:class:`~pipeline.process.context.
+    ProcessingContext`).
     """
     from pipeline.run_survey import _system_fwhm_s
 
@@ -50,7 +52,7 @@ def waveform_system(scene) -> WaveformSystem:
     return WaveformSystem(
         sample_interval_s=1.0 / det.sample_rate_hz,
         pulse_fwhm_s=_system_fwhm_s(scene),
-        group_index=scene.process.assumed_group_index or scene.water.group_index,
+        group_index=group_index,
         offset_counts=det.baseline_counts,
         counts_per_photoelectron=det.counts_per_photoelectron,
         excess_noise_factor=det.excess_noise_factor,
@@ -92,7 +94,7 @@ def choose_points(candidates: np.ndarray, preferred: np.ndarray, n: int, seed: i
     return np.sort(first)
 
 
-def survey_posteriors(scene, sim: dict, processed, refr, unc: dict, grid) -> dict[str, Any] | None:
+def survey_posteriors(scene, sim: dict, processed, ctx, unc: dict, grid) -> dict[str, Any] | None:
     """Sample the depth posteriors of up to :func:`posterior_budget` bathymetric points.
 
     Parameters
@@ -103,7 +105,8 @@ def survey_posteriors(scene, sim: dict, processed, refr, unc: dict, grid) -> dic
         ``kept_waveforms``); the truth in it is not read.
     processed : Processed
         Georeferenced points and the fitted surface (one row per pulse of ``returns``).
-    refr : RefractionSettings
+    ctx : ProcessingContext
+        What processing assumes (:func:`pipeline.process.context.processing_context`).
     unc : dict
         ``points40``, ``tpu40`` and ``cells`` of the uncertainty stage.
     grid : Grid
@@ -151,9 +154,9 @@ def survey_posteriors(scene, sim: dict, processed, refr, unc: dict, grid) -> dic
         t0_k[krows],
         ret.select(rows),
         take_surface(processed.surface, rows),
-        waveform_system(scene),
+        waveform_system(scene, ctx.refraction.group_index),
         scene.process.posterior,
-        refr,
+        ctx.refraction,
         seed=scene.scene.seed,
         detect_settings=scene.process.detect,
         detect_noise=detect_noise(scene),

@@ -23,18 +23,37 @@ class ProcessSettings:
     photon_detect: PhotonDetectSettings = setting(
         PhotonDetectSettings(), doc="photon-counting detector"
     )
-    surface_fit: SurfaceFitSettings = setting(SurfaceFitSettings(), doc="water-surface fit")
+    # None: taken over from the scene's description of the instrument (process/context.py)
+    surface_fit: SurfaceFitSettings = setting(
+        SurfaceFitSettings(air_index=None), doc="water-surface fit"
+    )
     # bottom candidates between 5 and ~6.7 noise σ (confidence 0.5-0.8) are mostly column or
     # surface-tail bumps where the real bottom is too deep to see: kept as class 7, not 40;
     # bottoms shallower than 0.3 m are closer than two system FWHM to the surface (merged)
     classify: ClassifySettings = setting(ClassifySettings(min_confidence=0.8), doc="LAS classes")
     assumed_phase_index: float | None = setting(
-        None, ge=1.0, le=2.0, doc="water phase index processing assumes (default: the scene's)"
+        None,
+        ge=1.0,
+        le=2.0,
+        doc="water phase index processing assumes (None: Quan & Fry sea water)",
     )
     assumed_group_index: float | None = setting(
-        None, ge=1.0, le=2.0, doc="water group index processing assumes (default: the scene's)"
+        None,
+        ge=1.0,
+        le=2.0,
+        doc="water group index processing assumes (None: Quan & Fry sea water)",
     )
-    tpu: TpuSettings = setting(TpuSettings(), doc="a-priori uncertainties of the TPU")
+    tpu: TpuSettings = setting(
+        TpuSettings(
+            position_sigma_h_m=None,
+            position_sigma_v_m=None,
+            attitude_sigma_deg=None,
+            heading_sigma_deg=None,
+            beam_divergence_mrad=None,
+            wavelength_nm=None,
+        ),
+        doc="a-priori uncertainties of the TPU",
+    )
     grid_resolution_m: float = setting(5.0, gt=0.0, le=1000.0, doc="bathymetry grid cell")
     # ~0.3-0.5 s each on one core (benchmarks/RESULTS_posterior.md): 2000/km² is ~15 min/km²
     posterior_pulses_per_km2: float = setting(

@@ -51,7 +51,9 @@ _GRAZING_COS = 1e-6
 class SurfaceFitSettings:
     """Settings of the water-surface fit."""
 
-    air_index: float = setting(1.000277, ge=1.0, le=1.01, doc="index of air for the air range")
+    air_index: float | None = setting(
+        1.000277, ge=1.0, le=1.01, doc="index of air for the air range (None: the atmosphere's)"
+    )
     k_neighbours: int = setting(16, ge=3, le=256, doc="surface points per local plane fit")
     radius_m: float = setting(5.0, gt=0.0, le=1000.0, doc="neighbour search radius")
     min_neighbours: int = setting(6, ge=3, le=256, doc="fewer: use the global plane")

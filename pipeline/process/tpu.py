@@ -153,21 +153,45 @@ class TpuSettings:
     PP-RTX vs base-station solutions agree to 2 cm horizontally and 6 cm vertically, Applanix
     airborne accuracy assessment); scanner jitter at an encoder's 0.001°; water of ±2 °C and
     ±2 psu around the nominal (index derivatives by Quan & Fry 1995); a 1 mrad beam.
+
+    In a scene (``[process.tpu]``) the navigation, attitude, beam and wavelength keys default
+    to ``None``: the scene's own ``[navigation]``, ``[scanner]`` and ``[system]`` figures, filled
+    in by :func:`pipeline.process.context.processing_context`; a value the user sets wins.
     """
 
-    position_sigma_h_m: float = setting(0.05, ge=0.0, doc="navigation, per horizontal axis")
-    position_sigma_v_m: float = setting(0.08, ge=0.0, doc="navigation, vertical")
-    attitude_sigma_deg: float = setting(0.005, ge=0.0, le=10.0, doc="IMU roll and pitch")
-    heading_sigma_deg: float = setting(0.008, ge=0.0, le=10.0, doc="IMU heading")
+    position_sigma_h_m: float | None = setting(
+        0.05,
+        ge=0.0,
+        doc="navigation, per horizontal axis (None: navigation.gnss_horizontal_sigma_m)",
+    )
+    position_sigma_v_m: float | None = setting(
+        0.08, ge=0.0, doc="navigation, vertical (None: navigation.gnss_vertical_sigma_m)"
+    )
+    attitude_sigma_deg: float | None = setting(
+        0.005,
+        ge=0.0,
+        le=10.0,
+        doc="IMU roll and pitch (None: the larger of navigation.ins_roll/pitch_sigma_deg)",
+    )
+    heading_sigma_deg: float | None = setting(
+        0.008, ge=0.0, le=10.0, doc="IMU heading (None: navigation.ins_heading_sigma_deg)"
+    )
     pointing_jitter_deg: float = setting(0.001, ge=0.0, le=10.0, doc="per-pulse beam jitter")
     timing_sigma_s: float = setting(1e-10, ge=0.0, doc="per-return timing if not given")
     temperature_sigma_c: float = setting(2.0, ge=0.0, doc="water temperature uncertainty")
     salinity_sigma_psu: float = setting(2.0, ge=0.0, doc="salinity uncertainty")
-    wavelength_nm: float = setting(532.0, ge=400.0, le=700.0, doc="for the index derivatives")
+    wavelength_nm: float | None = setting(
+        532.0,
+        ge=400.0,
+        le=700.0,
+        doc="for the water index and its derivatives (None: system.wavelength_nm)",
+    )
     temperature_c: float = setting(20.0, ge=-2.0, le=35.0, doc="nominal water temperature")
     salinity_psu: float = setting(35.0, ge=0.0, le=40.0, doc="nominal salinity")
     wave_slope_sigma_rad: float = setting(0.0, ge=0.0, le=1.0, doc="residual facet slope/axis")
-    beam_divergence_mrad: float = setting(1.0, ge=0.0, le=100.0, doc="full angle, 1/e²")
+    beam_divergence_mrad: float | None = setting(
+        1.0, ge=0.0, le=100.0, doc="full angle, 1/e² (None: scanner.beam_divergence_mrad)"
+    )
     seabed_slope_deg: float = setting(0.0, ge=0.0, lt=90.0, doc="assumed seabed slope")
     gradient_neighbours: int = setting(
         16, ge=3, le=256, doc="soundings per local plane of the seabed gradient"

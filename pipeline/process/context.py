@@ -1,0 +1,143 @@
+"""What processing assumes about the instrument, the navigation and the water, named in one place.
+
+Processing never reads the simulator's truth; it does take over what a survey would know from
+its own records: the system's wavelength and beam (the datasheet), the navigation solution's
+quality figures (as an SBET reports them), the index of the air. Each of those values is a
+``[process]`` key whose scene default is ``None``, meaning "from the scene's description of the
+instrument"; a value the user sets always wins. :func:`processing_context` resolves them once,
+and :meth:`ProcessingContext.to_dict` records every value used and where it came from (the
+manifest's ``processing_context``).
+
+The water indices are an assumption, not a record: by default processing assumes sea water of
+``process.tpu.salinity_psu`` and ``process.tpu.temperature_c`` at the system's wavelength
+(Quan & Fry 1995, :func:`pipeline.optics.water_phase_index`), never the scene's true water.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+from pipeline import optics
+from pipeline.errors import SceneError
+from pipeline.process.refraction import RefractionSettings
+from pipeline.process.surface_fit import SurfaceFitSettings
+from pipeline.process.tpu import TpuSettings
+
+__all__ = ["ProcessingContext", "processing_context"]
+
+#: ``process.tpu`` keys taken over from the scene's instrument description when left unset:
+#: key -> (dotted scene key, function of the scene giving the value).
+_TPU_FROM_SCENE = {
+    "position_sigma_h_m": (
+        "navigation.gnss_horizontal_sigma_m",
+        lambda s: s.navigation.gnss_horizontal_sigma_m,
+    ),
+    "position_sigma_v_m": (
+        "navigation.gnss_vertical_sigma_m",
+        lambda s: s.navigation.gnss_vertical_sigma_m,
+    ),
+    "attitude_sigma_deg": (
+        "max(navigation.ins_roll_sigma_deg, navigation.ins_pitch_sigma_deg)",
+        lambda s: max(s.navigation.ins_roll_sigma_deg, s.navigation.ins_pitch_sigma_deg),
+    ),
+    "heading_sigma_deg": (
+        "navigation.ins_heading_sigma_deg",
+        lambda s: s.navigation.ins_heading_sigma_deg,
+    ),
+    "beam_divergence_mrad": (
+        "scanner.beam_divergence_mrad",
+        lambda s: s.scanner.beam_divergence_mrad,
+    ),
+    "wavelength_nm": ("system.wavelength_nm", lambda s: s.system.wavelength_nm),
+}
+
+
+@dataclass(frozen=True)
+class ProcessingContext:
+    """Resolved processing assumptions: every value a processing stage uses from outside the data.
+
+    Attributes
+    ----------
+    tpu : TpuSettings
+        A-priori uncertainties with every scene-derived value filled in.
+    surface_fit : SurfaceFitSettings
+        Surface-fit settings with the index of air filled in.
+    refraction : RefractionSettings
+        The water's phase and group index processing assumes, and the navigation sigmas of
+        the a-priori point uncertainties (the TPU's).
+    sources : dict of str to str
+        For each resolved key, ``"user"`` or the scene key or model it came from.
+    """
+
+    tpu: TpuSettings
+    surface_fit: SurfaceFitSettings
+    refraction: RefractionSettings
+    sources: dict[str, str]
+
+    def to_dict(self) -> dict[str, Any]:
+        """Values and sources, JSON-ready (the manifest's ``processing_context``)."""
+        return {
+            "values": {
+                "tpu": dataclasses.asdict(self.tpu),
+                "surface_fit": dataclasses.asdict(self.surface_fit),
+                "refraction": dataclasses.asdict(self.refraction),
+            },
+            "sources": dict(self.sources),
+        }
+
+
+def processing_context(scene) -> ProcessingContext:
+    """Resolve the scene's ``[process]`` assumptions once (a user's value always wins).
+
+    Parameters
+    ----------
+    scene : Scene
+        A validated scene; only its ``process`` table and its description of the instrument
+        (``system``, ``scanner``, ``navigation``, ``atmosphere``) are read.
+
+    Returns
+    -------
+    ProcessingContext
+    """
+    ps = scene.process
+    sources: dict[str, str] = {}
+    tpu_fill = {}
+    for key, (where, value) in _TPU_FROM_SCENE.items():
+        if getattr(ps.tpu, key) is None:
+            tpu_fill[key] = float(value(scene))
+            sources[f"process.tpu.{key}"] = where
+        else:
+            sources[f"process.tpu.{key}"] = "user"
+    tpu = dataclasses.replace(ps.tpu, **tpu_fill)
+    fit = ps.surface_fit
+    if fit.air_index is None:
+        fit = dataclasses.replace(fit, air_index=float(scene.atmosphere.refractive_index))
+        sources["process.surface_fit.air_index"] = "atmosphere.refractive_index"
+    else:
+        sources["process.surface_fit.air_index"] = "user"
+    if not 400.0 <= tpu.wavelength_nm <= 700.0:
+        # the sea-water index model and the TPU's index derivatives are fitted over 400-700 nm
+        raise SceneError(
+            f"`process.tpu.wavelength_nm` (from {sources['process.tpu.wavelength_nm']}) must be "
+            f"within 400-700 nm for the water index processing assumes; got "
+            f"{tpu.wavelength_nm:g}. Set `process.tpu.wavelength_nm`, "
+            "`process.assumed_phase_index` and `process.assumed_group_index`."
+        )
+    lam_m = tpu.wavelength_nm * 1e-9
+    water = (lam_m, tpu.salinity_psu, tpu.temperature_c)
+    model = (
+        f"sea water by Quan & Fry (1995) at {tpu.wavelength_nm:g} nm, "
+        f"{tpu.salinity_psu:g} psu, {tpu.temperature_c:g} degC (process.tpu)"
+    )
+    phase, group = ps.assumed_phase_index, ps.assumed_group_index
+    sources["process.assumed_phase_index"] = "user" if phase is not None else model
+    sources["process.assumed_group_index"] = "user" if group is not None else model
+    refr = RefractionSettings(
+        phase_index=float(phase if phase is not None else optics.water_phase_index(*water)),
+        group_index=float(group if group is not None else optics.water_group_index(*water)),
+        position_sigma_h_m=tpu.position_sigma_h_m,
+        position_sigma_v_m=tpu.position_sigma_v_m,
+    )
+    return ProcessingContext(tpu=tpu, surface_fit=fit, refraction=refr, sources=sources)

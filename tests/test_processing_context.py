@@ -1,0 +1,117 @@
+"""Settings tell the truth: what processing assumes is the user's value when set, and recorded.
+
+`bathy run` used to replace `process.tpu.position_sigma_h_m`, `heading_sigma_deg`,
+`beam_divergence_mrad` and `process.surface_fit.air_index` with the simulator's values while the
+manifest recorded the user's, and processing assumed the scene's true water indices.
+"""
+
+import json
+import math
+import tomllib
+
+import numpy as np
+import pytest
+
+from pipeline.errors import SceneError
+from pipeline.process.context import processing_context
+from pipeline.run import run_scene
+from pipeline.scene import parse_scene
+
+from .conftest import ROOT
+
+UNUSUAL = {
+    "tpu": {
+        "position_sigma_h_m": 5.0,
+        "position_sigma_v_m": 0.7,
+        "attitude_sigma_deg": 0.3,
+        "heading_sigma_deg": 0.5,
+        "beam_divergence_mrad": 3.0,
+        "wavelength_nm": 550.0,
+    },
+    "surface_fit": {"air_index": 1.0003},
+    "assumed_phase_index": 1.30,
+    "assumed_group_index": 1.32,
+}
+
+
+def _small_survey(process=None):
+    data = tomllib.loads((ROOT / "data_synthetic" / "scenes" / "palmer_survey.toml").read_text())
+    data["flight"].update(area_m=[0.0, 100.0, 0.0, 100.0], run_in_m=0.0)
+    data["scanner"]["prf_hz"] = 5000.0
+    data["seabed"]["roughness_rms_m"] = 0.0
+    data["process"]["posterior_min_pulses"] = 0
+    data["process"].update(process or {})
+    return parse_scene(data)
+
+
+def test_unset_values_come_from_the_scene_records_and_sea_water():
+    scene = _small_survey()
+    ctx = processing_context(scene)
+    nav = scene.navigation
+    assert ctx.tpu.position_sigma_h_m == nav.gnss_horizontal_sigma_m
+    assert ctx.tpu.position_sigma_v_m == nav.gnss_vertical_sigma_m
+    assert ctx.tpu.heading_sigma_deg == nav.ins_heading_sigma_deg
+    assert ctx.tpu.beam_divergence_mrad == scene.scanner.beam_divergence_mrad
+    assert ctx.surface_fit.air_index == scene.atmosphere.refractive_index
+    assert ctx.sources["process.tpu.position_sigma_h_m"] == "navigation.gnss_horizontal_sigma_m"
+    # sea water at 532 nm, 35 psu, 20 degC: 1.3415 / 1.3638 (Quan & Fry 1995, published)
+    assert ctx.refraction.phase_index == pytest.approx(1.3415, abs=2e-4)
+    assert ctx.refraction.group_index == pytest.approx(1.3638, abs=2e-4)
+
+
+def test_assumed_water_does_not_follow_the_scene_truth():
+    scene = _small_survey()
+    data = tomllib.loads((ROOT / "data_synthetic" / "scenes" / "palmer_survey.toml").read_text())
+    data["water"].update(phase_index=1.33, group_index=1.35)
+    other = parse_scene(data)
+    a, b = processing_context(scene).refraction, processing_context(other).refraction
+    assert (a.phase_index, a.group_index) == (b.phase_index, b.group_index)
+
+
+def test_user_values_win_in_the_context():
+    ctx = processing_context(_small_survey(UNUSUAL))
+    for key, value in UNUSUAL["tpu"].items():
+        assert getattr(ctx.tpu, key) == value
+        assert ctx.sources[f"process.tpu.{key}"] == "user"
+    assert ctx.surface_fit.air_index == 1.0003
+    assert (ctx.refraction.phase_index, ctx.refraction.group_index) == (1.30, 1.32)
+    assert ctx.refraction.position_sigma_h_m == 5.0
+
+
+def test_a_wavelength_outside_the_water_model_is_one_clear_error():
+    scene = _small_survey({"tpu": {"wavelength_nm": 450.0}})
+    data = tomllib.loads((ROOT / "data_synthetic" / "scenes" / "palmer_survey.toml").read_text())
+    data["system"] = {**data.get("system", {}), "wavelength_nm": 1064.0}
+    with pytest.raises(SceneError, match="process.tpu.wavelength_nm"):
+        processing_context(parse_scene(data))
+    assert processing_context(scene).tpu.wavelength_nm == 450.0
+
+
+def test_bathy_run_uses_and_records_the_users_values(tmp_path):
+    scene = _small_survey(UNUSUAL)
+    manifest = run_scene(scene, tmp_path, log=lambda _: None)
+    ev = json.loads((tmp_path / "evaluation.json").read_text())
+    rec = ev["processing_context"]["values"]
+    assert rec["tpu"]["position_sigma_h_m"] == 5.0
+    assert rec["tpu"]["heading_sigma_deg"] == 0.5
+    assert rec["tpu"]["beam_divergence_mrad"] == 3.0
+    assert rec["surface_fit"]["air_index"] == 1.0003
+    assert rec["refraction"]["group_index"] == 1.32
+    assert manifest["scene"]["process"]["tpu"]["position_sigma_h_m"] == 5.0
+    from pipeline.outputs.las import read_points_laz
+
+    pts = read_points_laz(tmp_path / "points.laz").points
+    b = pts.classification == 40
+    assert b.sum() > 1000
+    # the TPU received the 5 m navigation sigma: no horizontal uncertainty below it
+    assert np.all(pts.uncertainty_h_m[b] >= 5.0)
+    # the refraction received n_g = 1.32 and n = 1.30 while the water has 1.3638 / 1.3415:
+    # slant range x 1.3638/1.32 and cos of the refracted angle at 20 deg incidence, so every
+    # depth is deeper by the same factor (flat water, plane seabed 2 m + tan(5.33 deg) x)
+    sin_i = math.sin(math.radians(20.0))
+    cos_true = math.sqrt(1 - (sin_i / 1.3415) ** 2)
+    cos_used = math.sqrt(1 - (sin_i / 1.30) ** 2)
+    factor = 1.3638 / 1.32 * cos_used / cos_true
+    truth = 2.0 + math.tan(math.radians(5.33)) * pts.xyz_m[b, 0]
+    ratio = np.median(pts.depth_m[b] / truth)
+    assert ratio == pytest.approx(factor, abs=0.004)
