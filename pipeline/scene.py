@@ -250,6 +250,9 @@ def parse_scene(data: dict[str, Any], source: str = "scene") -> Scene:
             f"{source}: no stage to run: add a `[profiler]` table (nadir profiling bathymeter) "
             "or a `[flight]` table (a survey)."
         )
+    from pipeline.feasibility import check_feasible
+
+    check_feasible(scene)
     return scene
 
 
