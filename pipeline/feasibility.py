@@ -73,9 +73,11 @@ def _check_survey(scene) -> None:
         lines = plan_lines(fl, sc)
     except (OverflowError, ValueError, MemoryError):
         raise SceneError(
-            f"`scanner.prf_hz` = {sc.prf_hz:g} at `flight.speed_m_s` = {fl.speed_m_s:g} over"
-            f" `flight.area_m` = {list(fl.area_m)} gives more pulses than can be counted;"
-            " lower the pulse rate or the area."
+            f"the flight plan gives more pulses than can be counted: `scanner.prf_hz` ="
+            f" {sc.prf_hz:g}, `flight.speed_m_s` = {fl.speed_m_s:g}, `flight.area_m` ="
+            f" {list(fl.area_m)}, `flight.line_length_m` = {fl.line_length_m},"
+            f" `flight.run_in_m` = {fl.run_in_m:g}, `flight.altitude_m` = {fl.altitude_m:g}"
+            " (the swath sets the number of lines); lower the pulse rate or the area."
         ) from None
     mem = MEMORY_SHARE * machine_memory_bytes()
     n = lines.n_pulses_total

@@ -49,20 +49,24 @@ _WEIGHTS = (0.6, 0.3, 0.1)
 class FlightSettings:
     """Survey flight: height, speed, heading of the first line and the area to cover."""
 
-    altitude_m: float = setting(400.0, gt=0.0, doc="height of the laser above local z = 0 (m)")
-    speed_m_s: float = setting(60.0, gt=0.0, doc="ground speed along the lines (m/s)")
+    altitude_m: float = setting(
+        400.0, ge=1.0, le=20000.0, doc="height of the laser above local z = 0 (m)"
+    )
+    speed_m_s: float = setting(60.0, ge=0.1, le=400.0, doc="ground speed along the lines (m/s)")
     heading_deg: float = setting(
         0.0, ge=0.0, lt=360.0, doc="heading of the first line, clockwise from north (deg)"
     )
     area_m: tuple[float, float, float, float] = setting(
         (-500.0, 500.0, -500.0, 500.0),
         length=4,
+        ge=-1e7,
+        le=1e7,
         doc="area to cover: (xmin, xmax, ymin, ymax) in local metres",
     )
     line_length_m: float | None = setting(
-        None, gt=0.0, doc="line length centred on the area (m); default: the area's extent"
+        None, gt=0.0, le=1e6, doc="line length centred on the area (m); default: the area's extent"
     )
-    run_in_m: float = setting(0.0, ge=0.0, doc="extension of every line at both ends (m)")
+    run_in_m: float = setting(0.0, ge=0.0, le=1e5, doc="extension of every line at both ends (m)")
     side_overlap_fraction: float = setting(
         0.3, ge=0.0, le=0.9, doc="fraction of the swath shared by adjacent lines"
     )
