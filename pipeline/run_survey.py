@@ -20,7 +20,7 @@ from pipeline.outputs.atomic import write_json
 from pipeline.process.context import processing_context
 from pipeline.process.detect import detect_full_waveform
 from pipeline.process.detect_photons import detect_photon_events
-from pipeline.process.returns import Points
+from pipeline.process.returns import PointFlag, Points
 
 __all__ = ["survey_extent_m", "simulate_detections", "process_detections", "run_survey"]
 
@@ -326,7 +326,7 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
     t1 = time.perf_counter()
     unc = _uncertainty(scene, sim["returns"], processed, ctx, grid)
     processed = dataclasses.replace(
-        processed, points=_with_tpu(processed.points, unc["is40"], unc["tpu40"])
+        processed, points=_with_tpu(processed.points, unc["is40"], unc["tpu40"], unc["no_tpu"])
     )
     timings["uncertainty_s"] = time.perf_counter() - t1
     t2 = time.perf_counter()
@@ -374,6 +374,7 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
         "posterior_against_truth": post_eval,
         "iho_orders_from_uncertainty": unc["summary"],
         "tpu_coverage_against_truth": coverage,
+        "tpu_left_out": unc["left_out"],
         "receiver": scene.detector.mode,
         "bottom_detected_fraction": float(np.mean(sim["returns"].has_bottom)),
         "water_column": water_column_report(processed.points, scene.water.layer_depth_m),
@@ -393,6 +394,14 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
             f"{k} {v['fraction']:.1%}" for k, v in orders.items() if v["fraction"] is not None
         )
     )
+    lo = unc["left_out"]
+    if lo["pulses"]:
+        why = ", ".join(f"{k} {v}" for k, v in lo["by_reason"].items() if v)
+        log(
+            f"  {lo['pulses']} bottom pulses left out of the TPU ({why}); their"
+            f" {lo['bathymetric_points']} bathymetric points keep the a-priori uncertainty"
+            " (flag NO_TPU) and are not in the cell uncertainty or the TPU check"
+        )
     if coverage["fraction_within"] is not None:
         log(
             "  TPU check (true depth within ±k σ_depth): "
@@ -503,6 +512,8 @@ def _uncertainty(scene, returns, processed, ctx, grid) -> dict[str, Any]:
             st,
             depth_scatter_m=scatter,
             seabed_gradient=grad,
+            # a return lies in the recorded window: its timing sigma is at most a uniform one's
+            max_sigma_s=scene.detector.window_s / math.sqrt(12.0),
         )
     tpu = point_tpu(
         returns,
@@ -512,6 +523,11 @@ def _uncertainty(scene, returns, processed, ctx, grid) -> dict[str, Any]:
         seabed_gradient=grad,
         surface_tilt_sigma_rad=tilt,
     )
+    # pulses the TPU could not propagate: their points keep the a-priori uncertainty and are
+    # left out of the cell uncertainty and the TPU check
+    no_tpu = is40 & np.isin(pts.pulse_id, tpu.left_out.pulse_id)
+    is40 = is40 & ~no_tpu
+    points40 = pts.select(is40)
     # TPU rows are per pulse with a bottom; keep those of the bathymetric points, same order
     order = np.argsort(tpu.pulse_id)
     pos = order[np.searchsorted(tpu.pulse_id[order], points40.pulse_id)]
@@ -521,13 +537,22 @@ def _uncertainty(scene, returns, processed, ctx, grid) -> dict[str, Any]:
         "tpu40": tpu40,
         "points40": points40,
         "is40": is40,
+        "no_tpu": no_tpu,
+        "left_out": {
+            "pulses": len(tpu.left_out),
+            "bathymetric_points": int(np.count_nonzero(no_tpu)),
+            "by_reason": tpu.left_out.counts(),
+        },
         "cells": cells,
         "summary": iho.order_summary(cells.order).to_dict(),
     }
 
 
-def _with_tpu(points, is40, tpu40):
+def _with_tpu(points, is40, tpu40, no_tpu=None):
     """``points`` whose bathymetric points carry their TPU as the per-point uncertainty.
+
+    The points of ``no_tpu`` (bool, optional: pulses the TPU left out) get the
+    ``PointFlag.NO_TPU`` bit and keep the a-priori values.
 
     ``uncertainty_v_m`` := ``PointTpu.sigma_v_m``, the one-sigma of the point's elevation ``z``
     (the LAS z; what IHO S-44's TVU bounds), and ``uncertainty_h_m`` := ``sigma_h_m``, per
@@ -537,7 +562,10 @@ def _with_tpu(points, is40, tpu40):
     """
     v, h = points.uncertainty_v_m.copy(), points.uncertainty_h_m.copy()
     v[is40], h[is40] = tpu40.sigma_v_m, tpu40.sigma_h_m
-    return points.replace(uncertainty_v_m=v, uncertainty_h_m=h)
+    flags = points.flags.copy()
+    if no_tpu is not None:
+        flags[no_tpu] |= np.uint16(PointFlag.NO_TPU)
+    return points.replace(uncertainty_v_m=v, uncertainty_h_m=h, flags=flags)
 
 
 def _cells_with_posteriors(unc: dict, grid, post: dict) -> dict:

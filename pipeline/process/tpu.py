@@ -76,6 +76,8 @@ circular normal, ``sqrt((s_x^2 + s_y^2) / 2)``. The IHO 95 % values are ``1.96 s
 ``2.45 sigma_h``.
 :func:`monte_carlo_points` redraws every input and recomputes the points with
 :func:`~pipeline.process.refraction.seabed_points` (the check of the linearisation).
+Pulses the linearisation cannot hold (a timing sigma reaching the surface-bottom separation, a
+term not finite) are left out and counted, never fatal (:mod:`pipeline.process.tpu_screen`).
 """
 
 from __future__ import annotations
@@ -89,11 +91,16 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from pipeline.config import setting
-from pipeline.errors import NumericalError
 from pipeline.optics import SPEED_OF_LIGHT_M_S, water_group_index, water_phase_index
 from pipeline.process.refraction import RefractionSettings, seabed_points
 from pipeline.process.returns import DetectedReturns
 from pipeline.process.surface_fit import WaterSurface
+from pipeline.process.tpu_screen import (
+    TERM_NOT_FINITE,
+    LeftOut,
+    max_timing_step_s,
+    timing_unresolved,
+)
 
 __all__ = [
     "TpuSettings",
@@ -268,6 +275,9 @@ class PointTpu:
         One-sigma of the depth below the measured water surface at the measured position
         (what ``Points.depth_m`` reports), total and split; None only in a PointTpu built by
         hand without them.
+    left_out : LeftOut
+        The bottom pulses not propagated, with their reasons (:mod:`pipeline.process.
+        tpu_screen`); they have no row.
     """
 
     row: np.ndarray
@@ -285,6 +295,7 @@ class PointTpu:
     sigma_depth_m: np.ndarray | None = None
     sigma_depth_random_m: np.ndarray | None = None
     sigma_depth_correlated_m: np.ndarray | None = None
+    left_out: LeftOut = dataclasses.field(default_factory=LeftOut.none)
 
     def __len__(self) -> int:
         return int(self.row.shape[0])
@@ -333,6 +344,16 @@ class _Inputs:
     wave_h: np.ndarray
     row: np.ndarray
     grad: np.ndarray
+
+
+def _take_inputs(inp: _Inputs, keep: np.ndarray) -> _Inputs:
+    """The rows ``keep`` (bool over the bottom rows) of every per-pulse input."""
+    return dataclasses.replace(
+        inp,
+        ret=inp.ret.select(keep),
+        surf=_take_surface(inp.surf, keep),
+        **{k: getattr(inp, k)[keep] for k in ("sig_ts", "sig_tb", "wave_h", "row", "grad")},
+    )
 
 
 def _per_row(name, value, n, cols=None):
@@ -487,6 +508,8 @@ def _terms(inp: _Inputs, st: TpuSettings, names=None) -> tuple[np.ndarray, dict[
         if name not in want:
             continue
         h = 0.01 * sigma  # a small fraction of the sigma: the tangent, not a secant
+        if name in TIMING_TERMS:  # never past the surface-bottom gap (depth is linear in it)
+            h = np.minimum(h, max_timing_step_s(inp.ret))
         if n == 0 or not np.any(h > 0):
             terms[name] = np.zeros((n, 4))
             continue
@@ -572,18 +595,29 @@ def point_tpu(
     -------
     PointTpu
         One row per pulse with a bottom return, in the order of
-        :func:`~pipeline.process.refraction.seabed_points`.
-
-    Raises
-    ------
-    NumericalError
-        If a term is not finite (e.g. a beam grazing its perturbed surface).
+        :func:`~pipeline.process.refraction.seabed_points`, except the pulses left out
+        (``PointTpu.left_out``): a timing sigma not below the surface-bottom separation, or a
+        term not finite (e.g. a beam grazing its perturbed surface); see
+        :mod:`pipeline.process.tpu_screen`.
     """
     st = settings or TpuSettings()
     rst = refraction_settings or RefractionSettings()
     inp = _inputs(returns, surface, rst, st, seabed_gradient, surface_tilt_sigma_rad)
-    n = len(inp.row)
+    code = timing_unresolved(inp.ret, inp.sig_ts, inp.sig_tb)
+    out = code >= 0
+    left = LeftOut(inp.ret.pulse_id[out], code[out])
+    inp = _take_inputs(inp, ~out)
     xyzd0, terms = _terms(inp, st)
+    finite = np.all(np.isfinite(xyzd0), axis=1)
+    for v in terms.values():
+        finite &= np.all(np.isfinite(v), axis=1)
+    if not np.all(finite):
+        left = left.concatenate(
+            LeftOut(inp.ret.pulse_id[~finite], np.full(int(np.sum(~finite)), TERM_NOT_FINITE))
+        )
+        inp, xyzd0 = _take_inputs(inp, finite), xyzd0[finite]
+        terms = {k: v[finite] for k, v in terms.items()}
+    n = len(inp.row)
 
     def var(names):
         v = np.zeros((n, 4))
@@ -593,12 +627,6 @@ def point_tpu(
 
     vr, vc = var(RANDOM_TERMS), var(CORRELATED_TERMS)
     vt = vr + vc
-    if not np.all(np.isfinite(vt)):
-        bad = int(np.flatnonzero(~np.all(np.isfinite(vt), axis=1))[0])
-        names = [k for k, v in terms.items() if not np.all(np.isfinite(v[bad]))]
-        raise NumericalError(
-            f"TPU of pulse {int(inp.ret.pulse_id[bad])} is not finite (terms {', '.join(names)})"
-        )
     return PointTpu(
         row=inp.row,
         pulse_id=inp.ret.pulse_id,
@@ -615,6 +643,7 @@ def point_tpu(
         sigma_depth_m=np.sqrt(vt[:, DEPTH]),
         sigma_depth_random_m=np.sqrt(vr[:, DEPTH]),
         sigma_depth_correlated_m=np.sqrt(vc[:, DEPTH]),
+        left_out=left,
     )
 
 
@@ -890,6 +919,7 @@ def timing_from_scatter(
     *,
     depth_scatter_m: Any,
     seabed_gradient: Any = None,
+    max_sigma_s: float = math.inf,
 ) -> DetectedReturns:
     """``returns`` with the per-return timing sigmas that the measured depth scatter implies.
 
@@ -900,6 +930,15 @@ def timing_from_scatter(
     is made as for photon-limited timing, variance in proportion to ``1 / amplitude``
     (equal without amplitudes). Rows with a NaN scatter keep the a-priori sigma.
 
+    The sigma is ``scatter / |d depth / d t|``, the derivative of the depth compared at the
+    measured position: it tends to 0 where a beam runs along the local seabed gradient
+    (``g . u tan(theta_w) -> 1``), or where false bottoms among the soundings make that
+    gradient absurd, and the sigma then grows without bound (hundreds of µs). A detected
+    return lies in the recorded window, so no timing sigma exceeds that of a time spread
+    uniformly over it, ``window / sqrt(12)``: ``max_sigma_s`` (``bathy run`` passes that of
+    the detector's window) bounds the sigmas set here. Pulses whose sigma still reaches their
+    surface-bottom separation are left out by :func:`point_tpu`.
+
     Parameters
     ----------
     depth_scatter_m : (n_bottom,) array_like
@@ -907,6 +946,8 @@ def timing_from_scatter(
         :func:`~pipeline.process.refraction.seabed_points`).
     seabed_gradient : (n_bottom, 2) array_like, optional
         As for :func:`point_tpu`.
+    max_sigma_s : float, optional
+        Upper bound of each sigma set from the scatter (default: none).
     """
     st = settings or TpuSettings()
     rst = refraction_settings or RefractionSettings()
@@ -946,8 +987,8 @@ def timing_from_scatter(
     sig_s, sig_b = np.array(sig_s, dtype=np.float64), np.array(sig_b, dtype=np.float64)
     use = np.isfinite(scatter)
     rows = inp.row[use]
-    sig_b[rows] = np.maximum(np.sqrt(wb * c)[use], floor)
-    sig_s[rows] = np.where(hs[use], np.maximum(np.sqrt(ws * c)[use], floor), 0.0)
+    sig_b[rows] = np.clip(np.sqrt(wb * c)[use], floor, max_sigma_s)
+    sig_s[rows] = np.where(hs[use], np.clip(np.sqrt(ws * c)[use], floor, max_sigma_s), 0.0)
     sig_s = np.where(returns.has_surface, np.maximum(sig_s, floor), 0.0)
     sig_b = np.where(returns.has_bottom, np.maximum(sig_b, floor), 0.0)
     return dataclasses.replace(returns, t_surface_sigma_s=sig_s, t_bottom_sigma_s=sig_b)
