@@ -206,6 +206,7 @@ def evaluate(
     grid: Grid | None = None,
     truth_depth_m: TruthFn | None = None,
     truth_z_m: TruthFn | None = None,
+    grid_truth_depth_m: TruthFn | None = None,
     classes: tuple[int, ...] = (BATHYMETRIC_POINT,),
 ) -> ErrorReport:
     """Compare processed points (and optionally the uncorrected points and the grid) with truth.
@@ -220,6 +221,10 @@ def evaluate(
         Gridded seabed; compared at the cell centres.
     truth_depth_m, truth_z_m : callable
         Exactly one: the truth as a function of local ``(x, y)``.
+    grid_truth_depth_m : callable, optional
+        The true depth below the grid's datum (the mean water level) as a function of local
+        ``(x, y)``, for a grid whose depths are below a datum rather than below the local
+        surface the points' ``depth_m`` use; default: ``truth_depth_m`` / ``truth_z_m``.
     classes : tuple of int
         Class codes compared (default 40, bathymetric point).
 
@@ -239,7 +244,8 @@ def evaluate(
         raw = error_stats(point_errors_m(pick(uncorrected), **kw)[0])
     gstats, giho = None, ()
     if grid is not None:
-        gerr, gdepth = grid_errors_m(grid, **kw)
+        gkw = kw if grid_truth_depth_m is None else {"truth_depth_m": grid_truth_depth_m}
+        gerr, gdepth = grid_errors_m(grid, **gkw)
         gstats, giho = error_stats(gerr), iho_fractions(gerr, gdepth)
     return ErrorReport(error_stats(err), raw, gstats, iho_fractions(err, depth), giho)
 

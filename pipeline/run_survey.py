@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.outputs.atomic import write_json
 from pipeline.process.context import processing_context
 from pipeline.process.detect import detect_full_waveform
@@ -73,16 +74,17 @@ def kept_for_posterior(pulse_id: np.ndarray, fraction: float, seed: int) -> np.n
 def _detect_chunk(scene, paths, keep_fraction: float = 0.0):
     """Run the receiver on one chunk of traced pulses and detect its returns.
 
-    Returns ``(photon events or None, detections or None, kept waveforms or None)``; the kept
-    waveforms (full waveform only) are ``(pulse_id, t0_s, samples)`` of the pulses
-    :func:`kept_for_posterior` selects.
+    Returns ``(photon events or None, detections or None, kept waveforms or None, no-bottom
+    inputs or None)``; the kept waveforms (full waveform only) are ``(pulse_id, t0_s, samples)``
+    of the pulses :func:`kept_for_posterior` selects; the no-bottom inputs are
+    :func:`_no_bottom_inputs`'.
     """
     from pipeline.simulate.waveform import simulate_photon_events, simulate_waveforms
 
     det = scene.detector
     if det.mode == "photon_counting":
         ev = simulate_photon_events(paths, scene, det, scene.returns)
-        return ev, None, None
+        return ev, None, None, None
     wf = simulate_waveforms(paths, scene, det, scene.returns)
     n_noise, shot = detect_noise(scene)
     found = detect_full_waveform(
@@ -100,10 +102,111 @@ def _detect_chunk(scene, paths, keep_fraction: float = 0.0):
     shift_b = np.where(found.has_bottom, wf.t0_s, 0.0)
     shift_c = np.where(found.has_column, wf.t0_s, 0.0)
     found = dataclasses.replace(found, t_column_s=found.t_column_s + shift_c)
+    nb = _no_bottom_inputs(scene, wf, found)
     found = dataclasses.replace(
         found, t_surface_s=found.t_surface_s + shift, t_bottom_s=found.t_bottom_s + shift_b
     )
-    return None, found, kept
+    return None, found, kept, nb
+
+
+def _detector_model(scene, dt_s: float):
+    """The full-waveform detector (sampling every ``dt_s``) as the class-45 limit needs it."""
+    from pipeline.process.detection_limit import DetectorModel
+
+    ps = scene.process
+    n_noise, shot = detect_noise(scene)
+    return DetectorModel(
+        dt_s=dt_s,
+        pulse_fwhm_s=_system_fwhm_s(scene),
+        noise_samples=n_noise,
+        threshold_sigma=ps.detect.threshold_sigma,
+        min_separation_fwhm=ps.detect.min_separation_fwhm,
+        group_index=ps.assumed_group_index or scene.water.group_index,
+        shot_noise_counts=shot,
+    )
+
+
+def _no_bottom_inputs(scene, wf, found) -> dict[str, np.ndarray]:
+    """Per chunk, what the class-45 detection limit needs of the waveforms (then dropped).
+
+    The column margins of the pulses with a surface and no bottom
+    (:func:`~pipeline.process.detection_limit.column_margins`; zeros elsewhere) and the losses
+    of the well-detected bottoms, SNR ≥ 2 × threshold
+    (:func:`~pipeline.process.detection_limit.bottom_losses`).
+    """
+    from pipeline.process.detection_limit import bottom_losses, column_margins
+
+    ps = scene.process
+    det = _detector_model(scene, wf.sample_interval_s)
+    n = found.has_surface.shape[0]
+    none = found.has_surface & ~found.has_bottom
+    margin, alpha, t_max = np.zeros(n), np.ones(n), np.zeros(n)
+    ok = np.zeros(n, dtype=bool)
+    if none.any():
+        cm = column_margins(
+            wf.samples[none], found.t_surface_s[none], found.noise_sigma[none], det, ps.no_bottom
+        )
+        margin[none], alpha[none], t_max[none], ok[none] = (
+            cm.log_margin,
+            cm.alpha_per_s,
+            cm.t_max_s,
+            cm.ok,
+        )
+    # a bottom near the threshold is found only where it happened to be bright: its loss would
+    # bias the extra decay low, so only clear detections are used
+    strong = found.has_bottom & (
+        found.bottom_amplitude >= 2.0 * ps.detect.threshold_sigma * found.noise_sigma
+    )
+    t_b, loss, ok_b = bottom_losses(
+        wf.samples[strong],
+        found.t_surface_s[strong],
+        found.t_bottom_s[strong],
+        found.bottom_amplitude[strong],
+        found.noise_sigma[strong],
+        det,
+        ps.no_bottom,
+    )
+    return {
+        "none": none,
+        "margin": margin,
+        "alpha": alpha,
+        "t_max": t_max,
+        "ok": ok,
+        "t_b": t_b[ok_b],
+        "loss": loss[ok_b],
+    }
+
+
+def _no_bottom_times(scene, inputs: list[dict], t_surface_s: np.ndarray):
+    """``t_no_bottom_s`` from emission of every pulse (0 where none), and a summary.
+
+    The extra decay is fitted once over the whole survey's bottoms, so the limits do not depend
+    on the chunking.
+    """
+    from pipeline.process.detection_limit import (
+        ColumnMargins,
+        excess_decay_per_s,
+        limit_after_surface_s,
+    )
+
+    cat = {k: np.concatenate([d[k] for d in inputs]) for k in inputs[0]}
+    delta = excess_decay_per_s(cat["t_b"], cat["loss"])
+    det = _detector_model(scene, 1.0 / scene.detector.sample_rate_hz)
+    margins = ColumnMargins(
+        log_margin=cat["margin"],
+        alpha_per_s=cat["alpha"],
+        t_max_s=cat["t_max"],
+        ok=cat["ok"],
+        t_min_s=det.min_separation_fwhm * det.pulse_fwhm_s,
+    )
+    t = limit_after_surface_s(margins, delta)
+    summary = {
+        "excess_decay_per_m": delta * 2.0 * det.group_index / SPEED_OF_LIGHT_M_S,
+        "bottoms_used": int(cat["t_b"].size),
+        "pulses_with_limit": int(np.count_nonzero(t > 0.0)),
+        "pulses_without_measurable_column": int(np.count_nonzero(cat["none"] & ~cat["ok"])),
+    }
+    return np.where(t > 0.0, t_surface_s + t, 0.0), summary
 
 
 def simulate_detections(scene, log=print) -> dict[str, Any]:
@@ -158,6 +261,7 @@ def simulate_detections(scene, log=print) -> dict[str, Any]:
     pulse_flags: dict[str, int] = {}
     parts: list[dict[str, np.ndarray]] = []
     kept: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    nb_inputs: list[dict[str, np.ndarray]] = []
     # waveforms of a bounded share of the pulses are kept for posteriors (a few times the
     # pulses sampled, so the cells that matter can be chosen among them)
     from pipeline.survey_posterior import posterior_budget
@@ -181,7 +285,9 @@ def simulate_detections(scene, log=print) -> dict[str, Any]:
         t2 = time.perf_counter()
         paths = trace(pulses, world, scene.trace, div_rad, scene.scanner.polarisation)
         t3 = time.perf_counter()
-        events, found, kept_wf = _detect_chunk(scene, paths, keep_fraction)
+        events, found, kept_wf, nb = _detect_chunk(scene, paths, keep_fraction)
+        if nb is not None:
+            nb_inputs.append(nb)
         if kept_wf is not None:
             kept.append(kept_wf)
         t4 = time.perf_counter()
@@ -220,6 +326,14 @@ def simulate_detections(scene, log=print) -> dict[str, Any]:
             }
         )
     cat = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    t_no_bottom, no_bottom = None, None
+    if nb_inputs:
+        t_no_bottom, no_bottom = _no_bottom_times(scene, nb_inputs, cat["t_surface_s"])
+        log(
+            f"  no-bottom limits: {no_bottom['pulses_with_limit']} pulses; bottoms fade "
+            f"{no_bottom['excess_decay_per_m']:.3f}/m (in-water path) faster than the column "
+            f"({no_bottom['bottoms_used']} bottoms)"
+        )
     returns = DetectedReturns(
         pulse_id=cat["pulse_id"],
         origin_meas_m=cat["origin_meas_m"],
@@ -235,6 +349,7 @@ def simulate_detections(scene, log=print) -> dict[str, Any]:
         bottom_amplitude=cat["bottom_amplitude"],
         # in-column returns (full waveform only; photon detections leave them empty)
         **{k: cat[k] for k in DetectedReturns.COLUMN_FIELDS if k in cat},
+        t_no_bottom_s=t_no_bottom,
     )
     return {
         "returns": returns,
@@ -242,6 +357,7 @@ def simulate_detections(scene, log=print) -> dict[str, Any]:
         "lines": lines,
         "extent": extent,
         "timings_s": timings,
+        "no_bottom": no_bottom,
         "subray_flags": sub_flags,
         "pulse_flags": pulse_flags,
         "kept_waveforms": (
@@ -305,6 +421,7 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
     from pipeline.evaluate import evaluate, tpu_coverage, water_column_report
     from pipeline.outputs.las import write_points_laz
     from pipeline.outputs.raster import write_grid_tif
+    from pipeline.process.datum import survey_datum
     from pipeline.process.grid import grid_seabed, snap_bounds_m
 
     sim = simulate_detections(scene, log)
@@ -319,8 +436,16 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
     bounds = snap_bounds_m(
         np.array([xmin, xmax]), np.array([ymin, ymax]), ps.grid_resolution_m, origin
     )
+    # one datum for the grid (the user's water level, else the median measured surface): depth
+    # below the local fitted surface would carry the wave heights into the grid
+    datum = survey_datum(processed.points, ps.datum)
     grid = grid_seabed(
-        processed.points, ps.grid_resolution_m, bounds_m=bounds, origin_m=origin, crs=fr.crs
+        processed.points,
+        ps.grid_resolution_m,
+        bounds_m=bounds,
+        origin_m=origin,
+        crs=fr.crs,
+        datum_m=datum.water_level_m,
     )
     timings["process_s"] = time.perf_counter() - t0
     t1 = time.perf_counter()
@@ -343,13 +468,17 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
         "grid": write_grid_tif(out / "grid.tif", grid),
     }
     truth = sim["truth"]
+    # the true mean water level: the scene's level, about which the wave field has zero mean
+    true_level_m = scene.water_surface.level_m
     report = evaluate(
         processed.points,
         uncorrected=processed.uncorrected,
         grid=grid,
-        # depth below the water surface: the datum hydrographers reduce soundings to; GNSS
+        # points: depth below the local water surface (their depth_m's reference); GNSS
         # height errors common to the surface and the seabed returns cancel in it
         truth_depth_m=truth.depth_m,
+        # grid: depth below the mean water level, as the grid's datum
+        grid_truth_depth_m=lambda x, y: true_level_m - truth.seabed.height_m(x, y),
     ).to_dict()
     # the depth's sigma (below the measured surface, at the measured position) against the
     # true depth there; a photon-counting window's shots share one detection (one draw)
@@ -377,6 +506,8 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
         "tpu_left_out": unc["left_out"],
         "receiver": scene.detector.mode,
         "bottom_detected_fraction": float(np.mean(sim["returns"].has_bottom)),
+        "datum": {**datum.to_dict(), "true_mean_water_level_m": true_level_m},
+        "no_bottom": sim["no_bottom"],
         "water_column": water_column_report(processed.points, scene.water.layer_depth_m),
         "subray_flags": sim["subray_flags"],
         "receiver_pulse_flags": sim["pulse_flags"],
@@ -387,6 +518,10 @@ def run_survey(scene, out: Path, log=print) -> tuple[dict[str, Path], dict[str, 
     files["evaluation"] = out / "evaluation.json"
     write_json(files["evaluation"], evaluation)
     _log_report(report, log)
+    log(
+        f"  grid datum: water level {datum.water_level_m:+.3f} m ({datum.source}, "
+        f"{datum.n_surface_points} surface points); true mean level {true_level_m:+.3f} m"
+    )
     orders = unc["summary"].get("orders", {})
     log(
         "  strictest IHO S-44 order met per cell (from the propagated uncertainty): "
@@ -606,11 +741,14 @@ def _take_tpu(tpu, index: np.ndarray):
 def _no_bottom_points(scene, returns, processed, refr):
     """ASPRS class 45 "no-bottom-found-at" points of the water pulses that have no bottom.
 
-    Each is the deepest point the recorded window reached along the refracted beam: no bottom
-    was seen above it.
-
-    The range gate opens ``pre_trigger_s`` before the first echo and lasts ``window_s``, so the
-    window ends ``window_s − pre_trigger_s`` after the surface echo: system knowledge, not truth.
+    Each is placed, along the refracted beam, at the pulse's detection limit
+    (``returns.t_no_bottom_s``, :mod:`pipeline.process.detection_limit`): the depth down to which
+    a bottom of the assumed reflectance would have been detected, so the absence of a bottom is
+    established there and no deeper. A full-waveform pulse whose column gave no limit (too weak
+    or too short to measure its decay: over land, or a bottom merged with the surface in a metre
+    of water) establishes nothing and gets no point. Photon-counting detections carry no limit
+    (``t_no_bottom_s`` None): theirs stays the end of the recorded window, which the range gate
+    fixes ``window_s − pre_trigger_s`` after the surface echo (system knowledge).
     """
     from pipeline.process.classify import NO_BOTTOM_FOUND_AT
     from pipeline.process.refraction import seabed_points
@@ -619,6 +757,9 @@ def _no_bottom_points(scene, returns, processed, refr):
     det = scene.detector
     none = returns.has_surface & ~returns.has_bottom
     t_end = returns.t_surface_s + (det.window_s - det.pre_trigger_s)
+    if returns.t_no_bottom_s is not None:
+        none &= returns.t_no_bottom_s > 0.0
+        t_end = returns.t_no_bottom_s
     probe = dataclasses.replace(
         returns,
         has_bottom=none,
@@ -626,6 +767,7 @@ def _no_bottom_points(scene, returns, processed, refr):
         bottom_confidence=np.where(none, 1.0, 0.0),
         bottom_amplitude=None,
         t_bottom_sigma_s=None,
+        t_no_bottom_s=None,
     )
     pts = seabed_points(probe, processed.surface, refr)
     bad = PointFlag.LAND | PointFlag.GRAZING | PointFlag.ABOVE_SURFACE

@@ -16,8 +16,10 @@ Layout
 * Standard fields: classification (ASPRS codes of :mod:`pipeline.process.classify`), return
   number / number of returns, synthetic flag for derived (synthetic) points, point source id 0,
   GPS time 0 (no timing in points), intensity 0.
-* Extra bytes (LAS 1.4 extra-bytes VLR): ``depth_m`` (f8), ``uncertainty_v_m``,
-  ``uncertainty_h_m``, ``confidence`` (f4), ``pulse_id`` (i8), ``kind`` (u1),
+* Extra bytes (LAS 1.4 extra-bytes VLR): ``depth_m`` (f8; below the *local fitted* water
+  surface, as its description says; the grid's datum is in ``grid.tif`` and
+  ``evaluation.json``), ``uncertainty_v_m``, ``uncertainty_h_m``, ``confidence`` (f4),
+  ``pulse_id`` (i8), ``kind`` (u1),
   ``process_flags``, ``detector_flags`` (u2), and ``amplitude`` (f4) when present.
 """
 
@@ -60,7 +62,9 @@ LOOKUP_NAMES: dict[int, str] = {
 _VLR_USER = "bathy"
 _VLR_RECORD = 1
 _EXTRA = (
-    ("depth_m", "f8", "depth below water surface (m)"),
+    # the point's own reference: below the water surface fitted around it (under waves it moves
+    # with them); grid.tif's depth is below the survey's datum (pipeline.process.datum)
+    ("depth_m", "f8", "below local fitted water surf. m"),
     ("uncertainty_v_m", "f4", "vertical 1-sigma uncertainty (m)"),
     ("uncertainty_h_m", "f4", "horiz. 1-sigma uncertainty (m)"),
     ("confidence", "f4", "detection confidence 0-1"),

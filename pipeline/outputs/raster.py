@@ -84,7 +84,13 @@ def write_grid_tif(path: str | Path, grid: Grid) -> Path:
             origin_northing_m=repr(float(grid.origin_m[1])),
             origin_height_m=repr(float(grid.origin_m[2])),
             resolution_m=repr(float(grid.resolution_m)),
-            depth="positive down, below the fitted local water surface",
+            depth=(
+                "positive down, below the fitted local water surface"
+                if grid.datum_m is None
+                else f"positive down, below the datum (mean water level) at local z = "
+                f"{grid.datum_m!r} m, height {grid.datum_m + float(grid.origin_m[2])!r} m"
+            ),
+            datum_water_level_m="" if grid.datum_m is None else repr(float(grid.datum_m)),
             registration="cell-centre (area): transform gives cell corners",
         )
     return path

@@ -16,6 +16,7 @@ as nodata by :mod:`pipeline.outputs.raster`).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -53,6 +54,9 @@ class Grid:
         World coordinates ``(easting, northing, height)`` of the local origin.
     crs : pyproj.CRS or None
         Horizontal CRS of the world coordinates.
+    datum_m : float or None
+        Local z of the water level the depths are below (:mod:`pipeline.process.datum`); None:
+        the depths are the points' own ``depth_m`` (below the local fitted surface).
     """
 
     depth_m: np.ndarray
@@ -66,6 +70,7 @@ class Grid:
     bounds_m: np.ndarray
     origin_m: np.ndarray
     crs: pyproj.CRS | None
+    datum_m: float | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -210,17 +215,26 @@ def grid_seabed(
     origin_m: Sequence[float] = (0.0, 0.0, 0.0),
     crs: Any = None,
     classes: Sequence[int] = (BATHYMETRIC_POINT,),
+    datum_m: float | None = None,
 ) -> Grid:
-    """Grid the points of ``classes`` (default 40, bathymetric point) by :func:`grid_points`."""
+    """Grid the points of ``classes`` (default 40, bathymetric point) by :func:`grid_points`.
+
+    With ``datum_m`` (local z of the survey's mean water level, :mod:`pipeline.process.datum`)
+    the gridded depth is ``datum_m − z``: one reference for the whole grid. Without it, the
+    points' own ``depth_m`` (below the local fitted surface, which under waves carries the
+    wave heights).
+    """
     keep = np.isin(points.classification, np.asarray(classes, dtype=np.uint8))
     xyz = points.xyz_m[keep]
-    return grid_points(
+    depth = points.depth_m[keep] if datum_m is None else float(datum_m) - xyz[:, 2]
+    grid = grid_points(
         xyz[:, 0],
         xyz[:, 1],
-        points.depth_m[keep],
+        depth,
         xyz[:, 2],
         resolution_m=resolution_m,
         bounds_m=bounds_m,
         origin_m=origin_m,
         crs=crs,
     )
+    return grid if datum_m is None else dataclasses.replace(grid, datum_m=float(datum_m))

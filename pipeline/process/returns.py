@@ -159,6 +159,10 @@ class DetectedReturns:
     t_column_s, column_confidence, column_amplitude : (n,) float64, optional
         Its round-trip time (``t_surface_s < t_column_s < t_bottom_s`` where those exist),
         confidence in [0, 1] and strength >= 0; 0 where ``has_column`` is False.
+    t_no_bottom_s : (n,) float64, optional
+        Round-trip time down to which a pulse without a bottom establishes there is none (its
+        detection limit, :mod:`pipeline.process.detection_limit`); ``> t_surface_s`` where
+        known, 0 where not estimated (and where there is a bottom).
     """
 
     pulse_id: np.ndarray
@@ -179,6 +183,7 @@ class DetectedReturns:
     t_column_s: np.ndarray | None = None
     column_confidence: np.ndarray | None = None
     column_amplitude: np.ndarray | None = None
+    t_no_bottom_s: np.ndarray | None = None
 
     #: The fields of the in-column return (a detector's output passes them on by these names).
     COLUMN_FIELDS: ClassVar[tuple[str, ...]] = (
@@ -236,6 +241,17 @@ class DetectedReturns:
         if np.any(self.t_column_s[col_b] >= self.t_bottom_s[col_b]):
             raise ValueError("`t_column_s` must be < `t_bottom_s` where both returns exist")
         s(self, "flags", _array("flags", self.flags, np.uint16, (n,)))
+        if self.t_no_bottom_s is not None:
+            tn = _array("t_no_bottom_s", self.t_no_bottom_s, np.float64, (n,))
+            known = tn != 0.0
+            if np.any(self.has_bottom & known) or np.any(
+                tn[known] <= np.where(self.has_surface, self.t_surface_s, np.inf)[known]
+            ):
+                raise ValueError(
+                    "`t_no_bottom_s` must be 0 where there is a bottom, and > `t_surface_s` "
+                    "(with a surface) where not 0"
+                )
+            s(self, "t_no_bottom_s", tn)
         for opt, mask in (
             ("surface_amplitude", "has_surface"),
             ("bottom_amplitude", "has_bottom"),

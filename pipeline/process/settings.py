@@ -6,8 +6,10 @@ from dataclasses import dataclass
 
 from pipeline.config import setting
 from pipeline.process.classify import ClassifySettings
+from pipeline.process.datum import DatumSettings
 from pipeline.process.detect import DetectSettings
 from pipeline.process.detect_photons import PhotonDetectSettings
+from pipeline.process.detection_limit import NoBottomSettings
 from pipeline.process.posterior import PosteriorSettings
 from pipeline.process.surface_fit import SurfaceFitSettings
 from pipeline.process.tpu import TpuSettings
@@ -55,6 +57,12 @@ class ProcessSettings:
         doc="a-priori uncertainties of the TPU",
     )
     grid_resolution_m: float = setting(5.0, gt=0.0, le=1000.0, doc="bathymetry grid cell")
+    no_bottom: NoBottomSettings = setting(
+        NoBottomSettings(), doc="assumed bottom and water of the class-45 detection limit"
+    )
+    datum: DatumSettings = setting(
+        DatumSettings(), doc="vertical datum of the grid's depths (mean water level)"
+    )
     # ~0.3-0.5 s each on one core (benchmarks/RESULTS_posterior.md): 2000/km² is ~15 min/km²
     posterior_pulses_per_km2: float = setting(
         2000.0, ge=0.0, le=1e7, doc="bathymetric points given an emcee depth posterior, per km²"

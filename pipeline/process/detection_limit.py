@@ -1,0 +1,320 @@
+"""Where a pulse that found no bottom stops proving there is none: its detection limit.
+
+A class-45 "no-bottom-found-at" point tells a hydrographer "no bottom down to here". Placed at
+the end of the recording window, it claims far more than the pulse saw: past the depth where a
+bottom echo would have sunk under the detection threshold, a bottom could be there unseen. So
+the point goes to the **detection limit of that pulse**: the depth at which a bottom of the
+assumed reflectance would just have been detected, computed from the pulse's own waveform.
+
+Model (single-scattering lidar equation, e.g. Guenther 1985, *Airborne laser hydrography*,
+NOAA Prof. Paper 1, ch. 3; the same terms as :mod:`pipeline.lidar_equation`). At time ``t``
+after the surface echo, with ``v = c / n_g`` and the in-water path ``l = v t / 2``, the
+matched-filtered waveform (a Gaussian of the system σ ``σ_t``, as in
+:mod:`pipeline.process.detect`) holds
+
+* the water-column return, per sample: ``C(t) = K β_π (v Δt / 2) T²(l) = C0 exp(−α t)``;
+* the peak of a bottom echo of Lambertian reflectance ``ρ`` there (total counts
+  ``K (ρ/π) T²(l)`` spread as the system pulse, then filtered by it: peak
+  ``total Δt / (2 √π σ_t)``): ``B(t) = r C(t)`` with ``r = ρ / (π^{3/2} β_π v σ_t)``.
+
+``C0`` and ``α`` are **measured**: a weighted least-squares line through the logarithm of the
+pulse's own filtered column return (weights ``(C/σ)²``, the inverse variance of ``log C``).
+``ρ`` and ``β_π`` are the named assumptions :class:`NoBottomSettings` (the column's level fixes
+``K T²`` but not ``β_π``, so the bottom-to-column ratio needs it). The detector declares a bottom
+where its residual over the column trend exceeds ``k √(σ_f² + F G C(t) Σg²)``
+(:mod:`pipeline.process.detect`); ``B(t)`` meets that threshold where ``C`` solves
+``r² C² − k² F G Σg² C − k² σ_f² = 0``, so
+
+``t_lim = ln(C0 / C*) / α`` with ``C* = (k² F G Σg² + √((k² F G Σg²)² + 4 r² k² σ_f²)) / (2 r²)``,
+
+capped at the last sample the detector searches (the window's end less the trend's gap). A pulse
+whose column is not measurable (fewer than 3 samples above ``min_column_snr`` σ, or no decay)
+gets no limit (0): nothing is established for it.
+
+**The bottom fades faster than the column.** Forward scattering stretches a deep bottom echo
+(its peak drops as it widens) and the column's apparent decay is slower than the beam's
+attenuation (light scattered out of the beam still returns from the column). Both are seen in
+the survey's own bottoms: for every well-detected bottom (SNR ≥ 2 × threshold), the log of its
+measured peak over ``r C(t_b)`` predicted from its own column falls about linearly with
+``t_b``; the slope of a least-squares line through them is the extra decay ``δ`` (its intercept,
+which holds the unknown ratio of the true to the assumed ``ρ/β_π``, is not used), and the limit
+becomes ``ln(C0 / C*) / (α + δ)``. ``δ = 0`` when the survey found too few bottoms (< 20).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from pipeline.config import setting
+from pipeline.optics import SPEED_OF_LIGHT_M_S
+from pipeline.process.detect import FWHM_TO_SIGMA
+
+__all__ = [
+    "NoBottomSettings",
+    "DetectorModel",
+    "ColumnMargins",
+    "bottom_to_column_ratio",
+    "column_margins",
+    "bottom_losses",
+    "excess_decay_per_s",
+    "limit_after_surface_s",
+    "no_bottom_limit_s",
+]
+
+#: Waveforms handled at once (bounds the float64 temporaries to a few tens of MB).
+BLOCK = 4096
+
+
+@dataclass(frozen=True, kw_only=True)
+class NoBottomSettings:
+    """Assumptions of the no-bottom-found-at depth (``[process.no_bottom]``)."""
+
+    # 0.15: a mid value of sand/mud seabed reflectances at 532 nm used in bathymetric lidar
+    # depth-performance statements (e.g. 10-20 %)
+    bottom_reflectance: float = setting(
+        0.15,
+        gt=0.0,
+        le=1.0,
+        doc="Lambertian reflectance of the bottom whose absence a class-45 point states",
+    )
+    # 2e-3: coastal water, Petzold (1972) coastal/harbour β(180°) ~ 1e-3 to 1e-2 m⁻¹ sr⁻¹
+    backscatter_180_per_m_sr: float = setting(
+        2.0e-3,
+        gt=0.0,
+        le=10.0,
+        doc="water volume backscatter β(180°) processing assumes: sets the ratio of a "
+        "bottom echo to the column return at the same depth",
+    )
+    min_column_snr: float = setting(
+        3.0, gt=0.0, le=100.0, doc="column samples above this many noise σ enter the decay fit"
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class DetectorModel:
+    """What the limit needs of the full-waveform detector (all known to processing).
+
+    ``dt_s`` sample interval, ``pulse_fwhm_s`` system-response FWHM, ``noise_samples`` leading
+    noise-only samples, ``threshold_sigma`` and ``min_separation_fwhm`` the detector's
+    (:class:`~pipeline.process.detect.DetectSettings`), ``group_index`` of the water processing
+    assumes, ``shot_noise_counts`` the detector's ``F·G`` (0: signal-independent noise).
+    """
+
+    dt_s: float
+    pulse_fwhm_s: float
+    noise_samples: int
+    threshold_sigma: float
+    min_separation_fwhm: float
+    group_index: float
+    shot_noise_counts: float = 0.0
+
+    @property
+    def sigma_samples(self) -> float:
+        """σ of the system response, samples."""
+        return self.pulse_fwhm_s * FWHM_TO_SIGMA / self.dt_s
+
+
+@dataclass(frozen=True)
+class ColumnMargins:
+    """Per pulse with no bottom, shapes ``(n,)``: what sets its detection limit.
+
+    ``log_margin`` is ``ln(C0 / C*)`` (``C*``: the column level at which ``r C*`` meets the
+    threshold), ``alpha_per_s`` the measured column decay, ``t_max_s``
+    the last searched time after the surface, ``ok`` whether the column was measurable;
+    ``t_min_s`` the surface-bottom separation the detector resolves.
+    """
+
+    log_margin: np.ndarray
+    alpha_per_s: np.ndarray
+    t_max_s: np.ndarray
+    ok: np.ndarray
+    t_min_s: float
+
+
+def bottom_to_column_ratio(
+    settings: NoBottomSettings, group_index: float, system_sigma_s: float
+) -> float:
+    """``r = ρ / (π^{3/2} β_π v σ_t)``: filtered bottom peak over column level, same depth."""
+    v = SPEED_OF_LIGHT_M_S / group_index
+    return settings.bottom_reflectance / (
+        math.pi**1.5 * settings.backscatter_180_per_m_sr * v * system_sigma_s
+    )
+
+
+def _blocks(fn, n: int, *arrays):
+    """``fn`` over blocks of ``BLOCK`` pulses (bounds the pulses × samples temporaries)."""
+    parts = [fn(*(a[i : i + BLOCK] for a in arrays)) for i in range(0, n, BLOCK)]
+    if not parts:
+        return fn(*(a[:0] for a in arrays))
+    return tuple(np.concatenate([p[j] for p in parts]) for j in range(len(parts[0])))
+
+
+def _column_fit(samples, t_surface_s, t_end_idx, noise_sigma, det, min_snr):
+    """``(log C0, α, ok)`` of the filtered column between the surface echo and ``t_end_idx``."""
+    y = np.asarray(samples, dtype=np.float64)
+    n, m = y.shape
+    sg = det.sigma_samples
+    k = min(max(int(det.noise_samples), 4), max(m - 1, 1))
+    filt = gaussian_filter1d(y - np.median(y[:, :k], axis=1)[:, None], sg, axis=1, mode="nearest")
+    i_s = np.asarray(t_surface_s, dtype=np.float64) / det.dt_s
+    first = i_s + det.min_separation_fwhm * det.pulse_fwhm_s / det.dt_s
+    cols = np.arange(m)[None, :]
+    nf = np.maximum(np.asarray(noise_sigma, dtype=np.float64), 1e-300)[:, None]
+    after = cols > first[:, None]
+    # the contiguous run above the noise from the first column sample on: the column's decay,
+    # not a later noise excursion
+    run = np.cumprod(np.where(after, filt > min_snr * nf, True), axis=1).astype(bool)
+    use = after & run & (cols < np.asarray(t_end_idx)[:, None])
+    t = (cols - i_s[:, None]) * det.dt_s
+    # weights (C/σ)²: the inverse variance of log C under additive noise
+    w = np.where(use, (filt / nf) ** 2, 0.0)
+    logc = np.log(np.where(use, filt, 1.0))
+    sw, st, sl = w.sum(1), (w * t).sum(1), (w * logc).sum(1)
+    stt, stl = (w * t * t).sum(1), (w * t * logc).sum(1)
+    den = sw * stt - st * st
+    ok = (use.sum(1) >= 3) & (den > 0)
+    slope = np.where(ok, (sw * stl - st * sl) / np.where(ok, den, 1.0), 0.0)
+    log_c0 = np.where(ok, (sl - slope * st) / np.where(sw > 0, sw, 1.0), 0.0)
+    ok &= slope < 0.0
+    return log_c0, np.where(ok, -slope, 1.0), ok
+
+
+def column_margins(
+    samples: np.ndarray,
+    t_surface_s: np.ndarray,
+    noise_sigma: np.ndarray,
+    det: DetectorModel,
+    settings: NoBottomSettings | None = None,
+) -> ColumnMargins:
+    """The measured column of waveforms without a bottom, against the assumed bottom's echo.
+
+    Parameters
+    ----------
+    samples : (n, m) array_like
+        Digitised waveforms, baseline included.
+    t_surface_s : (n,) ndarray
+        Surface echo time from the first sample, seconds.
+    noise_sigma : (n,) ndarray
+        Noise σ of the matched-filtered waveform (the detector's ``noise_sigma``: the
+        threshold it applied is ``threshold_sigma`` times it).
+    det : DetectorModel
+    settings : NoBottomSettings, optional
+
+    Returns
+    -------
+    ColumnMargins
+    """
+    s = settings or NoBottomSettings()
+    samples = np.asarray(samples)
+    n, m = samples.shape
+    fwhm = det.pulse_fwhm_s / det.dt_s
+    # the detector's search range: short of the window's end, where its trend is one-sided
+    gap = max(2, math.ceil(1.5 * fwhm))
+    t_s = np.asarray(t_surface_s, dtype=np.float64)
+    nf = np.asarray(noise_sigma, dtype=np.float64)
+
+    def fit(y, ts, noise):
+        return _column_fit(y, ts, np.full(len(ts), m - gap), noise, det, s.min_column_snr)
+
+    log_c0, alpha, ok = _blocks(fit, n, samples, t_s, nf)
+    # the assumed bottom at the threshold: r C = k √(σ_f² + F G C Σg²), solved for C
+    r = bottom_to_column_ratio(s, det.group_index, det.sigma_samples * det.dt_s)
+    kern_sq = 1.0 / (2.0 * math.sqrt(math.pi) * det.sigma_samples)  # Σ of the kernel squared
+    k = det.threshold_sigma
+    q = k * k * det.shot_noise_counts * kern_sq
+    c_star = (q + np.sqrt(q * q + 4.0 * r * r * k * k * np.maximum(nf, 1e-300) ** 2)) / (2 * r * r)
+    return ColumnMargins(
+        log_margin=np.where(ok, log_c0 - np.log(c_star), 0.0),
+        alpha_per_s=alpha,
+        t_max_s=(m - gap) * det.dt_s - t_s,
+        ok=ok,
+        t_min_s=det.min_separation_fwhm * det.pulse_fwhm_s,
+    )
+
+
+def bottom_losses(
+    samples: np.ndarray,
+    t_surface_s: np.ndarray,
+    t_bottom_s: np.ndarray,
+    bottom_amplitude: np.ndarray,
+    noise_sigma: np.ndarray,
+    det: DetectorModel,
+    settings: NoBottomSettings | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """How much weaker found bottoms are than the model's bottom from their own column.
+
+    Parameters
+    ----------
+    samples : (n, m) array_like
+        Waveforms of pulses with a detected bottom.
+    t_surface_s, t_bottom_s : (n,) ndarray
+        Echo times from the first sample, seconds.
+    bottom_amplitude, noise_sigma : (n,) ndarray
+        The detector's bottom peak (over the column trend) and filtered noise σ.
+    det : DetectorModel
+    settings : NoBottomSettings, optional
+
+    Returns
+    -------
+    t_after_surface_s, log_loss : (n,) ndarray
+        ``t_b − t_s`` and ``ln(A_b / (r C0 e^{−α (t_b − t_s)}))``.
+    ok : (n,) bool
+        The column before the bottom was measurable.
+    """
+    s = settings or NoBottomSettings()
+    samples = np.asarray(samples)
+    n = samples.shape[0]
+    sep = det.min_separation_fwhm * det.pulse_fwhm_s / det.dt_s
+    t_s = np.asarray(t_surface_s, dtype=np.float64)
+    t_b = np.asarray(t_bottom_s, dtype=np.float64)
+
+    def fit(y, ts, tb, noise):
+        # the column up to one separation before the bottom echo
+        return _column_fit(y, ts, tb / det.dt_s - sep, noise, det, s.min_column_snr)
+
+    log_c0, alpha, ok = _blocks(fit, n, samples, t_s, t_b, np.asarray(noise_sigma, float))
+    r = bottom_to_column_ratio(s, det.group_index, det.sigma_samples * det.dt_s)
+    dt = t_b - t_s
+    amp = np.asarray(bottom_amplitude, dtype=np.float64)
+    ok &= amp > 0
+    log_loss = np.where(ok, np.log(np.where(ok, amp, 1.0)) - math.log(r) - log_c0 + alpha * dt, 0.0)
+    return dt, log_loss, ok
+
+
+#: Bottoms the extra decay needs at least.
+MIN_BOTTOMS = 20
+
+
+def excess_decay_per_s(t_after_surface_s: np.ndarray, log_loss: np.ndarray) -> float:
+    """``δ``: minus the least-squares slope of ``log_loss`` on time (≥ 0; 0 with < 20 bottoms)."""
+    t = np.asarray(t_after_surface_s, dtype=np.float64)
+    y = np.asarray(log_loss, dtype=np.float64)
+    if t.size < MIN_BOTTOMS or np.ptp(t) <= 0.0:
+        return 0.0
+    slope = np.polyfit(t, y, 1)[0]
+    return float(max(-slope, 0.0))
+
+
+def limit_after_surface_s(margins: ColumnMargins, excess_decay_per_s: float = 0.0) -> np.ndarray:
+    """Detection-limit time after the surface echo, ``(n,)``; 0 where not established."""
+    t = margins.log_margin / (margins.alpha_per_s + excess_decay_per_s)
+    hi = np.maximum(margins.t_max_s, margins.t_min_s)
+    return np.where(margins.ok, np.clip(t, margins.t_min_s, hi), 0.0)
+
+
+def no_bottom_limit_s(
+    samples: np.ndarray,
+    t_surface_s: np.ndarray,
+    noise_sigma: np.ndarray,
+    det: DetectorModel,
+    settings: NoBottomSettings | None = None,
+    excess_decay_per_s: float = 0.0,
+) -> np.ndarray:
+    """:func:`column_margins` then :func:`limit_after_surface_s` (seconds after the surface)."""
+    return limit_after_surface_s(
+        column_margins(samples, t_surface_s, noise_sigma, det, settings), excess_decay_per_s
+    )

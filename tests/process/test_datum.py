@@ -1,0 +1,101 @@
+"""The grid's depths are below one datum (the mean water level), not below the waves.
+
+Analytic truth built here: a flat seabed at ``z = -Z`` under a sinusoidal sea
+``eta(x) = A sin(2 pi x / L)`` of mean level ``h``. A point's ``depth_m`` (below the local
+surface, as refraction makes it) is ``eta(x) + h + Z``; the depth below the mean level is
+``h + Z`` everywhere, which the grid must hold to the mm.
+"""
+
+import numpy as np
+import pytest
+
+from pipeline.process.classify import BATHYMETRIC_POINT, WATER_SURFACE
+from pipeline.process.datum import DatumSettings, survey_datum
+from pipeline.process.grid import grid_seabed
+from pipeline.process.returns import Points
+
+SEABED_Z_M = -10.0
+LEVEL_M = 0.37  # mean water level (local z), not 0, so a datum of 0 would show
+AMPLITUDE_M = 0.6
+WAVELENGTH_M = 7.3  # not a multiple of the 5 m cell: per-cell means of eta differ
+
+
+def _points(n_side=120):
+    # a regular lattice: the surface samples are symmetric about the mean level, so their median
+    # is the mean level exactly (to the sampling of the sine)
+    x, y = np.meshgrid(np.linspace(0.05, 49.95, n_side), np.linspace(0.05, 49.95, n_side))
+    x, y = x.ravel(), y.ravel()
+    n = x.size
+    eta = LEVEL_M + AMPLITUDE_M * np.sin(2.0 * np.pi * x / WAVELENGTH_M)
+    xyz = np.concatenate(
+        [np.column_stack([x, y, eta]), np.column_stack([x, y, np.full(n, SEABED_Z_M)])]
+    )
+    depth = np.concatenate([np.zeros(n), eta - SEABED_Z_M])  # below the local surface
+    cls = np.concatenate([np.full(n, WATER_SURFACE), np.full(n, BATHYMETRIC_POINT)])
+    m = 2 * n
+    return Points(
+        pulse_id=np.concatenate([np.arange(n), np.arange(n)]),
+        xyz_m=xyz,
+        depth_m=depth,
+        classification=cls.astype(np.uint8),
+        kind=np.concatenate([np.ones(n), np.full(n, 2)]).astype(np.uint8),
+        flags=np.zeros(m, np.uint16),
+        detector_flags=np.zeros(m, np.uint16),
+        return_number=np.ones(m, np.uint8),
+        number_of_returns=np.ones(m, np.uint8),
+        confidence=np.ones(m),
+        uncertainty_v_m=np.zeros(m),
+        uncertainty_h_m=np.zeros(m),
+    )
+
+
+def test_grid_depth_is_flat_below_the_mean_level_under_waves():
+    pts = _points()
+    datum = survey_datum(pts, DatumSettings())
+    assert datum.source == "surface_mean"
+    assert datum.water_level_m == pytest.approx(LEVEL_M, abs=0.02)
+    grid = grid_seabed(pts, 5.0, bounds_m=(0, 50, 0, 50), datum_m=datum.water_level_m)
+    true_depth = LEVEL_M - SEABED_Z_M
+    # the cells below the local surface would differ by up to ~0.4 m (the wave's cell means)
+    assert np.nanmax(grid.depth_m) - np.nanmin(grid.depth_m) < 1e-3
+    np.testing.assert_allclose(grid.depth_m, true_depth, atol=0.02)
+    np.testing.assert_allclose(grid.depth_m, datum.water_level_m - SEABED_Z_M, atol=1e-9)
+
+
+def test_user_water_level_wins():
+    pts = _points(40)
+    datum = survey_datum(pts, DatumSettings(water_level_m=1.25))
+    assert (datum.water_level_m, datum.source) == (1.25, "user")
+    grid = grid_seabed(pts, 5.0, bounds_m=(0, 50, 0, 50), datum_m=datum.water_level_m)
+    np.testing.assert_allclose(grid.depth_m, 1.25 - SEABED_Z_M, atol=1e-9)
+
+
+def test_the_local_surface_reference_carries_the_waves():
+    # what the grid held before: the cell means of eta (the defect this datum removes)
+    grid = grid_seabed(_points(), 5.0, bounds_m=(0, 50, 0, 50))
+    assert np.nanmax(grid.depth_m) - np.nanmin(grid.depth_m) > 0.2
+
+
+def test_surface_fit_outliers_still_count():
+    # the crests the local surface fit rejects (classes 1/7) are water returns all the same:
+    # leaving them out would put the datum in the troughs
+    pts = _points()
+    crest = (pts.kind == 1) & (pts.xyz_m[:, 2] > LEVEL_M + 0.5 * AMPLITUDE_M)
+    cls = pts.classification.copy()
+    cls[crest] = 1
+    datum = survey_datum(pts.replace(classification=cls))
+    assert datum.water_level_m == pytest.approx(LEVEL_M, abs=0.02)
+
+
+def test_spray_and_land_do_not_move_the_datum():
+    pts = _points(60)
+    z = pts.xyz_m.copy()
+    cls = pts.classification.copy()
+    surf = np.flatnonzero(pts.kind == 1)
+    z[surf[:50], 2] = LEVEL_M + 15.0  # spray / birds: high noise, far above the sea
+    cls[surf[:50]] = 18
+    z[surf[50:400], 2] = LEVEL_M + 3.0  # a beach: ground
+    cls[surf[50:400]] = 2
+    clean = survey_datum(pts.select(np.setdiff1d(np.arange(len(cls)), surf[:400])))
+    datum = survey_datum(pts.replace(xyz_m=z, classification=cls))
+    assert datum.water_level_m == pytest.approx(clean.water_level_m, abs=1e-9)
