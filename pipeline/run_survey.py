@@ -121,7 +121,7 @@ def _detector_model(scene, dt_s: float):
         noise_samples=n_noise,
         threshold_sigma=ps.detect.threshold_sigma,
         min_separation_fwhm=ps.detect.min_separation_fwhm,
-        group_index=ps.assumed_group_index or scene.water.group_index,
+        group_index=processing_context(scene).refraction.group_index,
         shot_noise_counts=shot,
     )
 
