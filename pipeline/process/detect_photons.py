@@ -64,7 +64,10 @@ class PhotonDetectSettings:
 
 def _significance(k: np.ndarray, b: np.ndarray, n_bins: int) -> np.ndarray:
     """Normal-σ equivalent of ``k`` Poisson counts over background ``b`` among ``n_bins`` bins."""
-    log_p = stats.poisson.logsf(k - 1, b) + math.log(n_bins)
+    # log P(X >= k) underflows to -inf for strong returns (all would tie at infinite σ):
+    # log P(X = k), its dominant term, keeps it finite and ordered
+    log_p = np.maximum(stats.poisson.logsf(k - 1, b), stats.poisson.logpmf(k, b))
+    log_p = log_p + math.log(n_bins)
     # ndtri_exp works on log p, so p-values far below float range keep a finite σ
     return np.where(log_p < 0, -special.ndtri_exp(np.minimum(log_p, -1e-300)), 0.0)
 
@@ -206,21 +209,19 @@ def detect_photon_events(
         flank_trend(hist, gap=cb + 1, length=s.trend_bins, valid=col < s_lo[:, None]),
         bg_safe[:, None],
     )
-    # ... and out of the emptiest bin between it and the surface: the falling tail of the
-    # surface echo has no such dip and so never passes as a bottom
-    upper = np.where(col < i_s[:, None], hist, np.inf)
-    suffix_min = np.minimum.accumulate(upper[:, ::-1], axis=1)[:, ::-1]
-    valley_min = np.concatenate([suffix_min[:, 1:], np.full((n_win, 1), np.inf)], axis=1)
-    local = np.maximum(local, np.where(np.isfinite(valley_min), valley_min, 0.0))
     # the candidate's box stops short of the surface box, so the surface tail is not counted
     hi_b = np.minimum(full + cb, s_lo[:, None] - 1)
     box_b = box_sum(full - cb, hi_b)
     n_b = np.maximum(hi_b - (full - cb) + 1, 1)
+    # ... and it must stand out of the emptiest bin between its box and the surface: the
+    # falling tail of the surface echo has no such dip and so never passes as a bottom
+    upper = np.where(col < i_s[:, None], hist, np.inf)
+    suffix_min = np.minimum.accumulate(upper[:, ::-1], axis=1)[:, ::-1]
+    suffix_min = np.concatenate([suffix_min, np.full((n_win, 1), np.inf)], axis=1)
+    valley_min = np.take_along_axis(suffix_min, np.clip(hi_b + 1, 0, nb), axis=1)
+    local = np.maximum(local, np.where(np.isfinite(valley_min), valley_min, 0.0))
     sig_all = _significance(box_b, local * n_b, nb)
     i_b = np.argmax(np.where(below, sig_all, -np.inf), axis=1)
-    # neighbouring candidates share the echo (equal sums): take the fullest bin of the box
-    in_b = (np.abs(col - i_b[:, None]) <= cb) & below
-    i_b = np.where(in_b.any(axis=1), np.argmax(np.where(in_b, hist, -1.0), axis=1), i_b)
     sig_s = np.where(has_s, sig_box[rows, i_s], 0.0)
     sig_b = np.where(has_s & below[rows, i_b], sig_all[rows, i_b], 0.0)
     has_b = has_s & (sig_b >= s.threshold_sigma)
