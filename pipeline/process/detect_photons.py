@@ -20,10 +20,11 @@ of ``shots_per_window`` consecutive shots:
    box) below the surface peak, tested against its local level: the larger flank mean of the
    water-column return (surface box left out), and the emptiest bin between it and the
    surface, so the falling tail of the surface echo is never a bottom. Closer than that, in
-   very shallow water (below ~0.2 m with 0.1 m bins and sub-ns pulses), surface and seabed
-   merge within the system response and the receiver dead time: no bottom is reported
-   rather than a split of the merged echo, and the surface is that echo's centroid (biased
-   down by up to half the depth). The significance is reported back in normal σ.
+   very shallow water (echoes under ~2 σ of their width apart, with no emptier bin between
+   them: below ~0.15-0.2 m for 0.1 m bins and sub-ns pulses), surface and seabed merge:
+   no bottom is reported rather than a split of the merged echo, and the surface is that
+   echo's centroid, pulled toward the brighter seabed (by up to the apparent depth). The
+   significance is reported back in normal σ.
 3. **Sub-bin height**: the background-subtracted centroid of the events within ±``centroid_bins``
    of the peak bin; with a bottom, surface and bottom centroids stop short of the emptiest bin
    between them.
