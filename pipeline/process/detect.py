@@ -124,7 +124,9 @@ def _confidence(snr: np.ndarray, threshold: float) -> np.ndarray:
     return 1.0 - np.exp(-0.5 * (np.maximum(snr, 0.0) / threshold) ** 4)
 
 
-def flank_trend(y: np.ndarray, gap: int, length: int) -> np.ndarray:
+def flank_trend(
+    y: np.ndarray, gap: int, length: int, valid: np.ndarray | None = None
+) -> np.ndarray:
     """Slow trend under narrow echoes: the mean of both flanks, ``gap`` samples away.
 
     At sample ``t`` the trend is the larger of the means of ``y`` over ``[t-gap-length, t-gap)``
@@ -132,16 +134,22 @@ def flank_trend(y: np.ndarray, gap: int, length: int) -> np.ndarray:
     ``gap`` does not raise its own trend, while the smooth water-column return is followed; the
     larger flank keeps the falling edge of the surface echo (whose earlier flank is high) from
     passing as a bottom. Running sums make it O(n_samples), unlike a running median.
+
+    ``valid`` (same shape as ``y``, bool), if given, leaves the other samples out of the flank
+    means (a flank with no valid sample takes the other side's mean).
     """
     n, m = y.shape
-    c = np.concatenate([np.zeros((n, 1)), np.cumsum(y, axis=1)], axis=1)
+    w = np.ones_like(y, dtype=float) if valid is None else valid.astype(float)
+    c = np.concatenate([np.zeros((n, 1)), np.cumsum(y * w, axis=1)], axis=1)
+    cw = np.concatenate([np.zeros((n, 1)), np.cumsum(w, axis=1)], axis=1)
     t = np.arange(m)
     l0, l1 = np.clip(t - gap - length, 0, m), np.clip(t - gap, 0, m)
     r0, r1 = np.clip(t + gap + 1, 0, m), np.clip(t + gap + 1 + length, 0, m)
-    left = (c[:, l1] - c[:, l0]) / np.maximum(l1 - l0, 1)
-    right = (c[:, r1] - c[:, r0]) / np.maximum(r1 - r0, 1)
-    left = np.where(l1 > l0, left, right)
-    right = np.where(r1 > r0, right, left)
+    n_left, n_right = cw[:, l1] - cw[:, l0], cw[:, r1] - cw[:, r0]
+    left = (c[:, l1] - c[:, l0]) / np.maximum(n_left, 1)
+    right = (c[:, r1] - c[:, r0]) / np.maximum(n_right, 1)
+    left = np.where(n_left > 0, left, right)
+    right = np.where(n_right > 0, right, left)
     return np.maximum(left, right)
 
 

@@ -5,15 +5,29 @@ accumulated along track. Each event is placed on its measured beam at the range 
 flight (``r = c t / (2 n_air)``, no refraction yet), and its height is histogrammed over a window
 of ``shots_per_window`` consecutive shots:
 
-1. **Background** per window: the mean count of the bins below the 90th percentile (returns
-   fill few bins, so they are left out).
-2. **Surface**: the highest-count bin; **bottom**: the highest-count bin at least
-   ``min_separation_m`` below the surface. Each is accepted when its count is significant over
-   the background: counts are Poisson, the p-value is ``P(X >= k | b)``, and it must beat the
-   one-sided normal tail of ``threshold_sigma`` divided by the number of bins searched (a
-   Bonferroni look-elsewhere correction). The significance is reported back in normal σ.
+1. **Background** per window (:func:`_background`): the larger of the mean of the bins below
+   the 90th percentile and the Poisson rate of the share of empty bins, both over the range
+   gate; the second keeps a sparse background (most bins empty) from being taken as zero.
+2. **Surface**: the FIRST significant return from above, not the strongest: at 532 nm a
+   shallow, bright seabed returns more photons than the water surface (off nadir, or with a
+   calm surface, many times more). A return is significant when the counts over its
+   ``2 centroid_bins + 1`` bins beat the background: counts are Poisson, the p-value is
+   ``P(X >= k | b)``, and it must beat the one-sided normal tail of ``threshold_sigma``
+   divided by the number of bins searched (a Bonferroni look-elsewhere correction). The peak
+   is then reached by climbing down from that box to the first local maximum, never past a
+   dip (which would lead into a seabed echo just below).
+   **Bottom**: the most significant return at least ``min_separation_m`` (and the surface's
+   box) below the surface peak, tested against its local level: the larger flank mean of the
+   water-column return (surface box left out), and the emptiest bin between it and the
+   surface, so the falling tail of the surface echo is never a bottom. Closer than that, in
+   very shallow water (echoes under ~2 σ of their width apart, with no emptier bin between
+   them: below ~0.15-0.2 m for 0.1 m bins and sub-ns pulses), surface and seabed merge:
+   no bottom is reported rather than a split of the merged echo, and the surface is that
+   echo's centroid, pulled toward the brighter seabed (by up to the apparent depth). The
+   significance is reported back in normal σ.
 3. **Sub-bin height**: the background-subtracted centroid of the events within ±``centroid_bins``
-   of the peak bin.
+   of the peak bin; with a bottom, surface and bottom centroids stop short of the emptiest bin
+   between them.
 4. Back to **per-shot times**: each shot of the window gets the time at which its own measured
    beam reaches the detected heights (``t = 2 n_air r / c``), so refraction correction then runs
    exactly as for full waveforms.
@@ -41,7 +55,9 @@ class PhotonDetectSettings:
 
     shots_per_window: int = setting(200, ge=1, le=10_000_000, doc="shots accumulated per window")
     bin_m: float = setting(0.1, gt=0.0, le=10.0, doc="height histogram bin")
-    threshold_sigma: float = setting(5.0, gt=0.0, le=100.0, doc="bottom significance, Poisson σ")
+    threshold_sigma: float = setting(
+        5.0, gt=0.0, le=100.0, doc="surface and bottom significance, Poisson σ"
+    )
     min_separation_m: float = setting(0.3, ge=0.0, le=100.0, doc="bottom below the surface by")
     centroid_bins: int = setting(2, ge=0, le=50, doc="bins each side used for the centroid")
     trend_bins: int = setting(20, ge=2, le=1000, doc="flank length of the column trend, bins")
@@ -49,9 +65,47 @@ class PhotonDetectSettings:
 
 def _significance(k: np.ndarray, b: np.ndarray, n_bins: int) -> np.ndarray:
     """Normal-σ equivalent of ``k`` Poisson counts over background ``b`` among ``n_bins`` bins."""
-    log_p = stats.poisson.logsf(k - 1, b) + math.log(n_bins)
+    # log P(X >= k) underflows to -inf for strong returns (all would tie at infinite σ):
+    # log P(X = k), its dominant term, keeps it finite and ordered
+    log_p = np.maximum(stats.poisson.logsf(k - 1, b), stats.poisson.logpmf(k, b))
+    log_p = log_p + math.log(n_bins)
     # ndtri_exp works on log p, so p-values far below float range keep a finite σ
     return np.where(log_p < 0, -special.ndtri_exp(np.minimum(log_p, -1e-300)), 0.0)
+
+
+def _background(hist: np.ndarray) -> np.ndarray:
+    """Background counts per bin of each window's histogram, robust to its few return bins.
+
+    Parameters
+    ----------
+    hist : (n_windows, n_bins) float
+        Event counts per window and height bin.
+
+    Returns
+    -------
+    (n_windows,) float
+        The larger of two estimates over the bins between the window's lowest and highest
+        event (the range gate; bins outside it hold no events at all): the mean of the bins
+        at or below the 90th percentile (returns fill few bins, so they are left out), and the
+        Poisson rate of the share of empty bins, ``-ln P(0)``. The first alone is far too low
+        when the background is sparse (then the 90th percentile is 0 and every lone photon
+        would pass as a return); the second, unaffected by the few bins returns fill, is
+        reliable exactly then, and saturates (no empty bins) only when the first is reliable.
+    """
+    nb = hist.shape[1]
+    col = np.arange(nb)[None, :]
+    nz = hist > 0
+    first = np.argmax(nz, axis=1)
+    last = nb - 1 - np.argmax(nz[:, ::-1], axis=1)
+    span = (col >= first[:, None]) & (col <= last[:, None])
+    n_span = np.maximum(span.sum(axis=1), 1)
+    q90 = np.quantile(np.where(span, hist, np.nan), 0.9, axis=1, method="lower")
+    q90 = np.nan_to_num(q90)  # windows without events
+    low = span & (hist <= q90[:, None])
+    trimmed = np.sum(np.where(low, hist, 0.0), axis=1) / np.maximum(low.sum(axis=1), 1)
+    empty = np.sum(span & ~nz, axis=1)
+    rate = -np.log(np.maximum(empty, 0.5) / n_span)
+    return np.maximum(trimmed, np.where(empty > 0, rate, 0.0))
 
 
 def detect_photon_events(
@@ -108,48 +162,90 @@ def detect_photon_events(
     nb = int((z.max() - z0) / s.bin_m) + 1
     b = np.minimum(((z - z0) / s.bin_m).astype(np.int64), nb - 1)
     hist = np.bincount(ev_win * nb + b, minlength=n_win * nb).reshape(n_win, nb).astype(float)
-    q90 = np.quantile(hist, 0.9, axis=1)
-    low = hist <= q90[:, None]
-    bg = np.sum(np.where(low, hist, 0.0), axis=1) / np.maximum(low.sum(axis=1), 1)
+    bg = _background(hist)
     bg_safe = np.maximum(bg, 1e-3)  # an empty background still has a finite p-value scale
     rows = np.arange(n_win)
-    i_s = np.argmax(hist, axis=1)
-    sep_bins = int(math.ceil(s.min_separation_m / s.bin_m))
-    # the bottom box (±centroid_bins) must not reach into the surface return
-    below = np.arange(nb)[None, :] <= (i_s - sep_bins - s.centroid_bins)[:, None]
-    # the water-column return decays smoothly below the surface: a bottom must stand out of
-    # its local level (the larger mean of the flanking bins), not only of the background
-    local = np.maximum(
-        flank_trend(hist, gap=s.centroid_bins + 1, length=s.trend_bins), bg_safe[:, None]
-    )
+    col = np.arange(nb)[None, :]
+    cb = s.centroid_bins
     # counts of a return spread over neighbouring bins: test the sum over the centroid window
-    w = 2 * s.centroid_bins + 1
     csum = np.concatenate([np.zeros((n_win, 1)), np.cumsum(hist, axis=1)], axis=1)
-    lo = np.clip(np.arange(nb) - s.centroid_bins, 0, nb)
-    hi = np.clip(np.arange(nb) + s.centroid_bins + 1, 0, nb)
-    box = csum[:, hi] - csum[:, lo]
-    sig_all = _significance(box, local * w, nb)
-    i_b = np.argmax(np.where(below, sig_all, -np.inf), axis=1)
-    sig_s = _significance(hist[rows, i_s], bg_safe, nb)
-    sig_b = np.where(below[rows, i_b], sig_all[rows, i_b], 0.0)
-    has_s = sig_s >= s.threshold_sigma
-    has_b = has_s & (sig_b >= s.threshold_sigma)
 
-    def centroid(i_peak):
-        lo = (i_peak - s.centroid_bins)[ev_win]
-        hi = (i_peak + s.centroid_bins)[ev_win]
+    def box_sum(lo, hi):
+        """Counts in bins ``[lo, hi]`` per window and bin (clipped to the histogram)."""
+        lo, hi = np.clip(lo, 0, nb), np.clip(hi + 1, 0, nb)
+        return np.take_along_axis(csum, hi, axis=1) - np.take_along_axis(
+            csum, np.minimum(lo, hi), axis=1
+        )
+
+    full = np.broadcast_to(col, (n_win, nb))
+    box = box_sum(full - cb, full + cb)
+    sig_box = _significance(box, bg_safe[:, None] * (2 * cb + 1), nb)
+    # Surface: the FIRST significant return from above (the highest bin), not the strongest:
+    # at 532 nm a shallow seabed can return more photons than the water surface.
+    top = np.where(sig_box >= s.threshold_sigma, col, -1).max(axis=1)
+    has_s = top >= 0
+    # its peak: from the highest bin of that box holding at least the box's mean count (a
+    # lone background photon above the echo does not), climb down while the counts do not
+    # fall, no further than one box length below the box (whose leading edge may alone
+    # have made it significant). The climb stops at the first dip, so a brighter seabed
+    # past it is not reached.
+    top0 = np.maximum(top, 0)
+    in_box = np.abs(col - top0[:, None]) <= cb
+    strong = in_box & (hist * (2 * cb + 1) >= box[rows, top0][:, None])
+    i_s = np.where(strong, col, 0).max(axis=1)
+    for _ in range(3 * cb):
+        step = (i_s > 0) & (i_s > top - 2 * cb)
+        step &= hist[rows, np.maximum(i_s - 1, 0)] >= hist[rows, i_s]
+        i_s = np.where(step, i_s - 1, i_s)
+    # Bottom: a return below the surface's box and at least min_separation_m below its peak.
+    # Closer (very shallow water), surface and bottom merge within the system response and
+    # dead time: no bottom is reported rather than a split of the surface echo.
+    sep_bins = max(int(math.ceil(s.min_separation_m / s.bin_m)), cb + 1)
+    s_lo = i_s - cb  # lowest bin of the surface box
+    below = col <= (i_s - sep_bins)[:, None]
+    # the water-column return decays smoothly below the surface: a bottom must stand out of
+    # its local level (the larger mean of the flanking bins, the surface box left out), not
+    # only of the background
+    local = np.maximum(
+        flank_trend(hist, gap=cb + 1, length=s.trend_bins, valid=col < s_lo[:, None]),
+        bg_safe[:, None],
+    )
+    # the candidate's box stops short of the surface box, so the surface tail is not counted
+    hi_b = np.minimum(full + cb, s_lo[:, None] - 1)
+    box_b = box_sum(full - cb, hi_b)
+    n_b = np.maximum(hi_b - (full - cb) + 1, 1)
+    # ... and it must stand out of the emptiest bin between its box and the surface: the
+    # falling tail of the surface echo has no such dip and so never passes as a bottom
+    upper = np.where(col < i_s[:, None], hist, np.inf)
+    suffix_min = np.minimum.accumulate(upper[:, ::-1], axis=1)[:, ::-1]
+    suffix_min = np.concatenate([suffix_min, np.full((n_win, 1), np.inf)], axis=1)
+    valley_min = np.take_along_axis(suffix_min, np.clip(hi_b + 1, 0, nb), axis=1)
+    local = np.maximum(local, np.where(np.isfinite(valley_min), valley_min, 0.0))
+    sig_all = _significance(box_b, local * n_b, nb)
+    i_b = np.argmax(np.where(below, sig_all, -np.inf), axis=1)
+    sig_s = np.where(has_s, sig_box[rows, i_s], 0.0)
+    sig_b = np.where(has_s & below[rows, i_b], sig_all[rows, i_b], 0.0)
+    has_b = has_s & (sig_b >= s.threshold_sigma)
+    # the centroids of surface and bottom stop at the emptiest bin between them
+    between = (col > i_b[:, None]) & (col < i_s[:, None])
+    valley = np.where(has_b, np.argmin(np.where(between, hist, np.inf), axis=1), -1)
+    s_box = (np.maximum(i_s - cb, valley + 1), i_s + cb)
+    b_box = (i_b - cb, np.minimum(i_b + cb, np.where(has_b, valley - 1, nb)))
+
+    def centroid(i_peak, box):
+        lo, hi = box[0][ev_win], box[1][ev_win]
         near = (b >= lo) & (b <= hi)
         # subtract the background's share, spread uniformly over the centroid bins
         w = np.bincount(ev_win[near], minlength=n_win).astype(float)
         zsum = np.bincount(ev_win[near], weights=z[near], minlength=n_win)
-        nbins = 2 * s.centroid_bins + 1
-        centre = z0 + (i_peak + 0.5) * s.bin_m
+        nbins = np.maximum(box[1] - box[0] + 1, 1)
+        centre = z0 + (box[0] + box[1] + 1) * 0.5 * s.bin_m
         excess = np.maximum(w - bg * nbins, 1e-9)
         zc = (zsum - bg * nbins * centre) / excess
-        return np.where(w > bg * nbins, zc, centre), w - bg * nbins
+        return np.where(w > bg * nbins, zc, z0 + (i_peak + 0.5) * s.bin_m), np.maximum(excess, 0.0)
 
-    z_s, amp_s = centroid(i_s)
-    z_b, amp_b = centroid(i_b)
+    z_s, amp_s = centroid(i_s, s_box)
+    z_b, amp_b = centroid(i_b, b_box)
     # per shot: time at which its own measured beam reaches the window's detected heights
     dz = direction[:, 2]
     with np.errstate(divide="ignore"):

@@ -55,3 +55,53 @@ def test_no_photons_at_all():
     d = np.tile([0.0, 0.0, -1.0], (10, 1))
     det = detect_photon_events(np.zeros(11, np.int64), np.zeros(0), o, d, N_AIR)
     assert not det.has_surface.any() and np.all(np.isfinite(det.t_surface_s))
+
+
+# --- shallow water: the seabed echo can be brighter than the surface echo ------------------
+# Heights are written here: the water surface at z = 0 under a nadir beam from H = 300 m, the
+# seabed D below it; in time the bottom lies 2 D n_g / c after the surface (no refraction at
+# nadir). The detector places events at z = H - c t / (2 n_air), so the true heights are
+# z_surface = 0 and z_bottom = -D n_g / n_air.
+@pytest.mark.parametrize("depth_m", [0.3, 0.5, 1.0, 2.0])
+def test_surface_is_the_first_return_when_the_seabed_is_brighter(depth_m):
+    # 0.5 surface and 1.5 seabed photons per shot: the seabed bin holds 3x the surface's
+    offsets, times, o, d, t_s, t_b = _events(
+        2000, depth_m, lam_s=0.5, lam_b=1.5, lam_bg=1.0, seed=int(100 * depth_m)
+    )
+    det = detect_photon_events(offsets, times, o, d, N_AIR, PhotonDetectSettings())
+    z_s = 300.0 - C * det.t_surface_s / (2 * N_AIR)
+    z_b = 300.0 - C * det.t_bottom_s / (2 * N_AIR)
+    assert det.has_surface.all()
+    # 100 surface photons of σ 7.5 cm per window: the centroid to ~1 cm; 4 cm allows 3σ and,
+    # at 0.3 m (echoes 0.41 m apart in range), the cut of the surface's lower tail at the
+    # emptiest bin before the seabed echo (up to ~10 % of its photons: ≤ 2 cm high)
+    assert np.abs(z_s).max() < 0.04
+    assert det.has_bottom.all()
+    assert np.abs(z_b + depth_m * N_G / N_AIR).max() < 0.03
+    depth = C * (det.t_bottom_s - det.t_surface_s) / (2 * N_G)
+    assert np.abs(depth - depth_m).max() < 0.04
+
+
+def test_merged_surface_and_bottom_give_no_bottom():
+    # D = 0.1 m: 0.14 m apart in range, under 2σ of the 7.5 cm echoes, and within the 0.3 m
+    # minimum separation: one merged echo. No bottom is reported rather than a wrong one, and
+    # the surface lies within the merged echo, between the true surface and the true bottom
+    offsets, times, o, d, *_ = _events(2000, 0.1, lam_s=0.5, lam_b=1.5, seed=5)
+    det = detect_photon_events(offsets, times, o, d, N_AIR)
+    z_s = 300.0 - C * det.t_surface_s / (2 * N_AIR)
+    assert det.has_surface.all() and not det.has_bottom.any()
+    assert np.all((z_s < 0.03) & (z_s > -0.1 * N_G / N_AIR - 0.03))
+
+
+def test_sparse_background_photons_above_the_surface_are_not_a_surface():
+    # 0.05 background photons per shot over a 100 m gate: about 0.01 per 0.1 m bin per window,
+    # so most bins are empty and a lone photon high above the water must not pass as a return
+    offsets, times, o, d, t_s, _ = _events(2000, 2.0, lam_s=0.5, lam_b=1.5, lam_bg=0.05, seed=3)
+    rng = np.random.default_rng(4)
+    # the gate reaches 50 m above the surface: spread the background over it
+    gate = rng.uniform(t_s - 330e-9, t_s + 40e-9, size=times.size)
+    times = np.where(rng.random(times.size) < 0.05 / 2.0, gate, times)
+    det = detect_photon_events(offsets, times, o, d, N_AIR)
+    z_s = 300.0 - C * det.t_surface_s / (2 * N_AIR)
+    assert det.has_surface.all()
+    assert np.abs(z_s).max() < 0.03
