@@ -28,6 +28,7 @@ import time
 
 import numpy as np
 
+from pipeline.process.context import processing_context
 from pipeline.process.detect import detect_full_waveform
 from pipeline.process.posterior import (
     PosteriorFlag,
@@ -36,7 +37,6 @@ from pipeline.process.posterior import (
     sample_batch,
 )
 from pipeline.process.waveform_model import WaveformSystem
-from pipeline.run_survey import _system_fwhm_s
 from pipeline.scene import load_scene
 from pipeline.simulate.flat_paths import flat_paths
 from pipeline.simulate.waveform import simulate_waveforms
@@ -53,7 +53,7 @@ def system_of(scene) -> WaveformSystem:
     det = scene.detector
     return WaveformSystem(
         sample_interval_s=1.0 / det.sample_rate_hz,
-        pulse_fwhm_s=_system_fwhm_s(scene),
+        pulse_fwhm_s=processing_context(scene).instrument.system_fwhm_s,
         group_index=scene.water.group_index,
         offset_counts=det.baseline_counts,
         counts_per_photoelectron=det.counts_per_photoelectron,

@@ -16,9 +16,9 @@ import math
 
 import numpy as np
 
+from pipeline.process.context import processing_context
 from pipeline.process.detect import detect_full_waveform
 from pipeline.process.returns import DetectorFlag
-from pipeline.run_survey import _system_fwhm_s
 from pipeline.scene import DEFAULT_SCENE_PATH, load_scene
 from pipeline.simulate.flat_paths import flat_paths
 from pipeline.simulate.waveform import simulate_waveforms
@@ -39,7 +39,7 @@ def main() -> None:
     )
     cos_w = math.sqrt(1 - (n_a * math.sin(theta) / n_w) ** 2)
     det = scene.detector
-    fwhm = _system_fwhm_s(scene)
+    fwhm = processing_context(scene).instrument.system_fwhm_s
     print(
         f"default system: pulse FWHM {scene.system.pulse_fwhm_s * 1e9:.2f} ns, system "
         f"{fwhm * 1e9:.2f} ns, {scene.scanner.off_nadir_deg:g} deg off nadir, "

@@ -28,8 +28,11 @@ import numpy as np
 from pipeline.process.context import processing_context
 from pipeline.process.grid import grid_seabed
 from pipeline.process.refraction import seabed_points
-from pipeline.run_survey import _uncertainty, process_detections, simulate_detections
+from pipeline.process.survey_points import process_detections
+from pipeline.process.survey_uncertainty import survey_uncertainty
+from pipeline.run_survey import simulate_detections
 from pipeline.scene import load_scene, parse_scene
+from pipeline.stages import StageClock, plan
 
 EDGES = (0.0, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 20.0, 30.0, 40.0)
 
@@ -49,7 +52,9 @@ def _simulate(scene, cache: Path | None):
     if cache is not None and cache.exists():
         with cache.open("rb") as f:
             return pickle.load(f)
-    sim = simulate_detections(scene, log=lambda s: None)
+    sim = simulate_detections(
+        scene, plan(scene), processing_context(scene), StageClock(), log=lambda s: None
+    )
     if cache is not None:
         with cache.open("wb") as f:
             pickle.dump(sim, f)
@@ -60,7 +65,7 @@ def _true_pulses(scene, sim, pulse_id):
     """True origins and directions of the given pulses (full-waveform: one row per pulse)."""
     from pipeline.simulate import survey
 
-    lines = sim["lines"]
+    lines = sim.lines
     out_o = np.empty((len(pulse_id), 3))
     out_d = np.empty((len(pulse_id), 3))
     order = np.argsort(pulse_id)
@@ -98,10 +103,10 @@ def process(scene, sim):
     """The bathymetric points, their TPU and the processed survey, as ``bathy run`` makes them."""
     ps = scene.process
     ctx = processing_context(scene)
-    processed, refr = process_detections(scene, sim["returns"], ctx)
+    processed = process_detections(sim.returns, ctx, ps.classify)
     grid = grid_seabed(processed.points, ps.grid_resolution_m)
-    unc = _uncertainty(scene, sim["returns"], processed, ctx, grid)
-    return unc, processed, refr, ctx.surface_fit
+    unc = survey_uncertainty(sim.returns, processed, ctx, grid)
+    return unc, processed, ctx.refraction, ctx.surface_fit
 
 
 def main(argv=None):
@@ -117,12 +122,12 @@ def main(argv=None):
     scene = _scene(a.scene, a.line_length, a.n_lines)
     t0 = time.perf_counter()
     sim = _simulate(scene, a.cache)
-    print(f"simulation {time.perf_counter() - t0:.1f} s, {len(sim['returns'])} pulses")
+    print(f"simulation {time.perf_counter() - t0:.1f} s, {len(sim.returns)} pulses")
     t1 = time.perf_counter()
     unc, processed, refr, fit = process(scene, sim)
     print(f"processing and uncertainty {time.perf_counter() - t1:.1f} s")
-    p40, tpu = unc["points40"], unc["tpu40"]
-    truth = sim["truth"]
+    p40, tpu = unc.points40, unc.tpu40
+    truth = sim.truth
     err = p40.depth_m - truth.depth_m(p40.xyz_m[:, 0], p40.xyz_m[:, 1])
     sig = tpu.sigma_depth_m
     d = p40.depth_m
@@ -169,9 +174,9 @@ def _truth_terms(scene, sim, refr, p40, err, sig, fit):
     """Realised depth error of the navigation: process again with the true navigation."""
     from pipeline.process.surface_fit import fit_water_surface
 
-    ret = sim["returns"]
+    ret = sim.returns
     o_true, d_true = _true_pulses(scene, sim, ret.pulse_id)
-    truth = sim["truth"]
+    truth = sim.truth
     order = np.argsort(ret.pulse_id)
     rows = order[np.searchsorted(ret.pulse_id[order], p40.pulse_id)]
     print("\n| reprocessed with | RMS error (m) | RMS of the change (m) |")

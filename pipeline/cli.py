@@ -1,4 +1,4 @@
-"""The ``bathy`` command line: ``bathy run [SCENE] [--out DIR]``, ``bathy validate SCENE``."""
+"""The ``bathy`` command line: ``run [SCENE] [--out DIR]``, ``validate``, ``plan``, ``keys``."""
 
 from __future__ import annotations
 
@@ -21,6 +21,8 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--out", default=None, help="output folder (default: out/<scene name>)")
     val = sub.add_parser("validate", help="check a scene file; exit 2 if it is invalid")
     val.add_argument("scene", help="scene TOML file")
+    pl = sub.add_parser("plan", help="the stages a scene runs, and why the others are left out")
+    pl.add_argument("scene", nargs="?", help="scene TOML file (default: built-in scene)")
     sub.add_parser("keys", help="list every scene key with its default, unit and bounds")
     return p
 
@@ -41,6 +43,12 @@ def main(argv: list[str] | None = None) -> int:
         scene = load_scene(path)
         if args.command == "validate":
             print(f"{path}: valid scene '{scene.scene.name}'")
+            return 0
+        if args.command == "plan":
+            from pipeline.stages import plan
+
+            print(f"bathy plan {path}: scene '{scene.scene.name}'")
+            print("\n".join(plan(scene).lines()))
             return 0
         from pipeline.run import run_scene
 

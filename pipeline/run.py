@@ -1,4 +1,4 @@
-"""Orchestration: the only place that knows the order of the stages."""
+"""Orchestration: the only place that knows the order of the stages; it runs the plan."""
 
 from __future__ import annotations
 
@@ -9,15 +9,15 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.outputs import profiler_report
 from pipeline.outputs.atomic import write_json
-from pipeline.scene import Scene, plan_stages
+from pipeline.scene import Scene
+from pipeline.stages import StageClock, plan
 
 __all__ = ["run_scene"]
 
 
 def run_scene(scene: Scene, out_dir: str | Path, log=print) -> dict[str, Any]:
-    """Run every stage the scene needs and write its outputs into ``out_dir``.
+    """Run exactly the stages the scene's plan selects and write its outputs into ``out_dir``.
 
     Parameters
     ----------
@@ -31,39 +31,48 @@ def run_scene(scene: Scene, out_dir: str | Path, log=print) -> dict[str, Any]:
     Returns
     -------
     dict
-        The manifest also written to ``out_dir/manifest.json``: files, stage timings, plan.
+        The manifest also written to ``out_dir/manifest.json``: the scene, the plan with each
+        stage's wall and CPU seconds, the files and the evaluation.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    plan = plan_stages(scene)
-    for stage, runs, reason in plan:
-        log(f"  {'run ' if runs else 'skip'} {stage:<18} {reason}")
-    timings = {}
+    the_plan = plan(scene)
+    for line in the_plan.lines():
+        log(line)
+    clock = StageClock()
     files: dict[str, Path] = {}
     t0 = time.perf_counter()
-    if scene.profiler is not None:
-        results = profiler_report.compute(scene)
-        timings["photon_budget+histograms_s"] = time.perf_counter() - t0
-        t1 = time.perf_counter()
-        files.update(profiler_report.write_report(scene, results, out))
-        timings["figures_s"] = time.perf_counter() - t1
-        b = results["budget"]
+    if the_plan.runs("photon_budget"):
+        from pipeline.outputs import profiler_report
+
+        with clock.stage("photon_budget"):
+            res = profiler_report.compute_budget(scene)
+        with clock.stage("photon_histograms"):
+            res.update(profiler_report.compute_histograms(scene))
+        with clock.stage("profiler_figures"):
+            files.update(
+                profiler_report.write_report(scene, profiler_report.ProfilerResults(res), out)
+            )
+        b = res["budget"]
         log(
             f"  surface: {b.surface_photons:.4g} photoelectrons/shot; "
             f"floor at {scene.seabed.depth_m:g} m: {b.floor_photons:.4g} photoelectrons/shot"
         )
     evaluation = None
-    if scene.flight is not None:
+    if the_plan.runs("terrain"):
         from pipeline.run_survey import run_survey
 
-        survey_files, survey_timings, evaluation = run_survey(scene, out, log)
+        survey_files, evaluation = run_survey(scene, the_plan, out, clock, log)
         files.update(survey_files)
-        timings.update(survey_timings)
+    stages = clock.to_dict()
     manifest = {
         "scene": scene.to_dict(),
-        "plan": [{"stage": s, "runs": r, "reason": why} for s, r, why in plan],
+        "plan": [
+            {"stage": s.name, "runs": s.runs, "reason": s.reason, **stages.get(s.name, {})}
+            for s in the_plan
+        ],
         "files": {k: str(v.name) for k, v in files.items()},
-        "timings_s": timings,
+        "timings_s": {"total_wall_s": time.perf_counter() - t0},
         "evaluation": evaluation,
         "versions": {"python": platform.python_version(), "numpy": np.__version__},
     }

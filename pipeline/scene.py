@@ -43,7 +43,6 @@ __all__ = [
     "Scene",
     "load_scene",
     "parse_scene",
-    "plan_stages",
     "DEFAULT_SCENE_PATH",
 ]
 
@@ -281,27 +280,3 @@ def load_scene(path: str | Path) -> Scene:
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{path} is not valid TOML: {exc}") from None
     return parse_scene(data, str(path))
-
-
-def plan_stages(scene: Scene) -> list[tuple[str, bool, str]]:
-    """The stages this scene needs, and why the others are left out.
-
-    Returns
-    -------
-    list of (stage, runs, reason)
-    """
-    prof = scene.profiler is not None
-    survey = scene.flight is not None
-    why_prof = "nadir profiler" if prof else "no [profiler] table"
-    why_survey = "survey scene ([flight])" if survey else "no [flight] table: not a survey"
-    return [
-        ("photon_budget", prof, f"{why_prof}: lidar equation along one path"),
-        ("photon_histograms", prof, f"{why_prof}: accumulate shots with background"),
-        ("terrain", survey, f"{why_survey}: seabed and water-surface truth and meshes"),
-        ("survey", survey, f"{why_survey}: flight lines, attitude, scanner, measured nav"),
-        ("trace", survey, f"{why_survey}: refracted ray paths to the seabed"),
-        ("receiver", survey, f"{why_survey}: waveforms or photon events per pulse"),
-        ("detect", survey, f"{why_survey}: surface and bottom returns from measured data"),
-        ("process", survey, f"{why_survey}: surface fit, refraction, classes, grid"),
-        ("evaluate", survey, f"{why_survey}: points and grid against the truth"),
-    ]

@@ -2,8 +2,7 @@
 
 import numpy as np
 
-from pipeline.run_survey import kept_for_posterior
-from pipeline.survey_posterior import choose_points
+from pipeline.process.posterior_selection import choose_points, kept_for_posterior
 
 
 def test_kept_share_matches_the_fraction_and_ignores_chunking():
@@ -40,9 +39,9 @@ def test_choose_points_takes_the_cells_that_matter_first_and_stays_bounded():
 def test_posterior_budget_is_per_km2_with_a_floor():
     import dataclasses
 
+    from pipeline.process.posterior_selection import posterior_budget
     from pipeline.process.settings import ProcessSettings
     from pipeline.scene import load_scene
-    from pipeline.survey_posterior import posterior_budget
 
     from .conftest import ROOT
 
@@ -51,14 +50,8 @@ def test_posterior_budget_is_per_km2_with_a_floor():
     scene = load_scene(ROOT / "pipeline" / "scenes" / "default.toml")
     assert scene.process.posterior_pulses_per_km2 == 0.0  # the demo: the minimum only
     ps = dataclasses.replace(scene.process, posterior_pulses_per_km2=2000.0)
-    scene = dataclasses.replace(scene, process=ps)
-    assert posterior_budget(scene, 1.0) == 2000
-    assert posterior_budget(scene, 0.01) == 48  # 20 by density: the floor
-    none = dataclasses.replace(
-        scene, process=dataclasses.replace(ps, posterior_pulses_per_km2=0.0, posterior_min_pulses=0)
-    )
-    assert posterior_budget(none, 1.0) == 0
-    photon = dataclasses.replace(
-        scene, detector=dataclasses.replace(scene.detector, mode="photon_counting")
-    )
-    assert posterior_budget(photon, 1.0) == 0
+    assert posterior_budget(ps, False, 1.0) == 2000
+    assert posterior_budget(ps, False, 0.01) == 48  # 20 by density: the floor
+    none = dataclasses.replace(ps, posterior_pulses_per_km2=0.0, posterior_min_pulses=0)
+    assert posterior_budget(none, False, 1.0) == 0
+    assert posterior_budget(ps, True, 1.0) == 0  # photon counting: no waveform

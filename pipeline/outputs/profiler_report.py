@@ -28,23 +28,29 @@ class ProfilerResults(dict):
 
 def compute(scene) -> ProfilerResults:
     """Run the profiler stages: transmittance, budget, ideal times, simulated histograms."""
+    return ProfilerResults(**compute_budget(scene), **compute_histograms(scene))
+
+
+def compute_budget(scene) -> dict[str, Any]:
+    """The photon-budget stage: transmittance, budget against depth, ideal times."""
     prof = scene.profiler
     depths = np.geomspace(*prof.depth_sweep_m, 200)
+    return {
+        "transmittance": profiler.transmittance_profile(scene),
+        "sweep": profiler.budget_vs_depth(scene, depths),
+        "ideal": profiler.ideal_times(scene, depths),
+        "budget": le.nadir_budget(scene, prof.altitude_m, scene.seabed.depth_m),
+    }
+
+
+def compute_histograms(scene) -> dict[str, Any]:
+    """The histogram stage: the expected and the simulated accumulated histograms."""
     gate = profiler.range_gate(scene)
-    expected = profiler.expected_histogram(scene, gate)
     hists = {}
-    for i, n_shots in enumerate(prof.shot_counts):
+    for i, n_shots in enumerate(scene.profiler.shot_counts):
         rng = np.random.default_rng([scene.scene.seed, 17, i])
         hists[n_shots] = profiler.simulate_histogram(scene, gate, n_shots, rng)
-    return ProfilerResults(
-        transmittance=profiler.transmittance_profile(scene),
-        sweep=profiler.budget_vs_depth(scene, depths),
-        ideal=profiler.ideal_times(scene, depths),
-        budget=le.nadir_budget(scene, prof.altitude_m, scene.seabed.depth_m),
-        gate=gate,
-        expected=expected,
-        histograms=hists,
-    )
+    return {"gate": gate, "expected": profiler.expected_histogram(scene, gate), "histograms": hists}
 
 
 def _floor_detection(res: ProfilerResults, fwhm_s: float) -> dict[str, Any]:

@@ -16,6 +16,7 @@ The water indices are an assumption, not a record: by default processing assumes
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,7 +26,7 @@ from pipeline.process.refraction import RefractionSettings
 from pipeline.process.surface_fit import SurfaceFitSettings
 from pipeline.process.tpu import TpuSettings
 
-__all__ = ["ProcessingContext", "processing_context"]
+__all__ = ["Instrument", "ProcessingContext", "instrument", "processing_context"]
 
 #: ``process.tpu`` keys taken over from the scene's instrument description when left unset:
 #: key -> (dotted scene key, function of the scene giving the value).
@@ -55,6 +56,65 @@ _TPU_FROM_SCENE = {
 
 
 @dataclass(frozen=True)
+class Instrument:
+    """What processing knows of the receiver: its datasheet and its range gate.
+
+    Attributes
+    ----------
+    mode : str
+        ``"full_waveform"`` or ``"photon_counting"``.
+    system_fwhm_s : float
+        FWHM of the system response (transmitted pulse ⊗ detector impulse response).
+    sample_interval_s : float
+        Digitiser sample interval.
+    noise_samples : int
+        Leading samples of a waveform that hold noise only: the gate opens ``pre_trigger_s``
+        before the first echo, less two system FWHM so the echo's leading edge stays out.
+    shot_noise_counts : float
+        The detector's excess-noise factor × counts per photoelectron (signal-dependent noise).
+    window_s, pre_trigger_s : float
+        Recording window and how long before the first echo it opens.
+    air_index : float
+        Index of air for the air range (the surface fit's).
+    shots_per_window : int
+        Photon counting: shots accumulated per detection window (one sounding).
+    """
+
+    mode: str
+    system_fwhm_s: float
+    sample_interval_s: float
+    noise_samples: int
+    shot_noise_counts: float
+    window_s: float
+    pre_trigger_s: float
+    air_index: float
+    shots_per_window: int
+
+    @property
+    def photon_counting(self) -> bool:
+        """True for a photon-counting receiver."""
+        return self.mode == "photon_counting"
+
+
+def instrument(scene, air_index: float) -> Instrument:
+    """The receiver as the scene's ``[system]`` and ``[detector]`` records describe it."""
+    det = scene.detector
+    fwhm = math.hypot(scene.system.pulse_fwhm_s, det.impulse_response_fwhm_s)
+    quiet_s = det.pre_trigger_s - 2.0 * fwhm
+    return Instrument(
+        mode=det.mode,
+        system_fwhm_s=fwhm,
+        sample_interval_s=1.0 / det.sample_rate_hz,
+        noise_samples=max(4, int(quiet_s * det.sample_rate_hz)),
+        shot_noise_counts=det.excess_noise_factor * det.counts_per_photoelectron,
+        window_s=det.window_s,
+        pre_trigger_s=det.pre_trigger_s,
+        air_index=air_index,
+        shots_per_window=scene.process.photon_detect.shots_per_window,
+    )
+
+
+@dataclass(frozen=True)
 class ProcessingContext:
     """Resolved processing assumptions: every value a processing stage uses from outside the data.
 
@@ -67,6 +127,8 @@ class ProcessingContext:
     refraction : RefractionSettings
         The water's phase and group index processing assumes, and the navigation sigmas of
         the a-priori point uncertainties (the TPU's).
+    instrument : Instrument
+        The receiver, its response and its gate.
     sources : dict of str to str
         For each resolved key, ``"user"`` or the scene key or model it came from.
     """
@@ -74,6 +136,7 @@ class ProcessingContext:
     tpu: TpuSettings
     surface_fit: SurfaceFitSettings
     refraction: RefractionSettings
+    instrument: Instrument
     sources: dict[str, str]
 
     def to_dict(self) -> dict[str, Any]:
@@ -83,6 +146,7 @@ class ProcessingContext:
                 "tpu": dataclasses.asdict(self.tpu),
                 "surface_fit": dataclasses.asdict(self.surface_fit),
                 "refraction": dataclasses.asdict(self.refraction),
+                "instrument": dataclasses.asdict(self.instrument),
             },
             "sources": dict(self.sources),
         }
@@ -140,4 +204,10 @@ def processing_context(scene) -> ProcessingContext:
         position_sigma_h_m=tpu.position_sigma_h_m,
         position_sigma_v_m=tpu.position_sigma_v_m,
     )
-    return ProcessingContext(tpu=tpu, surface_fit=fit, refraction=refr, sources=sources)
+    return ProcessingContext(
+        tpu=tpu,
+        surface_fit=fit,
+        refraction=refr,
+        instrument=instrument(scene, fit.air_index),
+        sources=sources,
+    )

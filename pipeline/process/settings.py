@@ -10,7 +10,7 @@ from pipeline.process.datum import DatumSettings
 from pipeline.process.detect import DetectSettings
 from pipeline.process.detect_photons import PhotonDetectSettings
 from pipeline.process.detection_limit import NoBottomSettings
-from pipeline.process.posterior import PosteriorSettings
+from pipeline.process.posterior_settings import PosteriorSettings
 from pipeline.process.surface_fit import SurfaceFitSettings
 from pipeline.process.tpu import TpuSettings
 
@@ -44,6 +44,11 @@ class ProcessSettings:
         ge=1.0,
         le=2.0,
         doc="water group index processing assumes (None: Quan & Fry sea water)",
+    )
+    water_column_points: str = setting(
+        "auto",
+        choices=("auto", "on", "off"),
+        doc="class 64 points of in-column returns; auto: when the scene has a scattering layer",
     )
     tpu: TpuSettings = setting(
         TpuSettings(

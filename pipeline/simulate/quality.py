@@ -43,21 +43,18 @@ def return_stats(comps: Components, ctype: np.ndarray, t, present=None):
     return tot, mu, np.sqrt(var)
 
 
-def pulse_flags(budget: ReturnBudget, detector, comps=None, ctype=None) -> np.ndarray:
+def pulse_flags(budget: ReturnBudget, detector, comps, ctype) -> np.ndarray:
     """Per-pulse quality flags from the expected returns (receiver saturation excepted).
 
     A return's detection SNR is ``N / sqrt(F (N + B) + n_s (sigma_e / G)^2)`` with ``B`` the
     background and column photoelectrons and ``n_s`` the samples within ``+-2 sigma`` of it
-    (``F = 1`` and no electronic noise for photon counting).
+    (``F = 1`` and no electronic noise for photon counting). ``comps``, ``ctype``: the pulses'
+    components (:func:`pipeline.simulate.waveform.build_components`).
 
     Returns
     -------
     (n_pulses,) uint16
     """
-    if comps is None:
-        from pipeline.simulate.waveform import build_components  # waveform imports this module
-
-        comps, ctype = build_components(budget)
     fl = budget.subray_flags
     pc = detector.mode == "photon_counting"
     f = 1.0 if pc else detector.excess_noise_factor

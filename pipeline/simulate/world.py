@@ -28,6 +28,7 @@ __all__ = [
     "PeriodicCaster",
     "build_truth",
     "build_world",
+    "wave_surface",
 ]
 
 FEATURE_KINDS = ("cube", "wreck", "ridge", "channel")
@@ -140,11 +141,12 @@ def _feature(f: FeatureSettings):
     return terrain.channel(f.x_m, f.y_m, h, f.height_m, f.width_m, length_m=f.length_m)
 
 
-def build_truth(scene, extent_m: tuple[float, float, float, float]) -> Truth:
+def build_truth(scene, extent_m: tuple[float, float, float, float], water=None) -> Truth:
     """The scene's seabed and water surface over ``extent_m`` = (xmin, xmax, ymin, ymax).
 
     Random parts (roughness, waves) are seeded from the scene seed, so the truth is the same
-    for every run of the scene.
+    for every run of the scene. ``water``: the wave surface already synthesised
+    (:func:`wave_surface`), for a wave scene whose waves are a stage of their own.
     """
     import terrain
 
@@ -196,9 +198,14 @@ def build_truth(scene, extent_m: tuple[float, float, float, float]) -> Truth:
     seabed = parts[0] if len(parts) == 1 else terrain.compose(*parts)
     if ws.kind == "flat":
         water = terrain.FlatWater(level)
-    else:
-        water = _wave_field(scene).at_time(0.0)
+    elif water is None:
+        water = wave_surface(scene)
     return Truth(seabed=seabed, water=water, frame=frame)
+
+
+def wave_surface(scene):
+    """The scene's wind sea (``water_surface.kind = 'waves'``) at t = 0: a periodic surface."""
+    return _wave_field(scene).at_time(0.0)
 
 
 def _wave_field(scene):

@@ -1,0 +1,144 @@
+"""Per-pulse no-bottom limits of a full-waveform survey, chunk by chunk then once per survey.
+
+:func:`chunk_inputs` keeps, of each chunk's waveforms (then dropped), what the class-45
+detection limit needs (:mod:`pipeline.process.detection_limit`); :func:`no_bottom_limits` fits
+the bottoms' extra decay once over the whole survey, so the limits do not depend on the
+chunking, and gives every pulse's ``t_no_bottom_s``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from pipeline.optics import SPEED_OF_LIGHT_M_S
+from pipeline.process.context import ProcessingContext
+from pipeline.process.detect import DetectSettings
+from pipeline.process.detection_limit import (
+    ColumnMargins,
+    DetectorModel,
+    NoBottomSettings,
+    bottom_losses,
+    column_margins,
+    excess_decay_per_s,
+    limit_after_surface_s,
+)
+from pipeline.process.returns import DetectedReturns
+
+__all__ = ["detector_model", "chunk_inputs", "no_bottom_limits"]
+
+
+def detector_model(ctx: ProcessingContext, detect: DetectSettings) -> DetectorModel:
+    """The full-waveform detector as the class-45 limit needs it."""
+    ins = ctx.instrument
+    return DetectorModel(
+        dt_s=ins.sample_interval_s,
+        pulse_fwhm_s=ins.system_fwhm_s,
+        noise_samples=ins.noise_samples,
+        threshold_sigma=detect.threshold_sigma,
+        min_separation_fwhm=detect.min_separation_fwhm,
+        group_index=ctx.refraction.group_index,
+        shot_noise_counts=ins.shot_noise_counts,
+    )
+
+
+def chunk_inputs(
+    samples: np.ndarray,
+    found: DetectedReturns,
+    ctx: ProcessingContext,
+    detect: DetectSettings,
+    settings: NoBottomSettings,
+) -> dict[str, np.ndarray]:
+    """What the limit needs of one chunk's waveforms.
+
+    Parameters
+    ----------
+    samples : (n_pulses, n_samples) array
+        The chunk's waveforms.
+    found : DetectedReturns
+        Their detections, times from sample 0.
+    ctx, detect, settings
+        Processing context, detector and no-bottom settings.
+
+    Returns
+    -------
+    dict
+        The column margins of the pulses with a surface and no bottom
+        (:func:`~pipeline.process.detection_limit.column_margins`; zeros elsewhere) and the
+        losses of the well-detected bottoms, SNR ≥ 2 × threshold
+        (:func:`~pipeline.process.detection_limit.bottom_losses`).
+    """
+    det = detector_model(ctx, detect)
+    n = found.has_surface.shape[0]
+    none = found.has_surface & ~found.has_bottom
+    margin, alpha, t_max = np.zeros(n), np.ones(n), np.zeros(n)
+    ok = np.zeros(n, dtype=bool)
+    if none.any():
+        cm = column_margins(
+            samples[none], found.t_surface_s[none], found.noise_sigma[none], det, settings
+        )
+        margin[none], alpha[none], t_max[none], ok[none] = (
+            cm.log_margin,
+            cm.alpha_per_s,
+            cm.t_max_s,
+            cm.ok,
+        )
+    # a bottom near the threshold is found only where it happened to be bright: its loss would
+    # bias the extra decay low, so only clear detections are used
+    strong = found.has_bottom & (
+        found.bottom_amplitude >= 2.0 * detect.threshold_sigma * found.noise_sigma
+    )
+    t_b, loss, ok_b = bottom_losses(
+        samples[strong],
+        found.t_surface_s[strong],
+        found.t_bottom_s[strong],
+        found.bottom_amplitude[strong],
+        found.noise_sigma[strong],
+        det,
+        settings,
+    )
+    return {
+        "none": none,
+        "margin": margin,
+        "alpha": alpha,
+        "t_max": t_max,
+        "ok": ok,
+        "t_b": t_b[ok_b],
+        "loss": loss[ok_b],
+    }
+
+
+def no_bottom_limits(
+    inputs: list[dict[str, np.ndarray]],
+    t_surface_s: np.ndarray,
+    ctx: ProcessingContext,
+    detect: DetectSettings,
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """``t_no_bottom_s`` from emission of every pulse (0 where none), and a summary.
+
+    Parameters
+    ----------
+    inputs : list of dict
+        :func:`chunk_inputs` of every chunk, in pulse order.
+    t_surface_s : (n_pulses,) float
+        Surface times from emission.
+    """
+    cat = {k: np.concatenate([d[k] for d in inputs]) for k in inputs[0]}
+    delta = excess_decay_per_s(cat["t_b"], cat["loss"])
+    det = detector_model(ctx, detect)
+    margins = ColumnMargins(
+        log_margin=cat["margin"],
+        alpha_per_s=cat["alpha"],
+        t_max_s=cat["t_max"],
+        ok=cat["ok"],
+        t_min_s=det.min_separation_fwhm * det.pulse_fwhm_s,
+    )
+    t = limit_after_surface_s(margins, delta)
+    summary = {
+        "excess_decay_per_m": delta * 2.0 * det.group_index / SPEED_OF_LIGHT_M_S,
+        "bottoms_used": int(cat["t_b"].size),
+        "pulses_with_limit": int(np.count_nonzero(t > 0.0)),
+        "pulses_without_measurable_column": int(np.count_nonzero(cat["none"] & ~cat["ok"])),
+    }
+    return np.where(t > 0.0, t_surface_s + t, 0.0), summary

@@ -1,0 +1,100 @@
+"""A survey's classified points from its detections: measured data and the context only.
+
+Surface fit, refraction correction and classes (:func:`~pipeline.process.refraction.
+georeference`), then the no-bottom-found-at points (:func:`no_bottom_points`) and the
+water-column points (:func:`~pipeline.process.water_column.add_water_column_points`, only
+where the plan runs them).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from pipeline.process.classify import NO_BOTTOM_FOUND_AT, ClassifySettings
+from pipeline.process.context import ProcessingContext
+from pipeline.process.refraction import ProcessedPoints, georeference, seabed_points
+from pipeline.process.returns import DetectedReturns, PointFlag, Points
+
+__all__ = ["process_detections", "no_bottom_points"]
+
+
+def process_detections(
+    returns: DetectedReturns,
+    ctx: ProcessingContext,
+    classify: ClassifySettings,
+    *,
+    water_column: bool = True,
+) -> ProcessedPoints:
+    """Points from the detections, as ``bathy run`` makes them.
+
+    Parameters
+    ----------
+    returns : DetectedReturns
+        The survey's detections and measured navigation, ``(n_pulses,)`` per field.
+    ctx : ProcessingContext
+        What processing assumes (:func:`pipeline.process.context.processing_context`).
+    classify : ClassifySettings
+        LAS class rules.
+    water_column : bool
+        Add the class-64 points of in-column returns (the detector reports them).
+
+    Returns
+    -------
+    ProcessedPoints
+        The fitted surface, the classified points (surface, bottom, class 45, class 64) and the
+        uncorrected bottoms.
+    """
+    from pipeline.process.water_column import add_water_column_points
+
+    processed = georeference(
+        returns,
+        surface_settings=ctx.surface_fit,
+        refraction_settings=ctx.refraction,
+        classify_settings=classify,
+    )
+    processed = dataclasses.replace(
+        processed,
+        points=Points.concatenate([processed.points, no_bottom_points(returns, processed, ctx)]),
+    )
+    if water_column:
+        processed = add_water_column_points(processed, returns, ctx.refraction, classify)
+    return processed
+
+
+def no_bottom_points(
+    returns: DetectedReturns, processed: ProcessedPoints, ctx: ProcessingContext
+) -> Points:
+    """ASPRS class 45 "no-bottom-found-at" points of the water pulses that have no bottom.
+
+    Each is placed, along the refracted beam, at the pulse's detection limit
+    (``returns.t_no_bottom_s``, :mod:`pipeline.process.detection_limit`): the depth down to which
+    a bottom of the assumed reflectance would have been detected, so the absence of a bottom is
+    established there and no deeper. A full-waveform pulse whose column gave no limit (too weak
+    or too short to measure its decay: over land, or a bottom merged with the surface in a metre
+    of water) establishes nothing and gets no point. Photon-counting detections carry no limit
+    (``t_no_bottom_s`` None): theirs stays the end of the recorded window, which the range gate
+    fixes ``window_s − pre_trigger_s`` after the surface echo (system knowledge).
+    """
+    ins = ctx.instrument
+    none = returns.has_surface & ~returns.has_bottom
+    t_end = returns.t_surface_s + (ins.window_s - ins.pre_trigger_s)
+    if returns.t_no_bottom_s is not None:
+        none &= returns.t_no_bottom_s > 0.0
+        t_end = returns.t_no_bottom_s
+    probe = dataclasses.replace(
+        returns,
+        has_bottom=none,
+        t_bottom_s=np.where(none, t_end, 0.0),
+        bottom_confidence=np.where(none, 1.0, 0.0),
+        bottom_amplitude=None,
+        t_bottom_sigma_s=None,
+        t_no_bottom_s=None,
+    )
+    pts = seabed_points(probe, processed.surface, ctx.refraction)
+    bad = PointFlag.LAND | PointFlag.GRAZING | PointFlag.ABOVE_SURFACE
+    pts = pts.select((pts.flags & np.uint16(bad)) == 0)
+    return pts.replace(
+        classification=np.full(pts.pulse_id.shape, NO_BOTTOM_FOUND_AT, dtype=np.uint8)
+    )

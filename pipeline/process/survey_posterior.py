@@ -1,0 +1,144 @@
+"""Depth posteriors of a bounded sample of a survey's bathymetric points (``bathy run``).
+
+The chunk loop keeps the waveforms of a fixed share of the pulses
+(:func:`~pipeline.process.posterior_selection.kept_for_posterior`);
+here, once the points, their TPU and the cells exist, :func:`posterior_budget` of the kept
+bathymetric points are chosen, first in the cells that matter
+(:func:`pipeline.process.cell_uncertainty.select_posterior_pulses`: the IHO order could flip,
+or a flagged point), then evenly among the rest, and their emcee posteriors are sampled and
+carried through refraction onto the seabed point
+(:func:`pipeline.process.seabed_posterior.seabed_posteriors`). Cost: the budget times about
+0.3-0.5 s (about 15 min per km² at the default 2000/km²), linear in the area, bounded per km².
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.process.cell_uncertainty import select_posterior_pulses
+from pipeline.process.context import ProcessingContext
+from pipeline.process.grid import Grid
+from pipeline.process.posterior_selection import (
+    KeptWaveforms,
+    choose_points,
+    posterior_budget,
+    sounded_area_km2,
+)
+from pipeline.process.refraction import ProcessedPoints
+from pipeline.process.returns import DetectedReturns
+from pipeline.process.seabed_posterior import SeabedPosteriors, seabed_posteriors, take_surface
+from pipeline.process.survey_uncertainty import SurveyUncertainty
+from pipeline.process.waveform_model import WaveformSystem
+
+__all__ = ["SurveyPosteriors", "waveform_system", "survey_posteriors"]
+
+
+@dataclass(frozen=True)
+class SurveyPosteriors:
+    """The posterior stage's result.
+
+    ``posteriors`` (None when every candidate had an in-column return), ``point_index`` rows of
+    ``points40`` sampled, ``cost_s`` and ``skipped_column``.
+    """
+
+    posteriors: SeabedPosteriors | None
+    point_index: np.ndarray
+    cost_s: float
+    skipped_column: int
+
+
+def waveform_system(scene, ctx: ProcessingContext) -> WaveformSystem:
+    """The instrument as the processing knows it: the scene's system and detector values.
+
+    Nothing of the water or the seabed: those are the posterior's parameters, but for the
+    group index, the one processing assumes (:class:`~pipeline.process.context.
+    ProcessingContext`).
+    """
+    det = scene.detector
+    return WaveformSystem(
+        sample_interval_s=ctx.instrument.sample_interval_s,
+        pulse_fwhm_s=ctx.instrument.system_fwhm_s,
+        group_index=ctx.refraction.group_index,
+        offset_counts=det.baseline_counts,
+        counts_per_photoelectron=det.counts_per_photoelectron,
+        excess_noise_factor=det.excess_noise_factor,
+        electronic_noise_counts=det.electronic_noise_counts,
+    )
+
+
+def survey_posteriors(
+    scene,
+    returns: DetectedReturns,
+    kept: KeptWaveforms | None,
+    processed: ProcessedPoints,
+    ctx: ProcessingContext,
+    unc: SurveyUncertainty,
+    grid: Grid,
+) -> SurveyPosteriors | None:
+    """Sample the depth posteriors of up to :func:`posterior_budget` bathymetric points.
+
+    Parameters
+    ----------
+    scene : Scene
+        Only ``process`` settings, ``detector`` records and the seed are read.
+    returns : DetectedReturns
+        The survey's detections, ``(n_pulses,)`` per field.
+    kept : KeptWaveforms or None
+        The waveforms the chunk loop kept.
+    processed : ProcessedPoints
+        Georeferenced points and the fitted surface (one row per pulse of ``returns``).
+    ctx : ProcessingContext
+        What processing assumes (:func:`pipeline.process.context.processing_context`).
+    unc : SurveyUncertainty
+        ``points40``, ``tpu40`` and ``cells`` of the uncertainty stage.
+    grid : Grid
+
+    Returns
+    -------
+    SurveyPosteriors or None
+        None when nothing is sampled (a zero budget or no kept waveform of a bathymetric
+        point); ``skipped_column`` counts kept points left out for an in-column return, which
+        the posterior's model lacks.
+    """
+    ps = scene.process
+    n = posterior_budget(ps, ctx.instrument.photon_counting, sounded_area_km2(grid))
+    if kept is None or n == 0:
+        return None
+    pts = unc.points40
+    ret = returns
+    # the posterior's waveform model has no in-column echo (a scattering layer): pulses with
+    # one would be sampled under a wrong model, so they are left out and counted
+    if ret.has_column is not None and ret.has_column.any():
+        pid_kept = np.setdiff1d(kept.pulse_id, ret.pulse_id[ret.has_column])
+    else:
+        pid_kept = kept.pulse_id
+    cand = np.flatnonzero(np.isin(pts.pulse_id, pid_kept))
+    n_column = int(np.count_nonzero(np.isin(pts.pulse_id, kept.pulse_id))) - cand.size
+    if cand.size == 0:
+        return SurveyPosteriors(None, cand, 0.0, n_column)
+    preferred = select_posterior_pulses(
+        grid, unc.cells, unc.tpu40, max_pulses=max(n, 1), seed=scene.scene.seed
+    )
+    sel = choose_points(cand, preferred, n, scene.scene.seed)
+    pid = pts.pulse_id[sel]
+    order = np.argsort(ret.pulse_id)
+    rows = order[np.searchsorted(ret.pulse_id[order], pid)]
+    korder = np.argsort(kept.pulse_id)
+    krows = korder[np.searchsorted(kept.pulse_id[korder], pid)]
+    t0 = time.perf_counter()
+    post: SeabedPosteriors = seabed_posteriors(
+        kept.samples[krows].astype(np.float64),
+        kept.t0_s[krows],
+        ret.select(rows),
+        take_surface(processed.surface, rows),
+        waveform_system(scene, ctx),
+        ps.posterior,
+        ctx.refraction,
+        seed=scene.scene.seed,
+        detect_settings=ps.detect,
+        detect_noise=(ctx.instrument.noise_samples, ctx.instrument.shot_noise_counts),
+    )
+    return SurveyPosteriors(post, sel, time.perf_counter() - t0, n_column)

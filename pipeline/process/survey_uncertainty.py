@@ -1,0 +1,208 @@
+"""A survey's propagated uncertainty: TPU of its bathymetric points, per cell, IHO orders.
+
+Measured data and the :class:`~pipeline.process.context.ProcessingContext` only: the seabed
+gradient under every bottom point (which couples the horizontal errors into the depth compared
+at the measured position) is a local plane through the neighbouring bathymetric soundings
+(:func:`~pipeline.process.tpu.seabed_gradient`); the water plane's tilt uncertainty is the
+larger of the fit's and the one measured over the soundings
+(:func:`~pipeline.process.tpu.surface_tilt_sigma`). When the detector reports no per-return
+timing sigma, the timing terms are set from the scatter of successive soundings
+(:func:`~pipeline.process.tpu.pair_scatter`, :func:`~pipeline.process.tpu.timing_from_scatter`).
+A photon-counting window's shots share one detection: they count as one sounding. Pulses the
+TPU cannot propagate are left out, flagged ``NO_TPU`` and counted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from pipeline import iho
+from pipeline.process.cell_uncertainty import CellUncertainty, cell_uncertainty
+from pipeline.process.classify import BATHYMETRIC_POINT
+from pipeline.process.context import ProcessingContext
+from pipeline.process.grid import Grid
+from pipeline.process.refraction import ProcessedPoints, seabed_points
+from pipeline.process.returns import DetectedReturns, PointFlag, Points, ReturnKind
+from pipeline.process.tpu import (
+    PointTpu,
+    pair_scatter,
+    point_tpu,
+    seabed_gradient,
+    surface_tilt_sigma,
+    timing_from_scatter,
+)
+
+__all__ = ["SurveyUncertainty", "survey_uncertainty", "with_tpu", "with_posteriors", "take_tpu"]
+
+
+@dataclass(frozen=True)
+class SurveyUncertainty:
+    """The uncertainty stage's result.
+
+    Attributes
+    ----------
+    tpu40 : PointTpu
+        TPU of the bathymetric points that have one, in the order of ``points40``.
+    points40 : Points
+        Those points (class 40 bottoms the TPU propagated).
+    is40 : (n_points,) bool
+        Where ``points40`` sit among all the survey's points.
+    no_tpu : (n_points,) bool
+        Bathymetric points the TPU left out (they keep the a-priori uncertainty).
+    left_out : dict
+        ``pulses``, ``bathymetric_points`` and ``by_reason`` of those left out.
+    cells : CellUncertainty
+        Per grid cell: TVU, THU and the strictest IHO S-44 order met.
+    summary : dict
+        The order summary (:func:`pipeline.iho.order_summary`), JSON-ready.
+    """
+
+    tpu40: PointTpu
+    points40: Points
+    is40: np.ndarray
+    no_tpu: np.ndarray
+    left_out: dict[str, Any]
+    cells: CellUncertainty
+    summary: dict[str, Any]
+
+
+def survey_uncertainty(
+    returns: DetectedReturns, processed: ProcessedPoints, ctx: ProcessingContext, grid: Grid
+) -> SurveyUncertainty:
+    """TPU of the bathymetric points, cell uncertainty and the IHO order met per cell.
+
+    Parameters
+    ----------
+    returns : DetectedReturns
+        The survey's detections, ``(n_pulses,)`` per field.
+    processed : ProcessedPoints
+        :func:`pipeline.process.survey_points.process_detections` of them.
+    ctx : ProcessingContext
+        Navigation quality, beam, wavelength and water the processing assumes.
+    grid : Grid
+        The bathymetry grid the cells belong to.
+    """
+    st, refr, ins = ctx.tpu, ctx.refraction, ctx.instrument
+    pts = processed.points
+    is40 = (pts.classification == BATHYMETRIC_POINT) & (pts.kind == ReturnKind.BOTTOM)
+    points40 = pts.select(is40)
+    bottom_xy = seabed_points(returns, processed.surface, refr).xyz_m[:, :2]
+    xy40, d40 = points40.xyz_m[:, :2], points40.depth_m
+    group = points40.pulse_id // ins.shots_per_window if ins.photon_counting else None
+    near = {"neighbours": st.gradient_neighbours, "radius_m": st.gradient_radius_m}
+    grad = seabed_gradient(xy40, d40, bottom_xy, group=group, **near)
+    # the water surface measured over each sounding against its pulse's plane there: the
+    # plane's tilt uncertainty, averaged over the bathymetric points
+    bottom_ids = returns.pulse_id[returns.has_bottom]
+    by_id = np.argsort(bottom_ids)
+    rows40 = by_id[np.searchsorted(bottom_ids[by_id], points40.pulse_id)]
+    tilt = surface_tilt_sigma(returns, processed.surface, bottom_xy, pool=rows40)
+    if returns.t_bottom_sigma_s is None:
+        # no timing sigma from the detector: from the scatter of successive soundings
+        scatter = pair_scatter(
+            xy40,
+            d40,
+            order=points40.pulse_id,
+            group=group,
+            query_xy_m=bottom_xy,
+            max_separation_m=st.pair_max_separation_m,
+            neighbours=st.scatter_neighbours,
+        )
+        returns = timing_from_scatter(
+            returns,
+            processed.surface,
+            refr,
+            st,
+            depth_scatter_m=scatter,
+            seabed_gradient=grad,
+            # a return lies in the recorded window: its timing sigma is at most a uniform one's
+            max_sigma_s=ins.window_s / math.sqrt(12.0),
+        )
+    tpu = point_tpu(
+        returns, processed.surface, refr, st, seabed_gradient=grad, surface_tilt_sigma_rad=tilt
+    )
+    # pulses the TPU could not propagate: their points keep the a-priori uncertainty and are
+    # left out of the cell uncertainty and the TPU check
+    no_tpu = is40 & np.isin(pts.pulse_id, tpu.left_out.pulse_id)
+    is40 = is40 & ~no_tpu
+    points40 = pts.select(is40)
+    # TPU rows are per pulse with a bottom; keep those of the bathymetric points, same order
+    order = np.argsort(tpu.pulse_id)
+    pos = order[np.searchsorted(tpu.pulse_id[order], points40.pulse_id)]
+    tpu40 = take_tpu(tpu, pos)
+    cells = cell_uncertainty(grid, tpu40)
+    return SurveyUncertainty(
+        tpu40=tpu40,
+        points40=points40,
+        is40=is40,
+        no_tpu=no_tpu,
+        left_out={
+            "pulses": len(tpu.left_out),
+            "bathymetric_points": int(np.count_nonzero(no_tpu)),
+            "by_reason": tpu.left_out.counts(),
+        },
+        cells=cells,
+        summary=iho.order_summary(cells.order).to_dict(),
+    )
+
+
+def with_tpu(points: Points, unc: SurveyUncertainty) -> Points:
+    """``points`` whose bathymetric points carry their TPU as the per-point uncertainty.
+
+    ``uncertainty_v_m`` := ``PointTpu.sigma_v_m``, the one-sigma of the point's elevation ``z``
+    (the LAS z; what IHO S-44's TVU bounds), and ``uncertainty_h_m`` := ``sigma_h_m``, per
+    horizontal axis; the other points keep the a-priori values of
+    :mod:`pipeline.process.refraction`. The points the TPU left out get ``PointFlag.NO_TPU``.
+    The depth's own sigma (below the measured water surface, smaller) is
+    ``PointTpu.sigma_depth_m`` (what the evaluate stage checks).
+    """
+    v, h = points.uncertainty_v_m.copy(), points.uncertainty_h_m.copy()
+    v[unc.is40], h[unc.is40] = unc.tpu40.sigma_v_m, unc.tpu40.sigma_h_m
+    flags = points.flags.copy()
+    flags[unc.no_tpu] |= np.uint16(PointFlag.NO_TPU)
+    return points.replace(uncertainty_v_m=v, uncertainty_h_m=h, flags=flags)
+
+
+def with_posteriors(
+    unc: SurveyUncertainty, grid: Grid, point_index: np.ndarray, converged: np.ndarray, std_m
+) -> SurveyUncertainty:
+    """Cell uncertainty again, the converged posteriors' depth sigma in place of the timing.
+
+    The posterior covers the waveform timing of both returns (and its nuisances), which the
+    TPU's timing terms approximate; in the cells where points were sampled their variance
+    replaces those terms (:func:`pipeline.process.cell_uncertainty.cell_uncertainty`).
+
+    Parameters
+    ----------
+    point_index : (k,) int
+        Rows of ``unc.points40`` that were sampled.
+    converged : (k,) bool
+    std_m : (k,) float
+        Posterior depth sigma of each.
+    """
+    n = len(unc.points40)
+    sampled = np.zeros(n, dtype=bool)
+    sigma = np.zeros(n)
+    sampled[point_index[converged]] = True
+    sigma[point_index[converged]] = np.asarray(std_m)[converged]
+    cells = cell_uncertainty(grid, unc.tpu40, posterior_sigma_v_m=sigma, has_posterior=sampled)
+    return dataclasses.replace(unc, cells=cells, summary=iho.order_summary(cells.order).to_dict())
+
+
+def take_tpu(tpu: PointTpu, index: np.ndarray) -> PointTpu:
+    """Rows ``index`` of a PointTpu (every per-point array and term)."""
+    kw = {}
+    for f in dataclasses.fields(tpu):
+        v = getattr(tpu, f.name)
+        if isinstance(v, dict):
+            kw[f.name] = {k: a[index] for k, a in v.items()}
+        elif isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == len(tpu):
+            kw[f.name] = v[index]
+        else:
+            kw[f.name] = v
+    return dataclasses.replace(tpu, **kw)

@@ -1,0 +1,160 @@
+"""Evaluation of a survey run against the truth: ``evaluation.json`` and the summary lines.
+
+The truth side: only the evaluate stage of :mod:`pipeline.run_survey` calls this, with the
+truth the simulation kept; processing never sees it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.evaluate import evaluate, tpu_coverage, water_column_report
+from pipeline.outputs.atomic import write_json
+
+__all__ = ["evaluate_survey"]
+
+
+def evaluate_survey(
+    scene, sim, processed, ctx, grid, datum, unc, post, clock, path: Path, log=print
+) -> dict[str, Any]:
+    """Points, grid, TPU and posteriors against the truth; write ``evaluation.json`` at ``path``.
+
+    Parameters
+    ----------
+    scene : Scene
+    sim : SimulatedSurvey
+        The simulation's detections and, for this stage alone, its truth.
+    processed : ProcessedPoints
+    ctx : ProcessingContext
+    grid : Grid
+    datum : Datum
+    unc : SurveyUncertainty
+    post : SurveyPosteriors or None
+    clock : StageClock
+        Stage timings so far (recorded in the file).
+    path : Path
+    log : callable
+
+    Returns
+    -------
+    dict
+        The evaluation, as written.
+    """
+    truth = sim.truth
+    # the true mean water level: the scene's level, about which the wave field has zero mean
+    true_level_m = scene.water_surface.level_m
+    report = evaluate(
+        processed.points,
+        uncorrected=processed.uncorrected,
+        grid=grid,
+        # points: depth below the local water surface (their depth_m's reference); GNSS
+        # height errors common to the surface and the seabed returns cancel in it
+        truth_depth_m=truth.depth_m,
+        # grid: depth below the mean water level, as the grid's datum
+        grid_truth_depth_m=lambda x, y: true_level_m - truth.seabed.height_m(x, y),
+    ).to_dict()
+    # the depth's sigma (below the measured surface, at the measured position) against the
+    # true depth there; a photon-counting window's shots share one detection (one draw)
+    group = None
+    if ctx.instrument.photon_counting:
+        group = unc.points40.pulse_id // ctx.instrument.shots_per_window
+    coverage = tpu_coverage(
+        unc.points40, unc.tpu40.sigma_depth_m, truth_depth_m=truth.depth_m, group=group
+    )
+    post_eval = None
+    if post is not None:
+        from pipeline.evaluate import posterior_coverage
+
+        post_eval = {"n": 0}
+        if post.posteriors is not None:
+            post_eval = posterior_coverage(post.posteriors, truth_depth_m=truth.depth_m)
+            post_eval["seconds_per_pulse"] = post.cost_s / max(len(post.point_index), 1)
+        post_eval["skipped_in_column_return"] = post.skipped_column
+        post_eval["cells_with_posterior"] = int(np.count_nonzero(unc.cells.n_posterior))
+    evaluation = {
+        "pulses": int(sim.returns.pulse_id.size),
+        "posterior_against_truth": post_eval,
+        "iho_orders_from_uncertainty": unc.summary,
+        "tpu_coverage_against_truth": coverage,
+        "tpu_left_out": unc.left_out,
+        "receiver": scene.detector.mode,
+        "bottom_detected_fraction": float(np.mean(sim.returns.has_bottom)),
+        "datum": {**datum.to_dict(), "true_mean_water_level_m": true_level_m},
+        "no_bottom": sim.no_bottom,
+        "water_column": water_column_report(processed.points, scene.water.layer_depth_m),
+        "subray_flags": sim.subray_flags,
+        "receiver_pulse_flags": sim.pulse_flags,
+        "error": report,
+        "stages": clock.to_dict(),
+        "processing_context": ctx.to_dict(),
+    }
+    write_json(path, evaluation)
+    _log_report(report, log)
+    log(
+        f"  grid datum: water level {datum.water_level_m:+.3f} m ({datum.source}, "
+        f"{datum.n_surface_points} surface points); true mean level {true_level_m:+.3f} m"
+    )
+    orders = unc.summary.get("orders", {})
+    log(
+        "  strictest IHO S-44 order met per cell (from the propagated uncertainty): "
+        + ", ".join(
+            f"{k} {v['fraction']:.1%}" for k, v in orders.items() if v["fraction"] is not None
+        )
+    )
+    lo = unc.left_out
+    if lo["pulses"]:
+        why = ", ".join(f"{k} {v}" for k, v in lo["by_reason"].items() if v)
+        log(
+            f"  {lo['pulses']} bottom pulses left out of the TPU ({why}); their"
+            f" {lo['bathymetric_points']} bathymetric points keep the a-priori uncertainty"
+            " (flag NO_TPU) and are not in the cell uncertainty or the TPU check"
+        )
+    if coverage["fraction_within"] is not None:
+        log(
+            "  TPU check (true depth within ±k σ_depth): "
+            + ", ".join(
+                f"k={c['k']:g}: {c['fraction_within']:.1%} ± {c['standard_error']:.1%}"
+                f" (nominal {c['nominal']:.1%})"
+                for c in coverage["intervals"]
+            )
+            + f" of {coverage['n']} points"
+        )
+    if post_eval is not None and post_eval.get("n"):
+        log(
+            f"  depth posteriors (emcee) of {post_eval['n']} points: the true depth lies in the"
+            f" 68 % interval for {post_eval['coverage_68']:.1%}, in the 95 % for "
+            f"{post_eval['coverage_95']:.1%}; {post_eval['converged_fraction']:.0%} converged, "
+            f"{post_eval['seconds_per_pulse']:.2f} s per pulse"
+        )
+    if post_eval is not None and post_eval["skipped_in_column_return"]:
+        log(
+            f"  {post_eval['skipped_in_column_return']} candidate points got no posterior: their"
+            " pulses have an in-column return, which the posterior's waveform model lacks"
+        )
+    return evaluation
+
+
+def _log_report(report: dict, log) -> None:
+    def line(name, st):
+        if not st or not st.get("n"):
+            return f"  {name:<24} no points"
+        return (
+            f"  {name:<24} n={st['n']:<8} bias {st['bias_m']:+.3f} m  RMSE {st['rmse_m']:.3f} m"
+            f"  |err|95 {st['p95_abs_m']:.3f} m"
+        )
+
+    log("  evaluation against the truth (measured minus true depth):")
+    log(line("points, refraction corr.", report.get("points")))
+    log(line("points, uncorrected", report.get("points_uncorrected")))
+    log(line("grid cells", report.get("grid")))
+    iho = report.get("iho_grid") or {}
+    if iho:
+        frac = ", ".join(
+            f"{k} {v['fraction_within']:.1%}"
+            for k, v in iho.items()
+            if v.get("fraction_within") is not None
+        )
+        log(f"  grid cells within IHO S-44 TVU: {frac}")
