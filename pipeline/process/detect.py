@@ -46,6 +46,7 @@ __all__ = [
     "DetectSettings",
     "WaveformDetections",
     "detect_full_waveform",
+    "column_decay",
     "fit_merged",
     "flank_trend",
 ]
@@ -326,8 +327,24 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     flags[merged] |= np.uint16(DetectorFlag.MERGED)
     if s.fit_merged and merged.any():
         idx = np.flatnonzero(merged)
-        ts, tb, a_s, a_b, ok = fit_merged(filt[idx], t_idx_s[idx], sigma_samples)
-        good = ok & (a_b > thr[idx])
+        # the column's decay, measured past the surface echo and the merged zone
+        k_col = column_decay(
+            filt[idx], i_s[idx], start=math.ceil(sep) + gap, length=max(4, math.ceil(sep))
+        )
+        corr = np.correlate(kernel, kernel, mode="full")[kernel.size - 1 :] / kernel_sq
+        ts, tb, a_s, a_b, ok, col, sd_b = fit_merged(
+            filt[idx], t_idx_s[idx], sigma_samples, decay=k_col, noise_corr=corr
+        )
+        # significance against the surface echo + column the bottom sits on, with their shot
+        # noise (as the separated bottom's), not against the electronic noise alone: the
+        # trailing flank of a strong surface echo carries far more noise than the baseline
+        sg2 = math.sqrt(2.0) * sigma_samples
+        under = a_s * np.exp(-0.5 * ((tb - ts) / sg2) ** 2) + col[:, 0] * ndtr(
+            (tb - ts) / sg2
+        ) * np.exp(-col[:, 1] * np.maximum(tb - ts, 0.0))
+        var_b = noise_f[idx] ** 2 + shot_noise_counts * np.maximum(under, 0.0) * kernel_sq
+        snr_fit = a_b / (sd_b * np.sqrt(var_b))
+        good = ok & (snr_fit > s.threshold_sigma)
         sel = idx[good]
         t_idx_s[sel], t_idx_b[sel], amp_s[sel], amp_b[sel] = (
             ts[good],
@@ -335,6 +352,7 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
             a_s[good],
             a_b[good],
         )
+        snr_b_local[sel] = snr_fit[good]
         has_b[sel] = True
     snr_s = amp_s / noise_f
     snr_b = np.where(has_b, snr_b_local, amp_b / noise_f)
@@ -377,8 +395,60 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     )
 
 
-def fit_merged(filt: np.ndarray, t_guess: np.ndarray, sigma_samples: float, iterations: int = 30):
-    """Two Gaussians of the filtered system width fitted to merged returns (batched LM).
+def column_decay(filt: np.ndarray, i_surface: np.ndarray, start: int, length: int) -> np.ndarray:
+    """Decay rate (per sample) of the water-column return after the surface echo.
+
+    The volume backscatter of a homogeneous column decays as ``exp(-k τ)`` after the surface
+    (Beer-Lambert on the way down and up): a straight line in ``ln y``. It is fitted over
+    ``[i_surface + start, i_surface + start + length)`` by least squares weighted with ``y²``
+    (the variance of ``ln y`` is ``σ²/y²``), so samples near the noise floor hardly count.
+
+    Parameters
+    ----------
+    filt : (n, m) ndarray
+        Matched-filtered, baseline-free waveforms.
+    i_surface : (n,) int ndarray
+        Sample of the surface peak.
+    start, length : int
+        Where the fit starts after the surface peak (past the echo itself), and its length.
+
+    Returns
+    -------
+    (n,) ndarray
+        ``k`` ≥ 0 in 1/sample; 0 where the column is too weak to fit (then the column term
+        of :func:`fit_merged` is a plain step).
+    """
+    n, m = filt.shape
+    x = np.arange(length, dtype=np.float64)[None, :]
+    cols = np.clip(i_surface[:, None] + start + np.arange(length), 0, m - 1)
+    y = np.take_along_axis(filt, cols, axis=1)
+    w = np.where(y > 0, y * y, 0.0)
+    ly = np.log(np.maximum(y, 1e-30))
+    sw = w.sum(1)
+    safe = np.where(sw > 0, sw, 1.0)
+    mx, my = (w * x).sum(1) / safe, (w * ly).sum(1) / safe
+    sxx = (w * (x - mx[:, None]) ** 2).sum(1)
+    sxy = (w * (x - mx[:, None]) * (ly - my[:, None])).sum(1)
+    k = -sxy / np.where(sxx > 0, sxx, 1.0)
+    return np.where((sw > 0) & (sxx > 0) & np.isfinite(k), np.maximum(k, 0.0), 0.0)
+
+
+def fit_merged(
+    filt: np.ndarray,
+    t_guess: np.ndarray,
+    sigma_samples: float,
+    iterations: int = 30,
+    decay: np.ndarray | None = None,
+    noise_corr: np.ndarray | None = None,
+):
+    """Two Gaussians of the filtered system width, on a column onset, fitted to merged returns.
+
+    The model is ``a_s g(t − t_s) + a_b g(t − t_b) + b Φ((t − t_s)/σ) exp(−k (t − t_s))``:
+    surface and bottom echoes plus the water-column return, which starts at the surface as a
+    step smoothed by the system response and decays at the rate ``k`` measured after the
+    surface (:func:`column_decay`). Without the column term its onset, a few samples after the
+    surface peak, passes for a bottom echo in every deep-water pulse. Batched
+    Levenberg-Marquardt.
 
     Parameters
     ----------
@@ -388,6 +458,13 @@ def fit_merged(filt: np.ndarray, t_guess: np.ndarray, sigma_samples: float, iter
         Sample index of the merged peak.
     sigma_samples : float
         σ of the system response in samples (the filtered return has σ √2).
+    iterations : int
+        Levenberg-Marquardt steps.
+    decay : (n,) ndarray, optional
+        Column decay rate ``k`` (1/sample). None: no column term (two Gaussians alone).
+    noise_corr : (L,) ndarray, optional
+        Correlation of the filtered noise at lags 0, 1, ... samples (1 at lag 0); needed for
+        ``sd_bottom``.
 
     Returns
     -------
@@ -395,53 +472,75 @@ def fit_merged(filt: np.ndarray, t_guess: np.ndarray, sigma_samples: float, iter
         Sample positions and heights of the two components, ``t_surface < t_bottom``.
     ok : (n,) bool
         Converged with both amplitudes positive and the two centres apart.
+    column : (n, 2) ndarray
+        Column term ``(b, k)`` of the fit (zeros without ``decay``).
+    sd_bottom : (n,) ndarray
+        Standard deviation of ``a_bottom`` per unit filtered-noise σ (inf without
+        ``noise_corr``): ``a_bottom / (sd_bottom σ)`` is its significance.
     """
     n, m = filt.shape
     sg = math.sqrt(2.0) * sigma_samples
+    use_col = decay is not None
+    kk = (np.zeros(n) if decay is None else np.asarray(decay, dtype=np.float64))[:, None]
     # fit only a slice of ±6 σ around the merged peak (cost independent of the window length)
     half = int(math.ceil(6.0 * sg))
     cols = np.clip(
         np.round(t_guess).astype(np.int64)[:, None] + np.arange(-half, half + 1), 0, m - 1
     )
+    # column level: what the waveform holds 3 σ after the merged peak (past both echoes)
+    after = np.clip(np.round(t_guess + 3.0 * sg).astype(np.int64), 0, m - 1)
+    col0 = filt[np.arange(n), after]
     filt = np.take_along_axis(filt, cols, axis=1)
     x = cols.astype(float)
     window = np.abs(x - t_guess[:, None]) <= 6.0 * sg
     peak_h = np.max(np.where(window, filt, -np.inf), axis=1)
-    p = np.column_stack([t_guess - 0.5 * sg, t_guess + 0.5 * sg, peak_h, 0.3 * peak_h])
+    b0 = np.where(use_col, np.clip(col0, 0.0, 0.5 * peak_h), 0.0)
+    p = np.column_stack([t_guess - 0.5 * sg, t_guess + 0.5 * sg, peak_h, 0.3 * peak_h, b0])
+    npar = 5 if use_col else 4
     lam = np.full(n, 1e-2)
 
     def model(p):
         g1 = np.exp(-0.5 * ((x - p[:, 0:1]) / sg) ** 2)
         g2 = np.exp(-0.5 * ((x - p[:, 1:2]) / sg) ** 2)
-        return p[:, 2:3] * g1 + p[:, 3:4] * g2, g1, g2
+        tau = x - p[:, 0:1]
+        # the column is a physical term only behind the surface: e^{-kτ} grows before it
+        col = ndtr(tau / sg) * np.exp(-kk * np.maximum(tau, 0.0))
+        return p[:, 2:3] * g1 + p[:, 3:4] * g2 + p[:, 4:5] * col, g1, g2, col, tau
 
     def cost(p):
-        f, _, _ = model(p)
+        f = model(p)[0]
         return np.sum(np.where(window, (f - filt) ** 2, 0.0), axis=1)
 
     c = cost(p)
     for _ in range(iterations):
-        f, g1, g2 = model(p)
+        f, g1, g2, col, tau = model(p)
         r = np.where(window, f - filt, 0.0)
+        dcol = -np.exp(-0.5 * (tau / sg) ** 2) / (sg * math.sqrt(2.0 * math.pi)) * np.exp(
+            -kk * np.maximum(tau, 0.0)
+        ) + kk * col * (tau > 0)
         jac = (
             np.stack(
                 [
-                    p[:, 2:3] * g1 * (x - p[:, 0:1]) / sg**2,
+                    p[:, 2:3] * g1 * tau / sg**2 + p[:, 4:5] * dcol,
                     p[:, 3:4] * g2 * (x - p[:, 1:2]) / sg**2,
                     g1,
                     g2,
+                    col,
                 ],
                 axis=2,
-            )
+            )[:, :, :npar]
             * window[:, :, None]
         )
         jtj = np.einsum("nmi,nmj->nij", jac, jac)
         jtr = np.einsum("nmi,nm->ni", jac, r)
-        damp = jtj + lam[:, None, None] * np.eye(4)[None] * (
+        damp = jtj + lam[:, None, None] * np.eye(npar)[None] * (
             np.diagonal(jtj, axis1=1, axis2=2)[:, None, :] + 1e-12
         )
-        step = np.linalg.solve(damp, -jtr[:, :, None])[:, :, 0]
+        step = np.zeros_like(p)
+        step[:, :npar] = np.linalg.solve(damp, -jtr[:, :, None])[:, :, 0]
         trial = p + step
+        # a negative column is not physical
+        trial[:, 4] = np.maximum(trial[:, 4], 0.0)
         c_new = cost(trial)
         better = c_new < c
         p = np.where(better[:, None], trial, p)
@@ -452,7 +551,32 @@ def fit_merged(filt: np.ndarray, t_guess: np.ndarray, sigma_samples: float, iter
     first_is_0 = p[:, 0] <= p[:, 1]
     a_lo = np.where(first_is_0, p[:, 2], p[:, 3])
     a_hi = np.where(first_is_0, p[:, 3], p[:, 2])
+    # σ of the later amplitude per unit filtered-noise σ: the least-squares sandwich
+    # (JᵀJ)⁻¹ Jᵀ R J (JᵀJ)⁻¹ with R the filtered noise's correlation. Two components
+    # closer than the echo width trade amplitude freely, so a "second return" that is only a
+    # broadened surface echo has a large σ here and is not significant.
+    sd_hi = np.full(n, np.inf)
+    if noise_corr is not None:
+        _, g1, g2, col, tau = model(p)
+        w = window.astype(float)
+        jac = np.stack([p[:, 2:3] * g1 * tau / sg**2, p[:, 3:4] * g2 * (x - p[:, 1:2]) / sg**2,
+                        g1, g2, col], axis=2)[:, :, :npar] * w[:, :, None]  # fmt: skip
+        lag = np.abs(np.arange(x.shape[1])[:, None] - np.arange(x.shape[1])[None, :])
+        rho = np.asarray(noise_corr, dtype=np.float64)
+        corr = np.where(lag < rho.size, rho[np.minimum(lag, rho.size - 1)], 0.0)
+        jtj = np.einsum("nmi,nmj->nij", jac, jac) + 1e-12 * np.eye(npar)[None]
+        meat = np.einsum("nmi,mk,nkj->nij", jac, corr, jac)
+        try:
+            inv = np.linalg.inv(jtj)
+            cov = inv @ meat @ inv
+            var_hi = np.where(first_is_0, cov[:, 3, 3], cov[:, 2, 2])
+            sd_hi = np.where(var_hi > 0, np.sqrt(np.abs(var_hi)), np.inf)
+        except np.linalg.LinAlgError:
+            pass
     near = (np.abs(lo - t_guess) <= 4.0 * sg) & (np.abs(hi - t_guess) <= 4.0 * sg)
+    # the column starts at the surface: a fit whose column starts at the later component
+    # has the order wrong
     ok = (a_lo > 0) & (a_hi > 0) & (hi - lo > 0.3 * sg) & np.isfinite(c) & near
+    ok &= first_is_0 | (p[:, 4] <= 0.0)
     lo, hi = np.where(ok, lo, t_guess), np.where(ok, hi, t_guess)
-    return lo, hi, a_lo, a_hi, ok
+    return lo, hi, a_lo, a_hi, ok, np.column_stack([p[:, 4], kk[:, 0]]), sd_hi
