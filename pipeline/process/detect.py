@@ -339,7 +339,7 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
         # noise (as the separated bottom's), not against the electronic noise alone: the
         # trailing flank of a strong surface echo carries far more noise than the baseline
         sg2 = math.sqrt(2.0) * sigma_samples
-        under = a_s * np.exp(-0.5 * ((tb - ts) / sg2) ** 2) + col[:, 0] * ndtr(
+        under = a_s * np.exp(-0.5 * ((tb - ts) / col[:, 2]) ** 2) + col[:, 0] * ndtr(
             (tb - ts) / sg2
         ) * np.exp(-col[:, 1] * np.maximum(tb - ts, 0.0))
         var_b = noise_f[idx] ** 2 + shot_noise_counts * np.maximum(under, 0.0) * kernel_sq
@@ -443,12 +443,14 @@ def fit_merged(
 ):
     """Two Gaussians of the filtered system width, on a column onset, fitted to merged returns.
 
-    The model is ``a_s g(t − t_s) + a_b g(t − t_b) + b Φ((t − t_s)/σ) exp(−k (t − t_s))``:
-    surface and bottom echoes plus the water-column return, which starts at the surface as a
-    step smoothed by the system response and decays at the rate ``k`` measured after the
-    surface (:func:`column_decay`). Without the column term its onset, a few samples after the
-    surface peak, passes for a bottom echo in every deep-water pulse. Batched
-    Levenberg-Marquardt.
+    With ``decay`` the model is
+    ``a_s g_s(t − t_s) + a_b g(t − t_b) + b Φ((t − t_s)/σ) exp(−k (t − t_s))``: surface and
+    bottom echoes plus the water-column return, which starts at the surface as a step smoothed
+    by the system response and decays at the rate ``k`` measured after the surface
+    (:func:`column_decay`); the surface Gaussian ``g_s`` may be wider than the system's (1-3×:
+    a footprint spread over a range of heights). Without these terms the column onset and a
+    broadened surface echo pass for a bottom just under the surface in a third of deep-water
+    pulses. Without ``decay``: two Gaussians of the system width. Batched Levenberg-Marquardt.
 
     Parameters
     ----------
@@ -472,8 +474,9 @@ def fit_merged(
         Sample positions and heights of the two components, ``t_surface < t_bottom``.
     ok : (n,) bool
         Converged with both amplitudes positive and the two centres apart.
-    column : (n, 2) ndarray
-        Column term ``(b, k)`` of the fit (zeros without ``decay``).
+    column : (n, 3) ndarray
+        Column term ``(b, k)`` of the fit (zeros without ``decay``) and the surface echo's
+        filtered σ (samples; the system's without ``decay``).
     sd_bottom : (n,) ndarray
         Standard deviation of ``a_bottom`` per unit filtered-noise σ (inf without
         ``noise_corr``): ``a_bottom / (sd_bottom σ)`` is its significance.
@@ -495,52 +498,68 @@ def fit_merged(
     window = np.abs(x - t_guess[:, None]) <= 6.0 * sg
     peak_h = np.max(np.where(window, filt, -np.inf), axis=1)
     b0 = np.where(use_col, np.clip(col0, 0.0, 0.5 * peak_h), 0.0)
-    p = np.column_stack([t_guess - 0.5 * sg, t_guess + 0.5 * sg, peak_h, 0.3 * peak_h, b0])
-    npar = 5 if use_col else 4
+    # parameters: t_s, t_b, a_s, a_b, column b, surface σ (the surface echo of a footprint
+    # spread over a range of heights is wider than the system response: a free width keeps a
+    # broadened surface from passing as a second return)
+    t1, t2, a2 = t_guess - 0.5 * sg, t_guess + 0.5 * sg, 0.3 * peak_h
+    if use_col:
+        # the surface comes first (from a symmetric start the fit may swap the two and give
+        # the column to the bottom): start the bottom at the largest excess over a surface
+        # echo of the system width behind the peak
+        excess = filt - peak_h[:, None] * np.exp(-0.5 * ((x - t_guess[:, None]) / sg) ** 2)
+        behind = window & (x > t_guess[:, None] + 0.5 * sg)
+        j = np.argmax(np.where(behind, excess, -np.inf), axis=1)
+        t1, t2 = t_guess, x[np.arange(n), j]
+        a2 = np.maximum(excess[np.arange(n), j] - b0, 0.1 * peak_h)
+    p = np.column_stack([t1, t2, peak_h, a2, b0, np.full(n, sg)])
+    act = [0, 1, 2, 3, 4, 5] if use_col else [0, 1, 2, 3]
     lam = np.full(n, 1e-2)
 
     def model(p):
-        g1 = np.exp(-0.5 * ((x - p[:, 0:1]) / sg) ** 2)
+        s1 = p[:, 5:6]
+        g1 = np.exp(-0.5 * ((x - p[:, 0:1]) / s1) ** 2)
         g2 = np.exp(-0.5 * ((x - p[:, 1:2]) / sg) ** 2)
         tau = x - p[:, 0:1]
         # the column is a physical term only behind the surface: e^{-kτ} grows before it
-        col = ndtr(tau / sg) * np.exp(-kk * np.maximum(tau, 0.0))
-        return p[:, 2:3] * g1 + p[:, 3:4] * g2 + p[:, 4:5] * col, g1, g2, col, tau
+        decay = np.exp(-kk * np.maximum(tau, 0.0))
+        col = ndtr(tau / sg) * decay
+        f = p[:, 2:3] * g1 + p[:, 3:4] * g2 + p[:, 4:5] * col
+        dcol = -np.exp(-0.5 * (tau / sg) ** 2) / (sg * math.sqrt(2.0 * math.pi)) * decay + (
+            kk * col * (tau > 0)
+        )
+        jac = np.stack(
+            [
+                p[:, 2:3] * g1 * tau / s1**2 + p[:, 4:5] * dcol,
+                p[:, 3:4] * g2 * (x - p[:, 1:2]) / sg**2,
+                g1,
+                g2,
+                col,
+                p[:, 2:3] * g1 * tau**2 / s1**3,
+            ],
+            axis=2,
+        )[:, :, act]
+        return f, jac * window[:, :, None]
 
     def cost(p):
         f = model(p)[0]
         return np.sum(np.where(window, (f - filt) ** 2, 0.0), axis=1)
 
+    npar = len(act)
     c = cost(p)
     for _ in range(iterations):
-        f, g1, g2, col, tau = model(p)
+        f, jac = model(p)
         r = np.where(window, f - filt, 0.0)
-        dcol = -np.exp(-0.5 * (tau / sg) ** 2) / (sg * math.sqrt(2.0 * math.pi)) * np.exp(
-            -kk * np.maximum(tau, 0.0)
-        ) + kk * col * (tau > 0)
-        jac = (
-            np.stack(
-                [
-                    p[:, 2:3] * g1 * tau / sg**2 + p[:, 4:5] * dcol,
-                    p[:, 3:4] * g2 * (x - p[:, 1:2]) / sg**2,
-                    g1,
-                    g2,
-                    col,
-                ],
-                axis=2,
-            )[:, :, :npar]
-            * window[:, :, None]
-        )
         jtj = np.einsum("nmi,nmj->nij", jac, jac)
         jtr = np.einsum("nmi,nm->ni", jac, r)
         damp = jtj + lam[:, None, None] * np.eye(npar)[None] * (
             np.diagonal(jtj, axis1=1, axis2=2)[:, None, :] + 1e-12
         )
         step = np.zeros_like(p)
-        step[:, :npar] = np.linalg.solve(damp, -jtr[:, :, None])[:, :, 0]
+        step[:, act] = np.linalg.solve(damp, -jtr[:, :, None])[:, :, 0]
         trial = p + step
-        # a negative column is not physical
+        # a negative column is not physical, nor a surface echo narrower than the system's
         trial[:, 4] = np.maximum(trial[:, 4], 0.0)
+        trial[:, 5] = np.clip(trial[:, 5], sg, 3.0 * sg)
         c_new = cost(trial)
         better = c_new < c
         p = np.where(better[:, None], trial, p)
@@ -557,10 +576,7 @@ def fit_merged(
     # broadened surface echo has a large σ here and is not significant.
     sd_hi = np.full(n, np.inf)
     if noise_corr is not None:
-        _, g1, g2, col, tau = model(p)
-        w = window.astype(float)
-        jac = np.stack([p[:, 2:3] * g1 * tau / sg**2, p[:, 3:4] * g2 * (x - p[:, 1:2]) / sg**2,
-                        g1, g2, col], axis=2)[:, :, :npar] * w[:, :, None]  # fmt: skip
+        jac = model(p)[1]
         lag = np.abs(np.arange(x.shape[1])[:, None] - np.arange(x.shape[1])[None, :])
         rho = np.asarray(noise_corr, dtype=np.float64)
         corr = np.where(lag < rho.size, rho[np.minimum(lag, rho.size - 1)], 0.0)
@@ -574,9 +590,9 @@ def fit_merged(
         except np.linalg.LinAlgError:
             pass
     near = (np.abs(lo - t_guess) <= 4.0 * sg) & (np.abs(hi - t_guess) <= 4.0 * sg)
-    # the column starts at the surface: a fit whose column starts at the later component
-    # has the order wrong
     ok = (a_lo > 0) & (a_hi > 0) & (hi - lo > 0.3 * sg) & np.isfinite(c) & near
-    ok &= first_is_0 | (p[:, 4] <= 0.0)
+    if use_col:
+        # the column and the free width belong to the surface: it must come first
+        ok &= first_is_0
     lo, hi = np.where(ok, lo, t_guess), np.where(ok, hi, t_guess)
-    return lo, hi, a_lo, a_hi, ok, np.column_stack([p[:, 4], kk[:, 0]]), sd_hi
+    return lo, hi, a_lo, a_hi, ok, np.column_stack([p[:, 4], kk[:, 0], p[:, 5]]), sd_hi
