@@ -18,8 +18,11 @@ Per waveform, vectorised over the batch:
 4. **Sub-sample timing**: a parabola through the logarithm of the three samples around the peak
    (exact for a Gaussian peak).
 5. **Shallow regime**: where the bottom is closer than ``min_separation`` the two returns merge
-   into one peak; a two-Gaussian fit (:func:`fit_merged`) separates them when the merged peak is
-   measurably wider than the system pulse, otherwise the pulse is flagged MERGED with no bottom.
+   into one peak. When the merged peak is measurably wider than the system pulse the pulse is
+   flagged MERGED and a fit of surface echo (free width) + bottom echo + water-column onset
+   (:mod:`pipeline.process.detect_merged`) separates them; the bottom is kept only if its fitted
+   amplitude is significant (``threshold_sigma``) against its own standard deviation, so the
+   column onset and a broadened surface echo are not taken for a bottom.
 6. **In-column return** (``column_returns``): the strongest other candidate of step 3 that lies
    between ``surface + min_separation`` and ``bottom − min_separation`` (a scattering layer,
    a fish school, a thermocline): the same residual, the same signal-dependent threshold and the
@@ -40,12 +43,14 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.special import ndtr
 
 from pipeline.config import setting
+from pipeline.process.detect_merged import column_decay, fit_merged, merged_bottoms
 from pipeline.process.returns import DetectorFlag
 
 __all__ = [
     "DetectSettings",
     "WaveformDetections",
     "detect_full_waveform",
+    "column_decay",
     "fit_merged",
     "flank_trend",
 ]
@@ -334,8 +339,10 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     flags[merged] |= np.uint16(DetectorFlag.MERGED)
     if s.fit_merged and merged.any():
         idx = np.flatnonzero(merged)
-        ts, tb, a_s, a_b, ok = fit_merged(filt[idx], t_idx_s[idx], sigma_samples)
-        good = ok & (a_b > thr[idx])
+        good, ts, tb, a_s, a_b, snr_fit = merged_bottoms(
+            filt[idx], i_s[idx], t_idx_s[idx], sigma_samples, sep, gap, kernel, noise_f[idx],
+            shot_noise_counts, s.threshold_sigma,
+        )  # fmt: skip
         sel = idx[good]
         t_idx_s[sel], t_idx_b[sel], amp_s[sel], amp_b[sel] = (
             ts[good],
@@ -343,6 +350,7 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
             a_s[good],
             a_b[good],
         )
+        snr_b_local[sel] = snr_fit[good]
         has_b[sel] = True
     snr_s = amp_s / noise_f
     snr_b = np.where(has_b, snr_b_local, amp_b / noise_f)
@@ -383,84 +391,3 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
         column_amplitude=np.where(has_c, amp_c, zero),
         column_confidence=np.where(has_c, _confidence(snr_c, s.threshold_sigma), zero),
     )
-
-
-def fit_merged(filt: np.ndarray, t_guess: np.ndarray, sigma_samples: float, iterations: int = 30):
-    """Two Gaussians of the filtered system width fitted to merged returns (batched LM).
-
-    Parameters
-    ----------
-    filt : (n, m) ndarray
-        Matched-filtered, baseline-free waveforms.
-    t_guess : (n,) ndarray
-        Sample index of the merged peak.
-    sigma_samples : float
-        σ of the system response in samples (the filtered return has σ √2).
-
-    Returns
-    -------
-    t_surface, t_bottom, a_surface, a_bottom : (n,) ndarray
-        Sample positions and heights of the two components, ``t_surface < t_bottom``.
-    ok : (n,) bool
-        Converged with both amplitudes positive and the two centres apart.
-    """
-    n, m = filt.shape
-    sg = math.sqrt(2.0) * sigma_samples
-    # fit only a slice of ±6 σ around the merged peak (cost independent of the window length)
-    half = int(math.ceil(6.0 * sg))
-    cols = np.clip(
-        np.round(t_guess).astype(np.int64)[:, None] + np.arange(-half, half + 1), 0, m - 1
-    )
-    filt = np.take_along_axis(filt, cols, axis=1)
-    x = cols.astype(float)
-    window = np.abs(x - t_guess[:, None]) <= 6.0 * sg
-    peak_h = np.max(np.where(window, filt, -np.inf), axis=1)
-    p = np.column_stack([t_guess - 0.5 * sg, t_guess + 0.5 * sg, peak_h, 0.3 * peak_h])
-    lam = np.full(n, 1e-2)
-
-    def model(p):
-        g1 = np.exp(-0.5 * ((x - p[:, 0:1]) / sg) ** 2)
-        g2 = np.exp(-0.5 * ((x - p[:, 1:2]) / sg) ** 2)
-        return p[:, 2:3] * g1 + p[:, 3:4] * g2, g1, g2
-
-    def cost(p):
-        f, _, _ = model(p)
-        return np.sum(np.where(window, (f - filt) ** 2, 0.0), axis=1)
-
-    c = cost(p)
-    for _ in range(iterations):
-        f, g1, g2 = model(p)
-        r = np.where(window, f - filt, 0.0)
-        jac = (
-            np.stack(
-                [
-                    p[:, 2:3] * g1 * (x - p[:, 0:1]) / sg**2,
-                    p[:, 3:4] * g2 * (x - p[:, 1:2]) / sg**2,
-                    g1,
-                    g2,
-                ],
-                axis=2,
-            )
-            * window[:, :, None]
-        )
-        jtj = np.einsum("nmi,nmj->nij", jac, jac)
-        jtr = np.einsum("nmi,nm->ni", jac, r)
-        damp = jtj + lam[:, None, None] * np.eye(4)[None] * (
-            np.diagonal(jtj, axis1=1, axis2=2)[:, None, :] + 1e-12
-        )
-        step = np.linalg.solve(damp, -jtr[:, :, None])[:, :, 0]
-        trial = p + step
-        c_new = cost(trial)
-        better = c_new < c
-        p = np.where(better[:, None], trial, p)
-        c = np.where(better, c_new, c)
-        lam = np.where(better, lam * 0.3, lam * 10.0)
-    lo = np.minimum(p[:, 0], p[:, 1])
-    hi = np.maximum(p[:, 0], p[:, 1])
-    first_is_0 = p[:, 0] <= p[:, 1]
-    a_lo = np.where(first_is_0, p[:, 2], p[:, 3])
-    a_hi = np.where(first_is_0, p[:, 3], p[:, 2])
-    near = (np.abs(lo - t_guess) <= 4.0 * sg) & (np.abs(hi - t_guess) <= 4.0 * sg)
-    ok = (a_lo > 0) & (a_hi > 0) & (hi - lo > 0.3 * sg) & np.isfinite(c) & near
-    lo, hi = np.where(ok, lo, t_guess), np.where(ok, hi, t_guess)
-    return lo, hi, a_lo, a_hi, ok

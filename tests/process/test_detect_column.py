@@ -125,5 +125,8 @@ def test_false_alarms_on_simulated_layer_free_waveforms_are_rare():
         noise_samples=int((scene.detector.pre_trigger_s - 2 * fwhm) / wf.sample_interval_s),
         shot_noise_counts=scene.detector.excess_noise_factor,
     )  # fmt: skip
-    assert d.has_bottom.mean() > 0.6  # most of the slope is within reach
+    # about half of the 1-30 m slope is within reach: measured 46.3 %, all at the right
+    # range (74 % "bottoms" before the column-aware merged fit: the surplus were false
+    # bottoms in the surface echo's tail, within 0.5 m of the surface)
+    assert d.has_bottom.mean() > 0.45
     assert d.has_column.mean() < 1e-3
