@@ -159,7 +159,7 @@ def test_no_import_circle():
 
 @pytest.mark.xfail(
     strict=True,
-    reason="tpu.py 1092, simulate/returns.py 571, detect.py 466, optics.py 456 lines (measured)",
+    reason="tpu.py 1092, simulate/returns.py 571, optics.py 456 lines (measured)",
 )
 def test_no_module_over_450_lines():
     long = {
