@@ -1,7 +1,7 @@
 """Reference optics of the air/water lidar path: Snell, Fresnel, Brewster, Beer-Lambert.
 
-Vectorised over numpy arrays (broadcasting), float64, SI units, angles in radians. Scalar
-inputs give numpy scalars. Invalid inputs raise :class:`ValueError` naming the parameter.
+Vectorised (broadcasting), float64, SI units, radians; scalars in, numpy scalars out; invalid
+inputs raise :class:`ValueError` naming the parameter.
 
 Conventions
 -----------
@@ -29,11 +29,11 @@ from scipy import constants
 __all__ = [
     "SPEED_OF_LIGHT_M_S", "GRAYBODY_AMPLITUDE_PERCENT", "refraction_angle", "refract_direction",
     "reflect_direction", "fresnel_amplitude", "fresnel_power", "fresnel_unpolarised",
-    "fresnel_jones", "jones_linear", "jones_circular", "brewster_angle", "brewster_angle_general",
-    "critical_angle", "absorption_coefficient_from_index", "index_imag_from_absorption",
-    "beer_lambert_transmittance", "log_transmittance", "total_extinction", "penetration_depth_m",
-    "extinction_from_penetration_depth", "graybody_power_reflectance", "water_phase_index",
-    "water_group_index", "photons_per_pulse",
+    "fresnel_jones", "jones_linear", "jones_circular", "brewster_angle",
+    "brewster_angle_general", "critical_angle", "absorption_coefficient_from_index",
+    "index_imag_from_absorption", "beer_lambert_transmittance", "log_transmittance",
+    "total_extinction", "penetration_depth_m", "extinction_from_penetration_depth",
+    "graybody_power_reflectance", "water_phase_index", "water_group_index", "photons_per_pulse",
 ]  # fmt: skip
 
 SPEED_OF_LIGHT_M_S: float = constants.c
@@ -402,7 +402,6 @@ def graybody_power_reflectance(amplitude_percent):
     return ((p / 100.0) ** 2)[()]
 
 
-# --- water index --------------------------------------------------------------------------------
 def _quan_fry(wavelength_m, salinity_psu, temperature_c):
     lam = _within("wavelength_m", wavelength_m, 400e-9, 700e-9, " m (fit range)") * 1e9
     s = _within("salinity_psu", salinity_psu, 0, 40)
@@ -415,7 +414,7 @@ def _quan_fry(wavelength_m, salinity_psu, temperature_c):
 
 
 def water_phase_index(wavelength_m=532e-9, salinity_psu=35.0, temperature_c=20.0):
-    """Phase refractive index of (sea) water by Quan & Fry (1995).
+    """Phase refractive index of (sea) water by Quan & Fry (1995), broadcast shape.
 
     Parameters
     ----------
@@ -425,11 +424,6 @@ def water_phase_index(wavelength_m=532e-9, salinity_psu=35.0, temperature_c=20.0
         Salinity in psu, 0-40 (fitted 0-35; the S terms are linear).
     temperature_c : array_like
         Temperature in degC, -2 to 35 (fitted 0-30; the T terms are quadratic).
-
-    Returns
-    -------
-    ndarray
-        Phase index, broadcast shape.
 
     Notes
     -----

@@ -157,10 +157,6 @@ def test_no_import_circle():
     assert cycles == []
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="tpu.py 1092, simulate/returns.py 571, optics.py 456 lines (measured)",
-)
 def test_no_module_over_450_lines():
     long = {
         str(p.relative_to(ROOT)): n

@@ -1,0 +1,373 @@
+"""The TPU's inputs measured from neighbouring soundings.
+
+The seabed gradient, the depth scatter, the water surface over each sounding, and the timing
+sigmas the scatter implies (:mod:`pipeline.process.tpu`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from pipeline.process.refraction import RefractionSettings
+from pipeline.process.returns import DetectedReturns
+from pipeline.process.surface_fit import WaterSurface
+from pipeline.process.tpu_settings import (
+    _MAD_TO_SIGMA,
+    DEPTH,
+    RANDOM_TERMS,
+    TIMING_TERMS,
+    TpuSettings,
+)
+from pipeline.process.tpu_terms import _inputs, _terms
+
+
+def _plane_fit(w, dx, dy, z, ridge):
+    """Batched weighted least-squares planes ``z = a + b dx + c dy``, ridge ``ridge`` on b, c."""
+    sw = w.sum(1)
+    sx, sy = (w * dx).sum(1), (w * dy).sum(1)
+    a = np.empty((len(sw), 3, 3))
+    a[:, 0, 0] = sw
+    a[:, 0, 1] = a[:, 1, 0] = sx
+    a[:, 0, 2] = a[:, 2, 0] = sy
+    a[:, 1, 1] = (w * dx * dx).sum(1) + ridge * sw
+    a[:, 2, 2] = (w * dy * dy).sum(1) + ridge * sw
+    a[:, 1, 2] = a[:, 2, 1] = (w * dx * dy).sum(1)
+    bad = sw < 3
+    a[bad] = np.eye(3)
+    rhs = np.stack([(w * z).sum(1), (w * dx * z).sum(1), (w * dy * z).sum(1)], axis=1)
+    rhs[bad] = 0.0
+    return np.linalg.solve(a, rhs[:, :, None])[:, :, 0]
+
+
+def _group_means(group, xy, dep):
+    """Mean position and depth of each group of soundings."""
+    _, inv = np.unique(np.asarray(group).ravel(), return_inverse=True)
+    cnt = np.bincount(inv).astype(np.float64)
+    xy = np.column_stack([np.bincount(inv, weights=xy[:, k]) / cnt for k in range(2)])
+    return xy, np.bincount(inv, weights=dep) / cnt
+
+
+def _masked_median(v: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Row medians of ``v`` over its ``valid`` entries (0 for a row without any)."""
+    cnt = valid.sum(axis=1)
+    s = np.sort(np.where(valid, v, np.inf), axis=1)
+    c = np.maximum(cnt, 1)
+    lo = np.take_along_axis(s, ((c - 1) // 2)[:, None], axis=1)[:, 0]
+    hi = np.take_along_axis(s, (c // 2)[:, None], axis=1)[:, 0]
+    return np.where(cnt > 0, 0.5 * (lo + np.where(cnt >= 2, hi, lo)), 0.0)
+
+
+def seabed_gradient(
+    xy_m: Any,
+    depth_m: Any,
+    query_xy_m: Any = None,
+    *,
+    group: Any = None,
+    neighbours: int = 16,
+    radius_m: float = 10.0,
+    ridge_m: float = 0.05,
+    chunk: int = 200_000,
+) -> np.ndarray:
+    """Depth gradient of the seabed from measured soundings, ``(m, 2)`` (m/m).
+
+    At each query point (default: each sounding), a plane ``depth = a + b dx + c dy`` through
+    the ``neighbours`` nearest soundings within ``radius_m``, by least squares with one robust
+    pass (residuals beyond 3 × 1.4826 MAD, at least 1 cm, dropped). A ridge of
+    ``count * ridge_m²`` on ``(b, c)`` keeps collinear soundings (a profiler track) solvable:
+    the slope across them tends to 0. Fewer than 3 soundings: 0.
+
+    Parameters
+    ----------
+    xy_m : (n, 2) array_like
+        Horizontal positions of the soundings.
+    depth_m : (n,) array_like
+        Their depths (positive down).
+    query_xy_m : (m, 2) array_like, optional
+    group : (n,) array_like, optional
+        Soundings sharing one detection (a photon-counting window's shots: one depth) carry
+        the same label and count as one, at their mean.
+    """
+    xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+    dep = np.asarray(depth_m, dtype=np.float64).ravel()
+    q = xy if query_xy_m is None else np.asarray(query_xy_m, dtype=np.float64).reshape(-1, 2)
+    if group is not None:
+        xy, dep = _group_means(group, xy, dep)
+    out = np.zeros((len(q), 2))
+    if len(xy) < 3 or len(q) == 0:
+        return out
+    tree = cKDTree(xy)
+    k = min(neighbours, len(xy))
+    for lo in range(0, len(q), chunk):
+        qq = q[lo : lo + chunk]
+        _, idx = tree.query(qq, k=k, distance_upper_bound=radius_m, workers=-1)
+        idx = np.asarray(idx).reshape(len(qq), k)
+        valid = idx < len(xy)
+        ic = np.where(valid, idx, 0)
+        dx = np.where(valid, xy[ic, 0] - qq[:, :1], 0.0)
+        dy = np.where(valid, xy[ic, 1] - qq[:, 1:], 0.0)
+        z = np.where(valid, dep[ic], 0.0)
+        w = valid.astype(np.float64)
+        p = _plane_fit(w, dx, dy, z, ridge_m**2)
+        r = np.abs(z - (p[:, :1] + p[:, 1:2] * dx + p[:, 2:3] * dy))
+        scale = _MAD_TO_SIGMA * _masked_median(r, valid)
+        keep = valid & (r <= np.maximum(3.0 * scale, 0.01)[:, None])
+        w = keep.astype(np.float64)
+        p = _plane_fit(w, dx, dy, z, ridge_m**2)
+        out[lo : lo + chunk] = np.where((w.sum(1) >= 3)[:, None], p[:, 1:], 0.0)
+    return out
+
+
+def pair_scatter(
+    xy_m: Any,
+    depth_m: Any,
+    gradient: Any = None,
+    *,
+    order: Any = None,
+    group: Any = None,
+    query_xy_m: Any = None,
+    max_separation_m: float = 2.0,
+    neighbours: int = 64,
+) -> np.ndarray:
+    """Local one-sigma random depth error of the soundings, measured from pairs of them.
+
+    Each sounding (or each ``group`` of soundings sharing one detection, e.g. the shots of a
+    photon-counting window, taken at their mean) is paired with the next one in ``order``
+    (the acquisition order: the pulse number), or without ``order`` with its nearest one, if it
+    lies within ``max_separation_m``. Their depth difference less the local slope times their
+    separation, ``D = d_i - d_j - g . (p_i - p_j)``, holds the two soundings' own random errors
+    (timing, jitter, relief at the footprint scale) and not what they share (navigation, the
+    water surface over them, water indices): ``E[D²] = s_i² + s_j²``. Successive pulses share
+    nearly all but their own noise, which makes ``order`` the clean choice. At each query point
+    (default: each sounding) the estimate is ``sqrt(mean(D² / 2))`` over the ``neighbours``
+    nearest pairs. ``gradient`` (``(n, 2)``, :func:`seabed_gradient`) defaults to the one of
+    the (grouped) soundings themselves: a group's shots share one depth, so only the groups
+    show the slope.
+
+    Returns
+    -------
+    (m,) float64
+        NaN where no pair exists at all.
+    """
+    xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+    dep = np.asarray(depth_m, dtype=np.float64).ravel()
+    g = None if gradient is None else np.asarray(gradient, dtype=np.float64).reshape(-1, 2)
+    key = None if order is None else np.asarray(order, dtype=np.float64).ravel()
+    q = xy if query_xy_m is None else np.asarray(query_xy_m, dtype=np.float64).reshape(-1, 2)
+    if group is not None:
+        _, inv = np.unique(np.asarray(group).ravel(), return_inverse=True)
+        cnt = np.bincount(inv).astype(np.float64)
+        if g is not None:
+            g = np.column_stack([np.bincount(inv, weights=g[:, k]) / cnt for k in range(2)])
+        xy, dep = _group_means(group, xy, dep)
+        if key is not None:
+            first = np.full(len(cnt), np.inf)
+            np.minimum.at(first, inv, key)
+            key = first
+    out = np.full(len(q), np.nan)
+    if len(xy) < 2 or len(q) == 0:
+        return out
+    if g is None:
+        g = seabed_gradient(xy, dep)
+    if key is None:
+        _, idx = cKDTree(xy).query(xy, k=2, workers=-1)
+        i, j = np.arange(len(xy)), idx[:, 1]
+    else:
+        seq = np.argsort(key, kind="stable")
+        i, j = seq[:-1], seq[1:]
+    sep = xy[i] - xy[j]
+    ok = np.hypot(sep[:, 0], sep[:, 1]) <= max_separation_m
+    i, j, sep = i[ok], j[ok], sep[ok]
+    if i.size == 0:
+        return out
+    diff = dep[i] - dep[j] - np.sum(0.5 * (g[i] + g[j]) * sep, axis=1)
+    half_sq = 0.5 * diff**2
+    k = min(neighbours, half_sq.size)
+    _, near = cKDTree(0.5 * (xy[i] + xy[j])).query(q, k=k, workers=-1)
+    near = np.asarray(near).reshape(len(q), k)
+    return np.sqrt(np.mean(half_sq[near], axis=1))
+
+
+def surface_over_sounding(
+    returns: DetectedReturns, surface: WaterSurface, xy_m: Any
+) -> tuple[np.ndarray, np.ndarray]:
+    """How the water plane of each bottom pulse turns against the surface over its sounding.
+
+    A sounding's depth is measured below its own pulse's local plane (fitted around the water
+    entry ``E``), read at the sounding ``B``, ``Delta`` away horizontally (the refracted beam's
+    offset, about a quarter of the depth at 20°). The surface measured over the sounding is the
+    local plane of the surface return nearest to ``B``. The difference of the two planes'
+    heights at ``B`` less their difference at ``E`` is ``T = (s_B - s_E) . (B - E)``, their
+    slopes' difference times the offset: free of any height offset between the two fits (e.g.
+    navigation heights that differ between the passes that sampled them, which the depth does
+    not see), it holds the two planes' tilt errors and the bending of the waves between ``E``
+    and ``B`` that one plane cannot follow. Where ``B`` lies within the fit's own
+    neighbourhood the two planes share their points and ``T`` understates the tilt error.
+
+    Parameters
+    ----------
+    returns, surface
+        As for :func:`point_tpu`.
+    xy_m : (n_bottom, 2) array_like
+        The soundings (rows of :func:`~pipeline.process.refraction.seabed_points`).
+
+    Returns
+    -------
+    T_m, Delta_m : (n_bottom,) float64
+        ``T`` is NaN where the pulse does not enter water or no surface return exists.
+    """
+    rows = np.flatnonzero(returns.has_bottom)
+    xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+    if xy.shape[0] != rows.size:
+        raise ValueError(f"`xy_m` must be (n_bottom, 2) = ({rows.size}, 2); got {xy.shape}")
+    entry = surface.entry_m[rows, :2]
+    delta = np.hypot(*(xy - entry).T)
+    ws = np.flatnonzero(surface.is_water & returns.has_surface)
+    if ws.size == 0 or rows.size == 0:
+        return np.full(rows.size, np.nan), delta
+    _, j = cKDTree(surface.surface_point_m[ws, :2]).query(xy, k=1, workers=-1)
+
+    def apart(x, y):  # the plane over the sounding less the pulse's own, at (x, y)
+        return surface.surface_z_m(ws[j], x, y) - surface.surface_z_m(rows, x, y)
+
+    turn = apart(xy[:, 0], xy[:, 1]) - apart(entry[:, 0], entry[:, 1])
+    return np.where(surface.is_water[rows], turn, np.nan), delta
+
+
+def _binned_mean(x, v, query, *, per_bin=100, max_bins=40):
+    """Mean of ``v`` in equal-count bins of ``x``, interpolated at ``query`` (clamped)."""
+    ok = np.isfinite(x) & np.isfinite(v)
+    x, v = x[ok], v[ok]
+    if x.size == 0:
+        return np.full(np.shape(query), np.nan)
+    order = np.argsort(x)
+    x, v = x[order], v[order]
+    nb = int(min(max(x.size // per_bin, 1), max_bins))
+    edges = np.linspace(0, x.size, nb + 1).astype(np.int64)
+    cx = np.array([np.median(x[a:b]) for a, b in zip(edges[:-1], edges[1:], strict=True)])
+    cv = np.array([np.mean(v[a:b]) for a, b in zip(edges[:-1], edges[1:], strict=True)])
+    return np.interp(query, cx, cv)
+
+
+def surface_tilt_sigma(
+    returns: DetectedReturns,
+    surface: WaterSurface,
+    xy_m: Any,
+    *,
+    pool: Any = None,
+    min_offset_m: float = 0.25,
+) -> np.ndarray:
+    """Tilt uncertainty of each bottom pulse's water plane, measured over its sounding (rad).
+
+    The fit's own standard error (``WaterSurface.normal_sigma_rad``) assumes independent
+    residuals: it sees neither the waves its neighbourhood does not follow nor the misfit of
+    neighbours flown at different times (navigation errors that differ between the passes).
+    The turn ``T`` of the pulse's plane against the plane over its sounding
+    (:func:`surface_over_sounding`) measures both: with the two fits' tilt errors alike, of
+    per-axis sigma ``tau``, ``E[T²] = 2 tau² Delta²``. ``E[T²]`` is averaged in bins of
+    ``Delta`` over the ``pool`` rows (default all: a wave field is the same over a survey,
+    and a single ``T`` is that point's error, not its spread). Returned as the total
+    ``sqrt(2) tau``, like ``normal_sigma_rad``; 0 below ``min_offset_m`` and where the pulse
+    does not enter water.
+
+    Parameters
+    ----------
+    xy_m : (n_bottom, 2) array_like
+        The soundings (rows of :func:`~pipeline.process.refraction.seabed_points`).
+    pool : array_like of int or bool, optional
+        The rows averaged (e.g. the bathymetric points').
+    """
+    rows = np.flatnonzero(returns.has_bottom)
+    turn, delta = surface_over_sounding(returns, surface, xy_m)
+    sel = np.arange(rows.size) if pool is None else np.asarray(pool)
+    mst = np.maximum(np.nan_to_num(_binned_mean(delta[sel], (turn**2)[sel], delta)), 0.0)
+    tilt = np.sqrt(mst) / np.maximum(delta, min_offset_m)
+    ok = surface.is_water[rows] & (delta >= min_offset_m)
+    return np.where(ok, tilt, 0.0)
+
+
+def timing_from_scatter(
+    returns: DetectedReturns,
+    surface: WaterSurface,
+    refraction_settings: RefractionSettings | None = None,
+    settings: TpuSettings | None = None,
+    *,
+    depth_scatter_m: Any,
+    seabed_gradient: Any = None,
+    max_sigma_s: float = math.inf,
+) -> DetectedReturns:
+    """``returns`` with the per-return timing sigmas that the measured depth scatter implies.
+
+    For a detector that reports no timing sigma: the timing terms' depth variance is set to the
+    measured random scatter of the soundings (:func:`pair_scatter`) less the other random
+    terms', ``s_t² = max(scatter² - other², 0)``. With the pulse's own surface return the depth
+    depends on ``t_b - t_s`` only, so the split between the two returns does not change it; it
+    is made as for photon-limited timing, variance in proportion to ``1 / amplitude``
+    (equal without amplitudes). Rows with a NaN scatter keep the a-priori sigma.
+
+    The sigma is ``scatter / |d depth / d t|``, the derivative of the depth compared at the
+    measured position: it tends to 0 where a beam runs along the local seabed gradient
+    (``g . u tan(theta_w) -> 1``), or where false bottoms among the soundings make that
+    gradient absurd, and the sigma then grows without bound (hundreds of µs). A detected
+    return lies in the recorded window, so no timing sigma exceeds that of a time spread
+    uniformly over it, ``window / sqrt(12)``: ``max_sigma_s`` (``bathy run`` passes that of
+    the detector's window) bounds the sigmas set here. Pulses whose sigma still reaches their
+    surface-bottom separation are left out by :func:`point_tpu`.
+
+    Parameters
+    ----------
+    depth_scatter_m : (n_bottom,) array_like
+        Measured one-sigma random depth error of each bottom point (rows of
+        :func:`~pipeline.process.refraction.seabed_points`).
+    seabed_gradient : (n_bottom, 2) array_like, optional
+        As for :func:`point_tpu`.
+    max_sigma_s : float, optional
+        Upper bound of each sigma set from the scatter (default: none).
+    """
+    st = settings or TpuSettings()
+    rst = refraction_settings or RefractionSettings()
+    unit = 1e-10
+    st_unit = dataclasses.replace(st, timing_sigma_s=unit)
+    bare = dataclasses.replace(returns, t_surface_sigma_s=None, t_bottom_sigma_s=None)
+    inp = _inputs(bare, surface, rst, st_unit, seabed_gradient)
+    n = len(inp.row)
+    scatter = np.asarray(depth_scatter_m, dtype=np.float64).ravel()
+    if scatter.shape != (n,):
+        raise ValueError(f"`depth_scatter_m` must be (n_bottom,) = ({n},); got {scatter.shape}")
+    _, terms = _terms(inp, st_unit, RANDOM_TERMS)
+    js = terms["timing_surface"][:, DEPTH] / unit
+    jb = terms["timing_bottom"][:, DEPTH] / unit
+    other = sum(terms[k][:, DEPTH] ** 2 for k in RANDOM_TERMS if k not in TIMING_TERMS)
+    excess = np.maximum(np.nan_to_num(scatter) ** 2 - other, 0.0)
+    ret = inp.ret
+    hs = ret.has_surface
+
+    def inv_amp(a):
+        if a is None:
+            return np.ones(n)
+        a = np.asarray(a, dtype=np.float64)
+        pos = a > 0
+        fill = np.median(a[pos]) if pos.any() else 1.0
+        return 1.0 / np.where(pos, a, fill)
+
+    ws = np.where(hs, inv_amp(ret.surface_amplitude), 0.0)
+    wb = inv_amp(ret.bottom_amplitude)
+    den = ws * js**2 + wb * jb**2
+    c = np.where(den > 0, excess / np.where(den > 0, den, 1.0), 0.0)
+    floor = 1e-15  # sigmas must be > 0 where a return exists
+    prior_s = returns.t_surface_sigma_s
+    prior_b = returns.t_bottom_sigma_s
+    sig_s = np.where(returns.has_surface, st.timing_sigma_s, 0.0) if prior_s is None else prior_s
+    sig_b = np.where(returns.has_bottom, st.timing_sigma_s, 0.0) if prior_b is None else prior_b
+    sig_s, sig_b = np.array(sig_s, dtype=np.float64), np.array(sig_b, dtype=np.float64)
+    use = np.isfinite(scatter)
+    rows = inp.row[use]
+    sig_b[rows] = np.clip(np.sqrt(wb * c)[use], floor, max_sigma_s)
+    sig_s[rows] = np.where(hs[use], np.clip(np.sqrt(ws * c)[use], floor, max_sigma_s), 0.0)
+    sig_s = np.where(returns.has_surface, np.maximum(sig_s, floor), 0.0)
+    sig_b = np.where(returns.has_bottom, np.maximum(sig_b, floor), 0.0)
+    return dataclasses.replace(returns, t_surface_sigma_s=sig_s, t_bottom_sigma_s=sig_b)

@@ -1,0 +1,290 @@
+"""The TPU's perturbation machinery: each input moved by its sigma, the points recomputed.
+
+Private to :mod:`pipeline.process.tpu` and its siblings: :func:`_terms` gives each
+uncertainty term's effect on x, y, z and the depth at the measured position.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.process.refraction import RefractionSettings, seabed_points
+from pipeline.process.returns import DetectedReturns
+from pipeline.process.surface_fit import WaterSurface
+from pipeline.process.tpu_screen import (
+    max_timing_step_s,
+)
+from pipeline.process.tpu_settings import (
+    _C,
+    CORRELATED_TERMS,
+    DEPTH,
+    RANDOM_TERMS,
+    TIMING_TERMS,
+    TpuSettings,
+    index_derivatives,
+)
+
+
+def _take_surface(surface: WaterSurface, index: np.ndarray) -> WaterSurface:
+    rows = {
+        f.name: getattr(surface, f.name)[index]
+        for f in dataclasses.fields(surface)
+        if f.name not in ("global_plane", "global_sigma_m", "air_index")
+    }
+    return dataclasses.replace(surface, **rows)
+
+
+def _on_plane(o, d, point, normal, water):
+    """Range and entry of beams ``(o, d)`` on planes ``(point, normal)`` (water rows only)."""
+    den = np.sum(normal * d, axis=1)
+    den = np.where(water & (den < -1e-9), den, -1.0)
+    r = np.sum(normal * (point - o), axis=1) / den
+    return r, o + d * r[:, None]
+
+
+def _rotate(v, axis, angle):
+    """Rodrigues rotation of rows ``v`` about unit ``axis`` rows by ``angle`` (n,)."""
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    return v * c + np.cross(axis, v) * s + axis * np.sum(axis * v, axis=1)[:, None] * (1.0 - c)
+
+
+def _perp_axes(d):
+    """Two unit vectors perpendicular to the unit rows ``d`` (and to each other)."""
+    ref = np.where(np.abs(d[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+    a = np.cross(d, ref)
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    return a, np.cross(d, a)
+
+
+@dataclass(frozen=True)
+class _Inputs:
+    """The bottom pulses and everything the perturbations need."""
+
+    ret: DetectedReturns
+    surf: WaterSurface
+    rst: RefractionSettings
+    sig_ts: np.ndarray
+    sig_tb: np.ndarray
+    wave_h: np.ndarray
+    row: np.ndarray
+    grad: np.ndarray
+
+
+def _take_inputs(inp: _Inputs, keep: np.ndarray) -> _Inputs:
+    """The rows ``keep`` (bool over the bottom rows) of every per-pulse input."""
+    return dataclasses.replace(
+        inp,
+        ret=inp.ret.select(keep),
+        surf=_take_surface(inp.surf, keep),
+        **{k: getattr(inp, k)[keep] for k in ("sig_ts", "sig_tb", "wave_h", "row", "grad")},
+    )
+
+
+def _per_row(name, value, n, cols=None):
+    """A per-bottom-row input, validated; None gives zeros; NaN becomes 0."""
+    shape = (n,) if cols is None else (n, cols)
+    if value is None:
+        return np.zeros(shape)
+    a = np.asarray(value, dtype=np.float64)
+    if a.shape != shape:
+        raise ValueError(f"`{name}` must have the shape (n_bottom[, 2]) = {shape}; got {a.shape}")
+    return np.where(np.isfinite(a), a, 0.0)
+
+
+def _inputs(returns, surface, rst, st, seabed_gradient=None, surface_tilt_sigma_rad=None):
+    if len(surface) != len(returns):
+        raise ValueError(f"`surface` has {len(surface)} pulses; `returns` has {len(returns)}")
+    row = np.flatnonzero(returns.has_bottom)
+    ret, surf = returns.select(row), _take_surface(surface, row)
+    n = len(row)
+    grad = _per_row("seabed_gradient", seabed_gradient, n, 2)
+    if surface_tilt_sigma_rad is not None:
+        tilt = np.maximum(
+            surf.normal_sigma_rad, _per_row("surface_tilt_sigma_rad", surface_tilt_sigma_rad, n)
+        )
+        surf = dataclasses.replace(surf, normal_sigma_rad=tilt)
+    sig_ts = (
+        np.full(n, st.timing_sigma_s) if ret.t_surface_sigma_s is None else ret.t_surface_sigma_s
+    )
+    sig_ts = np.where(ret.has_surface, sig_ts, 0.0)
+    sig_tb = np.full(n, st.timing_sigma_s) if ret.t_bottom_sigma_s is None else ret.t_bottom_sigma_s
+    # wave height: the fit residual in excess of the surface points' own ranging noise
+    cos_i = np.abs(np.sum(ret.direction_meas * surf.normal, axis=1))
+    ranging = _C * np.where(ret.has_surface, sig_ts, st.timing_sigma_s) / 2.0 * cos_i
+    wave_h = np.sqrt(np.maximum(surf.fit_sigma_m**2 - ranging**2, 0.0))
+    wave_h = np.where(surf.is_water, wave_h, 0.0)
+    return _Inputs(ret, surf, rst, sig_ts, sig_tb, wave_h, row, grad)
+
+
+def _xyzd(inp: _Inputs, *, ret=None, surf=None, rst=None) -> np.ndarray:
+    """Seabed points and their depths, ``(n, 4)``."""
+    p = seabed_points(ret or inp.ret, surf or inp.surf, rst or inp.rst)
+    return np.column_stack([p.xyz_m, p.depth_m])
+
+
+def _at_measured(t: np.ndarray, grad: np.ndarray) -> np.ndarray:
+    """A term's depth change compared at the measured position: ``depth - g . (dx, dy)``."""
+    t = t.copy()
+    t[:, DEPTH] -= np.sum(grad * t[:, :2], axis=1)
+    return t
+
+
+def _with_times(inp, dts, dtb):
+    r = inp.ret
+    return dataclasses.replace(
+        r,
+        t_surface_s=np.where(r.has_surface, r.t_surface_s + dts, 0.0),
+        t_bottom_s=r.t_bottom_s + dtb,
+    )
+
+
+def _with_direction(inp, d_new):
+    """Beams turned to ``d_new``; entry re-intersected with the unchanged local planes."""
+    s = inp.surf
+    r, e = _on_plane(inp.ret.origin_meas_m, d_new, s.entry_m, s.normal, s.is_water)
+    ret = dataclasses.replace(inp.ret, direction_meas=d_new)
+    w = s.is_water
+    surf = dataclasses.replace(
+        s,
+        entry_m=np.where(w[:, None], e, s.entry_m),
+        range_to_entry_m=np.where(w, r, s.range_to_entry_m),
+    )
+    return ret, surf
+
+
+def _with_plane(inp, dh, tilt_axis=None, tilt=None):
+    """Local planes raised by ``dh`` and/or turned by ``tilt`` about ``tilt_axis``.
+
+    The turn is about the entry point; the beams are re-intersected with the new planes.
+    """
+    s, o, d = inp.surf, inp.ret.origin_meas_m, inp.ret.direction_meas
+    nrm = s.normal if tilt is None else _rotate(s.normal, tilt_axis, tilt)
+    point = s.entry_m + np.column_stack([np.zeros((len(dh), 2)), dh])
+    r, e = _on_plane(o, d, point, nrm, s.is_water)
+    w = s.is_water[:, None]
+    return dataclasses.replace(
+        s,
+        entry_m=np.where(w, e, s.entry_m),
+        range_to_entry_m=np.where(w[:, 0], r, s.range_to_entry_m),
+        normal=np.where(w, nrm, s.normal),
+    )
+
+
+def _white_evaluations(inp: _Inputs, st: TpuSettings):
+    """``(name, sigma, f)`` of every term that goes through ``seabed_points``.
+
+    ``sigma`` is (n,); ``f`` maps a signed perturbation (n,) to the points and depths (n, 4).
+    """
+    n = len(inp.row)
+    zeros = np.zeros(n)
+    ex, ey = np.tile([1.0, 0.0, 0.0], (n, 1)), np.tile([0.0, 1.0, 0.0], (n, 1))
+    pa, pb = _perp_axes(inp.ret.direction_meas)
+    d = inp.ret.direction_meas
+    water = inp.surf.is_water
+    jitter = np.radians(st.pointing_jitter_deg)
+    fit_tilt = np.where(water, inp.surf.normal_sigma_rad / math.sqrt(2.0), 0.0)
+    wave_tilt = np.where(water, st.wave_slope_sigma_rad, 0.0)
+
+    def turn(axis):
+        def f(a):
+            d_new = _rotate(d, axis, a)
+            ret, surf = _with_direction(inp, d_new / np.linalg.norm(d_new, axis=1, keepdims=True))
+            return _xyzd(inp, ret=ret, surf=surf)
+
+        return f
+
+    def plane(axis=None):
+        if axis is None:
+            return lambda a: _xyzd(inp, surf=_with_plane(inp, a))
+        return lambda a: _xyzd(inp, surf=_with_plane(inp, zeros, axis, a))
+
+    return [
+        ("timing_surface", inp.sig_ts, lambda a: _xyzd(inp, ret=_with_times(inp, a, zeros))),
+        ("timing_bottom", inp.sig_tb, lambda a: _xyzd(inp, ret=_with_times(inp, zeros, a))),
+        ("pointing_a", np.full(n, jitter), turn(pa)),
+        ("pointing_b", np.full(n, jitter), turn(pb)),
+        ("wave_height", inp.wave_h, plane()),
+        ("wave_slope_x", wave_tilt, plane(ex)),
+        ("wave_slope_y", wave_tilt, plane(ey)),
+        ("surface_height", np.where(water, inp.surf.height_sigma_m, 0.0), plane()),
+        ("surface_tilt_x", fit_tilt, plane(ex)),
+        ("surface_tilt_y", fit_tilt, plane(ey)),
+    ]
+
+
+def _footprint(inp: _Inputs, xyz: np.ndarray, st: TpuSettings) -> np.ndarray:
+    """Per-axis horizontal sigma ``D / 4`` of the bottom footprint (n,)."""
+    gamma = st.beam_divergence_mrad * 1e-3
+    o = inp.ret.origin_meas_m
+    water = inp.surf.is_water
+    r_air = np.where(water, inp.surf.range_to_entry_m, np.linalg.norm(xyz - o, axis=1))
+    in_water = np.where(water, np.linalg.norm(xyz - inp.surf.entry_m, axis=1), 0.0)
+    return gamma * (r_air + in_water / inp.rst.phase_index) / 4.0
+
+
+def _terms(inp: _Inputs, st: TpuSettings, names=None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """The nominal points ``(n, 4)`` and the one-sigma term rows ``(n, 4)`` asked for."""
+    n = len(inp.row)
+    xyzd0 = _xyzd(inp) if n else np.zeros((0, 4))
+    want = set(RANDOM_TERMS + CORRELATED_TERMS) if names is None else set(names)
+    terms: dict[str, np.ndarray] = {}
+    for name, sigma, f in _white_evaluations(inp, st):
+        if name not in want:
+            continue
+        h = 0.01 * sigma  # a small fraction of the sigma: the tangent, not a secant
+        if name in TIMING_TERMS:  # never past the surface-bottom gap (depth is linear in it)
+            h = np.minimum(h, max_timing_step_s(inp.ret))
+        if n == 0 or not np.any(h > 0):
+            terms[name] = np.zeros((n, 4))
+            continue
+        jac = (f(h) - f(-h)) / np.where(h > 0, 2.0 * h, 1.0)[:, None]
+        terms[name] = _at_measured(jac * sigma[:, None], inp.grad)
+    for name, (dp, dg) in index_derivatives(st).items():
+        if name not in want:
+            continue
+        sig = st.temperature_sigma_c if name == "temperature" else st.salinity_sigma_psu
+        h = 0.01 * sig
+        if n == 0 or h == 0.0:
+            terms[name] = np.zeros((n, 4))
+            continue
+
+        def shifted(sign, dp=dp, dg=dg, h=h):
+            r = dataclasses.replace(
+                inp.rst,
+                phase_index=inp.rst.phase_index + sign * h * dp,
+                group_index=inp.rst.group_index + sign * h * dg,
+            )
+            return _xyzd(inp, rst=r)
+
+        terms[name] = _at_measured((shifted(1.0) - shifted(-1.0)) / (2.0 * h) * sig, inp.grad)
+    # rigid motions of the whole measured scene (exact): a rotation w about the origin keeps
+    # the distance from the point to its (rotated) plane, N . (E - B); the depth is that over
+    # N_z, so it changes by -depth (w x N)_z / N_z
+    arm = xyzd0[:, :3] - inp.ret.origin_meas_m
+    nrm = inp.surf.normal
+    tilt, head = np.radians(st.attitude_sigma_deg), np.radians(st.heading_sigma_deg)
+    for name, axis, sig in (
+        ("attitude_x", [1.0, 0.0, 0.0], tilt),
+        ("attitude_y", [0.0, 1.0, 0.0], tilt),
+        ("heading", [0.0, 0.0, 1.0], head),
+    ):
+        if name not in want:
+            continue
+        w = sig * np.asarray(axis)
+        dz_n = np.cross(w, nrm)[:, 2]
+        ddepth = -xyzd0[:, DEPTH] * dz_n / np.where(np.abs(nrm[:, 2]) > 0, nrm[:, 2], 1.0)
+        terms[name] = _at_measured(np.column_stack([np.cross(w, arm), ddepth]), inp.grad)
+    if "navigation" in want:
+        nav = np.tile([st.position_sigma_h_m, st.position_sigma_h_m, st.position_sigma_v_m], (n, 1))
+        # a translation moves surface and seabed alike: only the sideways part, over the slope
+        nav_depth = st.position_sigma_h_m * np.hypot(inp.grad[:, 0], inp.grad[:, 1])
+        terms["navigation"] = np.column_stack([nav, nav_depth])
+    if "footprint" in want:
+        fp = _footprint(inp, xyzd0[:, :3], st) if n else np.zeros(0)
+        slope = math.tan(math.radians(st.seabed_slope_deg))
+        terms["footprint"] = np.column_stack([fp, fp, fp * slope, np.zeros(n)])
+    return xyzd0, terms
