@@ -21,9 +21,9 @@ from scipy.special import ndtr
 
 from pipeline import lidar_equation as le
 from pipeline import optics
+from pipeline.constants import FWHM_TO_SIGMA
 
 __all__ = [
-    "FWHM_TO_SIGMA",
     "TransmittanceProfile",
     "transmittance_profile",
     "budget_vs_depth",
@@ -35,7 +35,6 @@ __all__ = [
 ]
 
 #: σ of a Gaussian pulse = FWHM / (2 √(2 ln 2)).
-FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
 C_M_S = optics.SPEED_OF_LIGHT_M_S
 
 

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 from scipy import special
 
+from pipeline.lidar_equation import cox_munk_mean_square_slope
 from terrain._validate import check_number
 
 __all__ = [
@@ -80,7 +81,7 @@ def wind_speed_at_height(
 def cox_munk_mss(u12_5_m_s: Any) -> np.ndarray:
     """Cox & Munk (1954) clean-sea mean-square slope ``0.003 + 5.12e-3 U12.5`` (U in m/s)."""
     u = np.asarray(u12_5_m_s, dtype=np.float64)
-    return 0.003 + 5.12e-3 * u
+    return cox_munk_mean_square_slope(u)
 
 
 def pierson_moskowitz_peak_rad_s(u19_5_m_s: float) -> float:

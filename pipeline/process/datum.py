@@ -27,13 +27,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.config import setting
+from pipeline.constants import MAD_TO_SIGMA
 from pipeline.errors import BathyError
 from pipeline.process.classify import GROUND
 from pipeline.process.returns import Points, ReturnKind
 
 __all__ = ["DatumSettings", "Datum", "survey_datum", "depth_below_datum_m"]
 
-MAD_TO_SIGMA = 1.4826
 #: Gate of the surface returns around their median, robust σ (a priori: keeps a Gaussian sea).
 GATE_SIGMA = 5.0
 

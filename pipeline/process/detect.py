@@ -43,6 +43,7 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.special import ndtr
 
 from pipeline.config import setting
+from pipeline.constants import FWHM_TO_SIGMA, MAD_TO_SIGMA
 from pipeline.process.detect_merged import column_decay, fit_merged, merged_bottoms
 from pipeline.process.returns import DetectorFlag
 
@@ -54,9 +55,6 @@ __all__ = [
     "fit_merged",
     "flank_trend",
 ]
-
-FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
-MAD_TO_SIGMA = 1.4826
 
 
 @dataclass(frozen=True, kw_only=True)

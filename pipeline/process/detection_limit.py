@@ -50,8 +50,8 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from pipeline.config import setting
+from pipeline.constants import FWHM_TO_SIGMA
 from pipeline.optics import SPEED_OF_LIGHT_M_S
-from pipeline.process.detect import FWHM_TO_SIGMA
 
 __all__ = [
     "NoBottomSettings",

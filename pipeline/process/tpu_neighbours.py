@@ -13,11 +13,11 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from pipeline.constants import MAD_TO_SIGMA
 from pipeline.process.refraction import RefractionSettings
 from pipeline.process.returns import DetectedReturns
 from pipeline.process.surface_fit import WaterSurface
 from pipeline.process.tpu_settings import (
-    _MAD_TO_SIGMA,
     DEPTH,
     RANDOM_TERMS,
     TIMING_TERMS,
@@ -114,7 +114,7 @@ def seabed_gradient(
         w = valid.astype(np.float64)
         p = _plane_fit(w, dx, dy, z, ridge_m**2)
         r = np.abs(z - (p[:, :1] + p[:, 1:2] * dx + p[:, 2:3] * dy))
-        scale = _MAD_TO_SIGMA * _masked_median(r, valid)
+        scale = MAD_TO_SIGMA * _masked_median(r, valid)
         keep = valid & (r <= np.maximum(3.0 * scale, 0.01)[:, None])
         w = keep.astype(np.float64)
         p = _plane_fit(w, dx, dy, z, ridge_m**2)

@@ -10,14 +10,12 @@ from typing import Any
 import numpy as np
 
 from pipeline.config import setting
+from pipeline.constants import FWHM_TO_SIGMA
+from pipeline.lidar_equation import cox_munk_mean_square_slope
 from pipeline.optics import SPEED_OF_LIGHT_M_S, water_group_index, water_phase_index
-from pipeline.process.tpu_screen import (
-    LeftOut,
-)
+from pipeline.process.tpu_screen import LeftOut
 
 _C = SPEED_OF_LIGHT_M_S
-FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
-_MAD_TO_SIGMA = 1.4826
 #: Columns of a term: the point's x, y, z and its depth at the measured position.
 X, Y, Z, DEPTH = 0, 1, 2, 3
 
@@ -124,7 +122,7 @@ def cox_munk_slope_sigma(wind_speed_m_s: float) -> float:
     This is the slope of the capillary-scale facets; a footprint of several metres averages
     much of it, so use it as an upper bound for ``wave_slope_sigma_rad``.
     """
-    return math.sqrt((0.003 + 5.12e-3 * wind_speed_m_s) / 2.0)
+    return math.sqrt(float(cox_munk_mean_square_slope(wind_speed_m_s)) / 2.0)
 
 
 def index_derivatives(settings: TpuSettings) -> dict[str, tuple[float, float]]:

@@ -78,6 +78,7 @@ import numpy as np
 from scipy.special import erfcx, ndtr
 
 from pipeline.config import setting
+from pipeline.constants import FWHM_TO_SIGMA
 from pipeline.errors import NumericalError, SceneError
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 
@@ -109,7 +110,6 @@ PARAM_NAMES = (
     "log_surface_width",
 )
 N_PARAMS = len(PARAM_NAMES)
-FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
 _C = SPEED_OF_LIGHT_M_S
 _SQRT1_2 = math.sqrt(0.5)
 #: Half-width, in system-response sigmas, of the band where the special functions are used.

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from pipeline.constants import FWHM_TO_SIGMA
 from pipeline.simulate import detector as D
 from pipeline.simulate import paths as P
 from pipeline.simulate.shapes import column_cdf
@@ -83,7 +84,7 @@ def pulse_flags(budget: ReturnBudget, detector, comps, ctype) -> np.ndarray:
     out = np.zeros(budget.n_pulses, dtype=np.uint16)
     out |= np.where((snr_s < thr) & (~has_bottom | (snr_b < thr)), D.NO_SIGNAL, 0).astype(np.uint16)
     out |= np.where(has_bottom & (snr_b < thr), D.BOTTOM_BELOW_NOISE, 0).astype(np.uint16)
-    fwhm = 2.0 * np.sqrt(2.0 * np.log(2.0)) * np.maximum(sig_s, sig_b)
+    fwhm = np.maximum(sig_s, sig_b) / FWHM_TO_SIGMA
     merged = has_bottom & (mu_b - mu_s < fwhm)
     out |= np.where(merged, D.MERGED_SURFACE_BOTTOM, 0).astype(np.uint16)
     beyond = budget.t0_s + (budget.n_samples - 0.5) * dt

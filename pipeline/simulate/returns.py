@@ -59,7 +59,7 @@ import numpy as np
 from pipeline import lidar_equation as le
 from pipeline import optics
 from pipeline.config import setting
-from pipeline.profiler import FWHM_TO_SIGMA
+from pipeline.constants import FWHM_TO_SIGMA
 from pipeline.simulate import paths as P
 from pipeline.simulate.geometry import (
     LOG_ZERO,
