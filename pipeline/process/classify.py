@@ -20,7 +20,7 @@ Rules (:func:`classify_points`), first match wins
 Bottom returns (``ReturnKind.BOTTOM``):
 
 1. ``GRAZING`` (no valid water entry) -> 1 unclassified.
-2. Any detector flag of ``unreliable_detector_flags`` (default MERGED, SATURATED, TRUNCATED:
+2. Any detector flag of ``unreliable_detector_flags`` (default MERGED, SATURATED:
    the bottom time is not trustworthy), or the pulse's own surface return is an outlier of the
    local fit (``surface_outlier_unreliable``: its timing reference is suspect) -> 1.
 3. ``confidence < min_confidence`` -> 7 low noise.
@@ -124,7 +124,7 @@ class ClassifySettings:
         False, doc="a bottom whose pulse's own surface return is an outlier stays unclassified"
     )
     unreliable_detector_flags: tuple[str, ...] = setting(
-        ("MERGED", "SATURATED", "TRUNCATED"),
+        ("MERGED", "SATURATED"),
         doc="detector flags that leave a bottom point unclassified",
     )
 

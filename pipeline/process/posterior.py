@@ -85,7 +85,6 @@ __all__ = [
     "start_theta",
     "posterior_modes",
     "sample_batch",
-    "sample_pulse",
     "interval_summary",
 ]
 
@@ -311,21 +310,6 @@ def _run(data: PulseBatch, pulses, pos, system, st, n_steps: int, thin: int, rng
 
 
 _BATCH_FIELDS = ("samples", "valid", "cos_water", "lower", "upper", "t_last_s", "ln_k_prior")
-
-
-def sample_pulse(
-    samples: Any,
-    system: WaveformSystem,
-    settings: PosteriorSettings | None = None,
-    *,
-    cos_water: float = 1.0,
-    theta0: Any = None,
-    seed: int = 0,
-) -> PulseChains:
-    """:func:`sample_batch` of one waveform (a batch of one)."""
-    th0 = None if theta0 is None else np.asarray(theta0, dtype=np.float64)[None, :]
-    y = np.asarray(samples, dtype=np.float64)[None, :]
-    return sample_batch(y, system, settings, cos_water=cos_water, theta0=th0, seed=seed)
 
 
 def interval_summary(values: Any, axis: int = -1) -> dict[str, np.ndarray]:

@@ -47,10 +47,8 @@ class DetectorFlag(enum.IntFlag):
     LOW_SNR = 1 << 2
     #: Several bottom candidates; the reported one is the detector's best guess.
     MULTIPLE_BOTTOM_CANDIDATES = 1 << 3
-    #: The range gate closed before the signal decayed (bottom may be beyond the gate).
-    TRUNCATED = 1 << 4
-    #: The surface time is an estimate (e.g. from the infrared channel or a model).
-    SURFACE_ESTIMATED = 1 << 5
+    # bits 4 and 5 (TRUNCATED, SURFACE_ESTIMATED) were never set by any detector: removed,
+    # their values kept free so files written before read the same
 
 
 class PointFlag(enum.IntFlag):

@@ -16,7 +16,6 @@ chunk size.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,7 +32,6 @@ __all__ = [
     "subray_pattern",
     "subray_directions",
     "trace",
-    "iter_paths",
 ]
 
 _INVALID = np.uint32(0xFFFFFFFF)
@@ -288,15 +286,3 @@ def trace(
         bottom_incidence_rad=shape(bottom_inc),
         transmittance_up=shape(t_up),
     )
-
-
-def iter_paths(
-    pulse_chunks: Iterable,
-    world: World,
-    settings: TraceSettings,
-    divergence_rad: float,
-    polarisation: str = "unpolarised",
-) -> Iterator[P.Paths]:
-    """Trace a stream of pulse chunks, one :class:`Paths` per chunk (bounded memory)."""
-    for pulses in pulse_chunks:
-        yield trace(pulses, world, settings, divergence_rad, polarisation)

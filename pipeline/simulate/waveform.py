@@ -72,7 +72,6 @@ __all__ = [
     "pulse_flags",
     "simulate_waveforms",
     "simulate_photon_events",
-    "simulate_receiver",
 ]
 
 SLICE_PULSES = 1024
@@ -367,10 +366,3 @@ def simulate_photon_events(
         channel=np.concatenate(parts_c) if parts_c else np.zeros(0, dtype=np.int16),
         flags=flags,
     )
-
-
-def simulate_receiver(paths: P.Paths, scene, detector, settings=None):
-    """:func:`simulate_waveforms` or :func:`simulate_photon_events` by ``detector.mode``."""
-    if detector.mode == "photon_counting":
-        return simulate_photon_events(paths, scene, detector, settings)
-    return simulate_waveforms(paths, scene, detector, settings)
