@@ -26,9 +26,9 @@ import numpy as np
 
 from pipeline.config import from_mapping
 from pipeline.scene import DEFAULT_SCENE_PATH, parse_scene
+from pipeline.simulate.budget import ReturnSettings, return_budget
 from pipeline.simulate.detector import DetectorSettings, describe_pulse_flags, load_preset
 from pipeline.simulate.flat_paths import flat_paths
-from pipeline.simulate.returns import ReturnSettings, return_budget
 from pipeline.simulate.waveform import simulate_photon_events, simulate_waveforms
 
 CASES = {

@@ -23,9 +23,9 @@ from typing import Any
 from pipeline.config import from_mapping, setting
 from pipeline.errors import SceneError
 from pipeline.process.settings import ProcessSettings
+from pipeline.simulate.budget import ReturnSettings
 from pipeline.simulate.detector import DetectorSettings
 from pipeline.simulate.noise import NavigationNoiseSettings
-from pipeline.simulate.returns import ReturnSettings
 from pipeline.simulate.scanner import ScannerSettings
 from pipeline.simulate.trace_settings import TraceSettings
 from pipeline.simulate.trajectory import AttitudeSettings, FlightSettings
@@ -103,7 +103,7 @@ class WaterSettings:
         0.0, ge=0.0, le=40.0, doc="wind at 12.5 m; sets Cox-Munk slopes and whitecaps"
     )
     # an optional horizontal scattering layer (plankton, turbidity, thermocline): a uniform
-    # slab whose extra backscatter gives an in-column echo (pipeline.simulate.returns)
+    # slab whose extra backscatter gives an in-column echo (pipeline.simulate.budget)
     layer_depth_m: float = setting(
         0.0, ge=0.0, le=11000.0, doc="scattering layer's centre below the mean water level; 0: none"
     )

@@ -1,7 +1,7 @@
 """The echo of a scattering layer in the water column (``water.layer_*``), per sub-ray.
 
 Each sub-ray's layer echo is the column lidar equation integrated exactly across the slab and
-stopped at the seabed (see :mod:`pipeline.simulate.returns`, Notes, for the model); it is timed
+stopped at the seabed (see :mod:`pipeline.simulate.budget`, Notes, for the model); it is timed
 with the group index.
 
 layer echo of a sub-ray is centred at ``t_surface + 2 n_g l_mean / c0`` with

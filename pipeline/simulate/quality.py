@@ -17,8 +17,8 @@ from pipeline.simulate import paths as P
 from pipeline.simulate.shapes import column_cdf
 
 if TYPE_CHECKING:
+    from pipeline.simulate.budget import ReturnBudget
     from pipeline.simulate.photon import Components
-    from pipeline.simulate.returns import ReturnBudget
 
 __all__ = ["pulse_flags", "return_stats"]
 

@@ -46,6 +46,7 @@ import numpy as np
 from pipeline.errors import NumericalError
 from pipeline.simulate import detector as D
 from pipeline.simulate import paths as P
+from pipeline.simulate.budget import ReturnBudget, ReturnSettings, return_budget
 from pipeline.simulate.geometry import LOG_ZERO
 from pipeline.simulate.photon import (
     KIND_COLUMN,
@@ -59,7 +60,6 @@ from pipeline.simulate.photon import (
 )
 from pipeline.simulate.quality import pulse_flags
 from pipeline.simulate.receivers import dead_time_filter, digitise, expected_samples
-from pipeline.simulate.returns import ReturnBudget, ReturnSettings, return_budget
 
 __all__ = [
     "Waveforms",

@@ -21,9 +21,9 @@ from waveform_support import (
 from pipeline.errors import SceneError
 from pipeline.simulate import paths as P
 from pipeline.simulate import waveform as W
+from pipeline.simulate.budget import layer_echo, return_budget
 from pipeline.simulate.flat_paths import flat_paths
 from pipeline.simulate.geometry import LOG_ZERO
-from pipeline.simulate.returns import layer_echo, return_budget
 
 SIGMA_PER_FWHM = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
 

@@ -20,9 +20,9 @@ from waveform_support import (
 
 from pipeline import lidar_equation as le
 from pipeline.simulate import paths as P
+from pipeline.simulate.budget import ReturnSettings, return_budget
 from pipeline.simulate.flat_paths import flat_paths
 from pipeline.simulate.geometry import log_aperture_factor, log_column_integral
-from pipeline.simulate.returns import ReturnSettings, return_budget
 from pipeline.simulate.waveform import expected_waveform
 
 

@@ -11,9 +11,9 @@ from waveform_support import detector, make_scene, replace
 from pipeline.simulate import detector as D
 from pipeline.simulate import paths as P
 from pipeline.simulate import waveform as W
+from pipeline.simulate.budget import return_budget
 from pipeline.simulate.flat_paths import flat_paths
 from pipeline.simulate.geometry import LOG_ZERO
-from pipeline.simulate.returns import return_budget
 
 
 def _grazing(paths):

@@ -11,10 +11,10 @@ from waveform_support import clean_scene, detector, make_scene, replace
 
 from pipeline.simulate import photon
 from pipeline.simulate import waveform as W
+from pipeline.simulate.budget import return_budget
 from pipeline.simulate.flat_paths import flat_paths
 from pipeline.simulate.paths import Paths
 from pipeline.simulate.receivers import dead_time_filter
-from pipeline.simulate.returns import return_budget
 
 
 def test_poisson_quantile_matches_scipy_ppf():

@@ -12,8 +12,8 @@ from waveform_support import preset
 from pipeline.config import describe, from_mapping
 from pipeline.errors import SceneError
 from pipeline.simulate import photon
+from pipeline.simulate.budget import ReturnSettings
 from pipeline.simulate.detector import PRESETS_DIR, DetectorSettings, load_preset
-from pipeline.simulate.returns import ReturnSettings
 from pipeline.simulate.shapes import (
     column_bin_integrals,
     column_cdf,

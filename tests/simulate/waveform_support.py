@@ -16,8 +16,8 @@ import numpy as np
 
 from pipeline.config import from_mapping
 from pipeline.scene import parse_scene
+from pipeline.simulate.budget import ReturnSettings
 from pipeline.simulate.detector import DetectorSettings, load_preset
-from pipeline.simulate.returns import ReturnSettings
 
 H_PLANCK = 6.62607015e-34  # J s, exact (SI 2019)
 C_LIGHT = 299_792_458.0  # m/s, exact
