@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -15,10 +16,18 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="bathy", description="Open survey pipeline for airborne bathymetric lidar."
     )
-    sub = p.add_subparsers(dest="command", required=True)
+    p.add_argument("--version", action="store_true", help="print the version and commit")
+    sub = p.add_subparsers(dest="command")
     run = sub.add_parser("run", help="run a scene end to end (the built-in default if none)")
     run.add_argument("scene", nargs="?", help="scene TOML file (default: built-in scene)")
     run.add_argument("--out", default=None, help="output folder (default: out/<scene name>)")
+    run.add_argument(
+        "--overwrite", action="store_true", help="replace the outputs already in the folder"
+    )
+    run.add_argument("--quiet", action="store_true", help="no progress, only errors")
+    run.add_argument(
+        "--json", action="store_true", help="a machine-readable summary on stdout (log on stderr)"
+    )
     val = sub.add_parser("validate", help="check a scene file; exit 2 if it is invalid")
     val.add_argument("scene", help="scene TOML file")
     pl = sub.add_parser("plan", help="the stages a scene runs, and why the others are left out")
@@ -29,7 +38,17 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``bathy`` console script; returns the exit status."""
-    args = _parser().parse_args(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.version:
+        from pipeline.provenance import commit, version
+
+        print(f"bathy {version()} (commit {commit() or 'unknown'})")
+        return 0
+    if args.command is None:
+        parser.print_usage(sys.stderr)
+        print("bathy: a command is required (run, validate, plan, keys)", file=sys.stderr)
+        return EXIT_BAD_SCENE
     # imported late so `bathy --help` stays fast
     from pipeline.scene import DEFAULT_SCENE_PATH, Scene, load_scene
 
@@ -50,11 +69,27 @@ def main(argv: list[str] | None = None) -> int:
             print(f"bathy plan {path}: scene '{scene.scene.name}'")
             print("\n".join(plan(scene).lines()))
             return 0
-        from pipeline.run import run_scene
+        from pipeline.run import clear_outputs, existing_outputs, run_scene
 
         out = Path(args.out) if args.out else Path("out") / scene.scene.name
-        print(f"bathy run {path} -> {out}")
-        run_scene(scene, out)
+        old = existing_outputs(out)
+        if old and not args.overwrite:
+            raise SceneError(
+                f"output folder {out} already holds outputs ({', '.join(old[:4])}"
+                f"{', ...' if len(old) > 4 else ''}); give --overwrite to replace them, or"
+                " another --out"
+            )
+        clear_outputs(out)
+        stream = sys.stderr if args.json else sys.stdout
+
+        def log(line: str) -> None:
+            if not args.quiet:
+                print(line, file=stream, flush=True)
+
+        log(f"bathy run {path} -> {out}")
+        manifest = run_scene(scene, out, log=log, progress=not args.quiet)
+        if args.json:
+            print(json.dumps(_summary(out, manifest), indent=2))
         return 0
     except SceneError as exc:
         print(f"bathy: invalid scene: {exc}", file=sys.stderr)
@@ -62,6 +97,24 @@ def main(argv: list[str] | None = None) -> int:
     except BathyError as exc:
         print(f"bathy: {exc}", file=sys.stderr)
         return 1
+
+
+def _summary(out: Path, manifest: dict) -> dict:
+    """The ``--json`` summary: where the outputs are and the headline figures."""
+    ev = manifest.get("evaluation") or {}
+    err = ev.get("error") or {}
+    cov = ev.get("tpu_coverage_against_truth") or {}
+    return {
+        "out": str(out),
+        "files": manifest["files"],
+        "stages": [s["stage"] for s in manifest["plan"] if s["runs"]],
+        "pulses": ev.get("pulses"),
+        "points_bias_m": (err.get("points") or {}).get("bias_m"),
+        "points_rmse_m": (err.get("points") or {}).get("rmse_m"),
+        "grid_rmse_m": (err.get("grid") or {}).get("rmse_m"),
+        "tpu_within_95": cov.get("fraction_within"),
+        "provenance": manifest["provenance"],
+    }
 
 
 if __name__ == "__main__":

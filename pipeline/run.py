@@ -2,21 +2,48 @@
 
 from __future__ import annotations
 
-import platform
 import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from pipeline.outputs.atomic import write_json
+from pipeline.provenance import provenance
 from pipeline.scene import Scene
 from pipeline.stages import StageClock, plan
 
-__all__ = ["run_scene"]
+__all__ = ["run_scene", "existing_outputs", "clear_outputs"]
+
+#: Files a run writes (the figure names by pattern): an output folder holding any of them
+#: already holds outputs.
+OUTPUT_PATTERNS = (
+    "manifest.json",
+    "evaluation.json",
+    "points.laz",
+    "grid.tif",
+    "grid.nc",
+    "photon_budget.json",
+    "fig*.png",
+    "report.html",
+)
 
 
-def run_scene(scene: Scene, out_dir: str | Path, log=print) -> dict[str, Any]:
+def existing_outputs(out_dir: str | Path) -> list[str]:
+    """Names of earlier outputs in ``out_dir`` (empty when it is missing or holds none)."""
+    out = Path(out_dir)
+    if not out.is_dir():
+        return []
+    return sorted({p.name for pat in OUTPUT_PATTERNS for p in out.glob(pat)})
+
+
+def clear_outputs(out_dir: str | Path) -> None:
+    """Remove earlier outputs from ``out_dir`` (only the files a run writes), so none mixes in."""
+    for name in existing_outputs(out_dir):
+        (Path(out_dir) / name).unlink()
+
+
+def run_scene(
+    scene: Scene, out_dir: str | Path, log=print, *, progress: bool = False
+) -> dict[str, Any]:
     """Run exactly the stages the scene's plan selects and write its outputs into ``out_dir``.
 
     Parameters
@@ -27,6 +54,8 @@ def run_scene(scene: Scene, out_dir: str | Path, log=print) -> dict[str, Any]:
         Output folder, created if missing.
     log : callable
         Receives one line of progress at a time (``print`` by default).
+    progress : bool
+        Show progress bars with ETA (on stderr) for the long stages.
 
     Returns
     -------
@@ -62,7 +91,7 @@ def run_scene(scene: Scene, out_dir: str | Path, log=print) -> dict[str, Any]:
     if the_plan.runs("terrain"):
         from pipeline.run_survey import run_survey
 
-        survey_files, evaluation = run_survey(scene, the_plan, out, clock, log)
+        survey_files, evaluation = run_survey(scene, the_plan, out, clock, log, progress)
         files.update(survey_files)
     stages = clock.to_dict()
     manifest = {
@@ -74,7 +103,7 @@ def run_scene(scene: Scene, out_dir: str | Path, log=print) -> dict[str, Any]:
         "files": {k: str(v.name) for k, v in files.items()},
         "timings_s": {"total_wall_s": time.perf_counter() - t0},
         "evaluation": evaluation,
-        "versions": {"python": platform.python_version(), "numpy": np.__version__},
+        "provenance": provenance(scene),
     }
     write_json(out / "manifest.json", manifest)
     for key, path in files.items():

@@ -11,11 +11,13 @@ truth (:mod:`pipeline.survey_report`). Every stage runs only where the plan
 from __future__ import annotations
 
 import dataclasses
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
 from pipeline.process.context import ProcessingContext, processing_context
 from pipeline.process.posterior_selection import (
@@ -78,9 +80,12 @@ def _count(into: dict[str, int], counts: dict[str, int]) -> None:
 
 
 def simulate_detections(
-    scene, plan: Plan, ctx: ProcessingContext, clock: StageClock, log=print
+    scene, plan: Plan, ctx: ProcessingContext, clock: StageClock, log=print, progress=False
 ) -> SimulatedSurvey:
-    """Simulate the survey chunk by chunk; keep the measured navigation and the detections."""
+    """Simulate the survey chunk by chunk; keep the measured navigation and the detections.
+
+    ``progress``: a progress bar with ETA over the pulses (stderr).
+    """
     from pipeline.simulate import paths as P
     from pipeline.simulate import survey
     from pipeline.simulate.detector import describe_pulse_flags
@@ -135,6 +140,14 @@ def simulate_detections(
     kept: list[KeptWaveforms] = []
     nb_inputs: list[dict[str, np.ndarray]] = []
     n_chunk = survey.n_chunks(lines, chunk)
+    bar = tqdm(
+        total=lines.n_pulses_total,
+        unit="pulse",
+        unit_scale=True,
+        desc="simulate + detect",
+        disable=not progress,
+        file=sys.stderr,
+    )
     for c in range(n_chunk):
         with clock.stage("survey"):
             pulses = survey.generate_pulses(
@@ -167,9 +180,11 @@ def simulate_detections(
                 **{f.name: getattr(found, f.name) for f in dataclasses.fields(found)},
             }
         )
-        if (c + 1) % 5 == 0 or c + 1 == n_chunk:
+        bar.update(len(pulses.pulse_id))
+        if not progress and ((c + 1) % 5 == 0 or c + 1 == n_chunk):
             done = min((c + 1) * chunk, lines.n_pulses_total)
             log(f"  chunk {c + 1}/{n_chunk}: {done} pulses simulated and detected")
+    bar.close()
     returns = _returns(parts)
     no_bottom = None
     if nb_inputs:
@@ -273,7 +288,7 @@ def _photon_chunk(scene, ctx, clock, paths, pulses):
     return found, ev.flags
 
 
-def run_survey(scene, plan: Plan, out: Path, clock: StageClock, log=print):
+def run_survey(scene, plan: Plan, out: Path, clock: StageClock, log=print, progress: bool = False):
     """Run the plan's survey stages and write the survey's outputs into ``out``.
 
     Returns
@@ -288,7 +303,7 @@ def run_survey(scene, plan: Plan, out: Path, clock: StageClock, log=print):
     from pipeline.process.survey_uncertainty import survey_uncertainty, with_tpu
 
     ctx = processing_context(scene)
-    sim = simulate_detections(scene, plan, ctx, clock, log)
+    sim = simulate_detections(scene, plan, ctx, clock, log, progress)
     ps, fr = scene.process, scene.frame
     with clock.stage("process"):
         processed = process_detections(sim.returns, ctx, ps.classify, water_column=False)
