@@ -297,6 +297,7 @@ def run_survey(scene, plan: Plan, out: Path, clock: StageClock, log=print, progr
     evaluation : dict
         The error report (also written to ``evaluation.json``).
     """
+    from pipeline.process.coverage import area_coverage
     from pipeline.process.datum import survey_datum
     from pipeline.process.grid import grid_seabed, snap_bounds_m
     from pipeline.process.survey_points import process_detections
@@ -329,6 +330,16 @@ def run_survey(scene, plan: Plan, out: Path, clock: StageClock, log=print, progr
             crs=fr.crs,
             datum_m=datum.water_level_m,
         )
+        covered = area_coverage(
+            processed.points.xyz_m[:, :2], scene.flight.area_m, ps.grid_resolution_m
+        )
+    cell = ps.grid_resolution_m
+    log(f"  coverage: {covered:.0%} of flight.area_m has a point in its {cell:g} m cell")
+    if covered < 0.5:
+        log(
+            f"  WARNING: the flight plan leaves {1.0 - covered:.0%} of flight.area_m without a"
+            " point: check flight.area_m, n_lines, line_length_m and the swath"
+        )
     with clock.stage("tpu"):
         unc = survey_uncertainty(sim.returns, processed, ctx, grid)
         processed = dataclasses.replace(processed, points=with_tpu(processed.points, unc))
@@ -358,6 +369,17 @@ def run_survey(scene, plan: Plan, out: Path, clock: StageClock, log=print, progr
 
         files["evaluation"] = out / "evaluation.json"
         evaluation = evaluate_survey(
-            scene, sim, processed, ctx, grid, datum, unc, post, clock, files["evaluation"], log
+            scene,
+            sim,
+            processed,
+            ctx,
+            grid,
+            datum,
+            unc,
+            post,
+            clock,
+            files["evaluation"],
+            log,
+            area_covered=covered,
         )
     return files, evaluation

@@ -18,7 +18,19 @@ __all__ = ["evaluate_survey"]
 
 
 def evaluate_survey(
-    scene, sim, processed, ctx, grid, datum, unc, post, clock, path: Path, log=print
+    scene,
+    sim,
+    processed,
+    ctx,
+    grid,
+    datum,
+    unc,
+    post,
+    clock,
+    path: Path,
+    log=print,
+    *,
+    area_covered: float | None = None,
 ) -> dict[str, Any]:
     """Points, grid, TPU and posteriors against the truth; write ``evaluation.json`` at ``path``.
 
@@ -37,6 +49,8 @@ def evaluate_survey(
         Stage timings so far (recorded in the file).
     path : Path
     log : callable
+    area_covered : float, optional
+        Fraction of ``flight.area_m`` with a sounding (recorded as ``area_covered``).
 
     Returns
     -------
@@ -76,6 +90,7 @@ def evaluate_survey(
         post_eval["cells_with_posterior"] = int(np.count_nonzero(unc.cells.n_posterior))
     evaluation = {
         "pulses": int(sim.returns.pulse_id.size),
+        "area_covered": area_covered,
         "posterior_against_truth": post_eval,
         "iho_orders_from_uncertainty": unc.summary,
         "tpu_coverage_against_truth": coverage,
