@@ -290,6 +290,7 @@ def fw_batch():
     return th, chains
 
 
+@pytest.mark.slow
 def test_intervals_are_calibrated(fw_batch):
     """Simulation-based calibration over 120 pulses (the 500-pulse run is the benchmark)."""
     th, all_chains = fw_batch
@@ -310,6 +311,7 @@ def test_intervals_are_calibrated(fw_batch):
     assert abs(np.median(z)) < 0.35 and abs(mad - 1.0) < 0.3, (np.median(z), mad)
 
 
+@pytest.mark.slow
 def test_chains_are_converged(fw_batch):
     th, all_chains = fw_batch
     ok = all_chains.converged[:120]
@@ -324,6 +326,7 @@ def test_chains_are_converged(fw_batch):
     assert np.all(c.flags[:120][bad] & (PosteriorFlag.NOT_CONVERGED | PosteriorFlag.ACCEPTANCE))
 
 
+@pytest.mark.slow
 def test_posterior_sigma_reaches_the_cramer_rao_bound_gaussian(fw_batch):
     """Flat bottom, 8 noise realisations of one pulse: the posterior sigma of the depth is
     the CRB of the same model (Bernstein–von Mises at this SNR)."""
@@ -334,6 +337,7 @@ def test_posterior_sigma_reaches_the_cramer_rao_bound_gaussian(fw_batch):
     assert 0.8 < ratio < 1.2, ratio
 
 
+@pytest.mark.slow
 def test_posterior_sigma_reaches_the_cramer_rao_bound_poisson():
     m = window(CRB_PC)
     rng = np.random.default_rng(21)
