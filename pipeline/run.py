@@ -24,7 +24,8 @@ def run_scene(scene: Scene, out_dir: str | Path, log=print) -> dict[str, Any]:
     scene : Scene
         A validated scene (:func:`pipeline.scene.load_scene`).
     out_dir : str or Path
-        Output folder, created if missing.
+        Output folder, created with its first complete file (a run stopped before any output
+        leaves no folder).
     log : callable
         Receives one line of progress at a time (``print`` by default).
 
@@ -33,8 +34,7 @@ def run_scene(scene: Scene, out_dir: str | Path, log=print) -> dict[str, Any]:
     dict
         The manifest also written to ``out_dir/manifest.json``: files, stage timings, plan.
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = Path(out_dir)  # made by the first atomic write, not before
     plan = plan_stages(scene)
     for stage, runs, reason in plan:
         log(f"  {'run ' if runs else 'skip'} {stage:<18} {reason}")
