@@ -44,12 +44,27 @@ def scene_file(tmp_path_factory):
     return path
 
 
+@pytest.fixture(autouse=True)
+def _no_stray_runs():
+    """A run the test left alive (a failure mid-way) is killed at teardown."""
+    yield
+    for proc in _STARTED:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    _STARTED.clear()
+
+
+_STARTED = []
+
+
 def _start(scene, work):
     """`bathy run` into ``work/out``; its output lines go to ``work.log``."""
     env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
     log = open(work.with_suffix(".log"), "wb")  # closed by _finish
     cmd = [sys.executable, "-u", "-m", "pipeline.cli", "run", str(scene), "--out"]
     proc = subprocess.Popen(cmd + [str(work / "out")], stdout=log, stderr=log, env=env)
+    _STARTED.append(proc)
     return proc, log
 
 
