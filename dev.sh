@@ -2,7 +2,8 @@
 # The project's one set-up script: installs the system packages and a virtual environment,
 # then runs the demo or the tests. Safe to re-run: each step is skipped when already done.
 #   bash dev.sh demo     install everything, run the built-in default scene
-#   bash dev.sh test     install everything, run ruff and the test suite
+#   bash dev.sh test     install everything, run ruff and the whole test suite (what CI runs)
+#   bash dev.sh test --quick   the same without the tests marked slow (pytest -m "not slow")
 #   bash dev.sh install  install only
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -48,6 +49,7 @@ install_python() {
 }
 
 cmd=${1:-test}
+[ $# -gt 0 ] && shift
 install_system
 install_python
 export MPLBACKEND=Agg
@@ -61,11 +63,16 @@ case "$cmd" in
     log "ruff"
     "$VENV/bin/ruff" check .
     "$VENV/bin/ruff" format --check .
-    log "pytest"
-    "$VENV/bin/python" -m pytest
+    select=()
+    if [ "${1:-}" = "--quick" ]; then
+      shift
+      select=(-m "not slow")  # the slow and statistical tests are left to the full run
+    fi
+    log "pytest ${select[*]}"
+    "$VENV/bin/python" -m pytest "${select[@]}" "$@"
     ;;
   *)
-    echo "usage: bash dev.sh demo|test|install" >&2
+    echo "usage: bash dev.sh demo|test [--quick]|install" >&2
     exit 2
     ;;
 esac

@@ -17,7 +17,7 @@ Water(depth_m=3.0)
 >>> from_mapping(Water, {"depth_m": -1}, "water")
 Traceback (most recent call last):
 ...
-pipeline.errors.SceneError: `water.depth_m` must be >= 0.0; got -1.
+pipeline.errors.SceneError: `water.depth_m` must be >= 0.0; got -1.0.
 """
 
 from __future__ import annotations

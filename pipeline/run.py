@@ -64,7 +64,6 @@ def run_scene(
         stage's wall and CPU seconds, the files and the evaluation.
     """
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     the_plan = plan(scene)
     for line in the_plan.lines():
         log(line)

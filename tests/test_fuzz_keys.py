@@ -9,6 +9,7 @@ import copy
 import math
 import tomllib
 
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -70,6 +71,7 @@ def _set(data, key, value):
         node[leaf] = value
 
 
+@pytest.mark.slow
 @settings(
     max_examples=1500,
     deadline=None,

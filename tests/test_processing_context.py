@@ -87,6 +87,7 @@ def test_a_wavelength_outside_the_water_model_is_one_clear_error():
     assert processing_context(scene).tpu.wavelength_nm == 450.0
 
 
+@pytest.mark.slow
 def test_bathy_run_uses_and_records_the_users_values(tmp_path):
     scene = _small_survey(UNUSUAL)
     manifest = run_scene(scene, tmp_path, log=lambda _: None)

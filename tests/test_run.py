@@ -32,6 +32,7 @@ def test_cli_and_python_api_give_the_same_outputs(tmp_path):
     assert not list((tmp_path / "cli").glob(".*tmp*"))  # no temporary left behind
 
 
+@pytest.mark.slow
 def test_default_scene_runs(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert main(["run"]) == 0
@@ -59,6 +60,7 @@ def small_survey():
     return parse_scene(data)
 
 
+@pytest.mark.slow
 def test_survey_scene_end_to_end(tmp_path, small_survey):
     manifest = run_scene(small_survey, tmp_path, log=lambda _: None)
     ev = json.loads((tmp_path / "evaluation.json").read_text())
@@ -103,6 +105,7 @@ def test_photon_counting_profiler_end_to_end(tmp_path):
     assert ev["error"]["points_uncorrected"]["rmse_m"] > 0.5
 
 
+@pytest.mark.slow
 def test_tpu_depth_sigma_is_calibrated_end_to_end(tmp_path):
     """A short dense Palmer line over the rough sloping seabed (~12 000 bathymetric points,
     ~9 s): the true depth lies within the 68 % and 95 % intervals of the propagated depth

@@ -196,8 +196,10 @@ def write_points_laz(
     if points.amplitude is not None:
         las.amplitude = points.amplitude.astype(np.float32)
     do_compress = path.suffix.lower() == ".laz" if compress is None else compress
-    with atomic_path(path) as tmp:
-        las.write(str(tmp), do_compress=do_compress)
+    # a stream, not a path: laspy takes the compression from a path's suffix and ignores
+    # do_compress (and the temporary path has no suffix)
+    with atomic_path(path) as tmp, open(tmp, "wb+") as f:
+        las.write(f, do_compress=do_compress)
     return path
 
 

@@ -255,8 +255,7 @@ def write_report(scene, res: ProfilerResults, out_dir: str | Path) -> dict[str, 
     dict of str to Path
         The files written.
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = Path(out_dir)  # made by the first atomic write
     files = {
         "fig14": out / "fig14_transmittance.png",
         "fig15": out / "fig15_photons_vs_depth.png",

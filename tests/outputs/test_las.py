@@ -74,6 +74,15 @@ def test_laz_header(tmp_path):
     assert read_points_laz(path).points.amplitude is None
 
 
+@pytest.mark.parametrize("name, compress", [("a.laz", False), ("b.las", True), ("c.las", None)])
+def test_compress_is_honoured_whatever_the_suffix(tmp_path, name, compress):
+    pts = sample_points()
+    path = write_points_laz(tmp_path / name, pts, crs=32633, origin_m=ORIGIN, compress=compress)
+    with laspy.open(path) as f:
+        assert f.header.are_points_compressed == bool(compress)
+    np.testing.assert_array_equal(read_points_laz(path).points.pulse_id, pts.pulse_id)
+
+
 def test_too_far_for_int32(tmp_path):
     pts = sample_points(n=3)
     with pytest.raises(ValueError, match="int32"):

@@ -65,6 +65,7 @@ def test_echo_too_close_to_the_bottom_or_surface_is_not_a_column_return():
     assert not off.has_column.any()
 
 
+@pytest.mark.slow
 def test_false_alarms_on_layer_free_waveforms_are_rare():
     # 20 000 noisy waveforms with a surface, a column and a bottom but no layer: a column
     # return is a noise peak above the bottom's 5 sigma threshold among ~90 samples between

@@ -148,6 +148,7 @@ def test_subrays_spread_the_footprint_on_the_bottom():
     assert np.all(p.flags == P.OK)
 
 
+@pytest.mark.slow
 def test_identical_paths_for_chunk_sizes_1000_and_100000():
     flight = FlightSettings(
         altitude_m=300.0, speed_m_s=60.0, area_m=(0.0, 100.0, 0.0, 400.0), side_overlap_fraction=0.2

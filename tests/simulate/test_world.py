@@ -79,6 +79,7 @@ def test_wave_caster_hits_lie_on_the_wave_truth(survey_scene):
     assert p[:, 2].std() > 0.05
 
 
+@pytest.mark.slow
 def test_wave_surface_slopes_seen_by_the_tracer_match_cox_munk(survey_scene):
     wind = 8.0
     scene = _wave_scene(survey_scene, wind)
