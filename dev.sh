@@ -57,7 +57,7 @@ case "$cmd" in
   install) ;;
   demo)
     log "running the default scene"
-    "$VENV/bin/bathy" run --out out/default
+    "$VENV/bin/bathy" run --out out/default --overwrite
     ;;
   test)
     log "ruff"
