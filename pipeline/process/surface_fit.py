@@ -5,11 +5,16 @@ Method
 1. Surface points: ``p_s = origin + direction * c t_s / (2 n_air)`` for every pulse with a
    surface return.
 2. Water level and land: the water surface is the densest level layer of surface points: the
-   mode of a histogram of their heights (or ``water_level_hint_m``) starts an iterated
+   mode of a histogram of their heights (of those with a bottom return more than
+   ``level_min_depth_m`` below them when there are any: water under them; or
+   ``water_level_hint_m``) starts an iterated
    least-squares *global plane* fitted to the points within the band
-   ``[-below_margin_m, +land_margin_m]`` around it. A surface point higher than the band is
-   land; a pulse without a surface return whose straight (air) bottom point is higher than the
-   band is land too. Points below the band are not water surface (flagged outliers).
+   ``[-below_margin_m, +land_margin_m]`` around it. A surface point higher than the band is a
+   land candidate, and land only with no return below the water level in its pulse, enough
+   candidate neighbours and a neighbourhood height above the sea state measured from the
+   surface heights (:mod:`pipeline.process.surface_land`): a wave crest is water. A pulse
+   without a surface return whose straight (air) bottom point is higher than the band is land.
+   Points below the band are not water surface (flagged outliers).
 3. Local fit, batched: for each water pulse, the ``k_neighbours`` nearest water-surface points
    (horizontally, within ``radius_m``, from a ``scipy.spatial.cKDTree``) give the plane
    ``z = z_global(x, y) + a + b dx + c dy`` by weighted least squares on stacked 3x3 normal
@@ -38,6 +43,7 @@ from scipy.spatial import cKDTree
 from pipeline.config import setting
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.returns import DetectedReturns, PointFlag
+from pipeline.process.surface_land import land_surface_points
 
 __all__ = ["SurfaceFitSettings", "WaterSurface", "fit_water_surface", "surface_points_m"]
 
@@ -63,12 +69,31 @@ class SurfaceFitSettings:
     outlier_floor_m: float = setting(
         0.02, ge=0.0, doc="residuals below this are never rejected (exact data)"
     )
-    land_margin_m: float = setting(1.0, gt=0.0, doc="higher above the water level: land")
+    land_margin_m: float = setting(
+        1.0, gt=0.0, doc="higher above the water level: land candidate (see surface_land)"
+    )
+    land_sea_sigmas: float = setting(
+        4.0,
+        ge=0.0,
+        doc="land stands this many measured sea-height sigmas above the level (Hs ~ 4 sigma)",
+    )
+    land_radius_m: float = setting(
+        5.0, gt=0.0, le=1000.0, doc="neighbour radius of the land support and height"
+    )
+    land_neighbours: int = setting(32, ge=1, le=1024, doc="neighbours of the land support")
+    land_support_fraction: float = setting(
+        0.25, ge=0.0, le=1.0, doc="fewer land candidates among the neighbours: not land"
+    )
     below_margin_m: float = setting(1.0, gt=0.0, doc="lower below the water level: not surface")
     water_level_hint_m: float | None = setting(
         None, doc="known water level (local z) to start from instead of the histogram mode"
     )
     level_bin_m: float = setting(0.25, gt=0.0, doc="histogram bin of the water-level search")
+    level_min_depth_m: float = setting(
+        1.0,
+        ge=0.0,
+        doc="water-level search: surface points with a bottom this far below (air range) first",
+    )
     slope_prior_m: float = setting(
         0.05, ge=0.0, doc="ridge towards the global slope, as an equivalent spread"
     )
@@ -180,15 +205,23 @@ def _plane_lstsq(x, y, z):
     return np.array([coef[0] - coef[1] * xm - coef[2] * ym, coef[1], coef[2]]), sigma
 
 
-def _global_plane(ps: np.ndarray, st: SurfaceFitSettings) -> tuple[np.ndarray, float]:
-    """Water plane from surface points ``ps`` (m, 3): histogram mode, then iterated band fit."""
+def _global_plane(
+    ps: np.ndarray, st: SurfaceFitSettings, wet: np.ndarray | None = None
+) -> tuple[np.ndarray, float]:
+    """Water plane from surface points ``ps`` (m, 3): histogram mode, then iterated band fit.
+
+    ``wet`` (m,) bool marks points whose pulse has a return well below them (water under the
+    surface); when at least 3 are wet, the mode is theirs, so a flat, densely sampled land
+    level (a beach berm) cannot outvote a sea whose heights waves spread over metres.
+    """
     z = ps[:, 2]
     if st.water_level_hint_m is not None:
         level = float(st.water_level_hint_m)
     else:
-        lo, hi = float(z.min()), float(z.max())
+        zm = z[wet] if wet is not None and wet.sum() >= 3 else z
+        lo, hi = float(zm.min()), float(zm.max())
         nbins = int(min(max(np.ceil((hi - lo) / st.level_bin_m), 1), 1_000_000))
-        counts, edges = np.histogram(z, bins=nbins, range=(lo, lo + nbins * st.level_bin_m))
+        counts, edges = np.histogram(zm, bins=nbins, range=(lo, lo + nbins * st.level_bin_m))
         i = int(np.argmax(counts))
         level = 0.5 * (edges[i] + edges[i + 1])
     plane = np.array([level, 0.0, 0.0])
@@ -324,8 +357,10 @@ def fit_water_surface(
     has_s = returns.has_surface
     flags = np.zeros(n, dtype=np.uint16)
 
+    pb = o + d * (c * returns.t_bottom_s / (2.0 * st.air_index))[:, None]
     if has_s.sum() >= 3:
-        gplane, gsigma = _global_plane(ps[has_s], st)
+        wet = returns.has_bottom & (ps[:, 2] - pb[:, 2] > st.level_min_depth_m)
+        gplane, gsigma = _global_plane(ps[has_s], st, wet[has_s])
     else:
         level = st.water_level_hint_m
         gplane = np.array([st.fallback_water_level_m if level is None else level, 0.0, 0.0])
@@ -335,13 +370,20 @@ def fit_water_surface(
     def zg(x, y):
         return z0 + gx * x + gy * y
 
-    # land / water decision per pulse
+    # land / water decision per pulse: a high surface point is land only with no water under
+    # it, neighbours that are land candidates too, and a height above the measured sea
     res_s = np.where(has_s, ps[:, 2] - zg(ps[:, 0], ps[:, 1]), 0.0)
-    land_s = has_s & (res_s >= st.land_margin_m)
+    res_b = pb[:, 2] - zg(pb[:, 0], pb[:, 1])
+    pc = o + d * (c * returns.t_column_s / (2.0 * st.air_index))[:, None]
+    water_below = (returns.has_bottom & (res_b < 0.0)) | (
+        returns.has_column & (pc[:, 2] - zg(pc[:, 0], pc[:, 1]) < 0.0)
+    )
+    land_s = np.zeros(n, dtype=bool)
+    if has_s.any():
+        land_s[has_s] = land_surface_points(ps[has_s, :2], res_s[has_s], water_below[has_s], st)[0]
     low_s = has_s & (res_s <= -st.below_margin_m)
     water_s = has_s & ~land_s & ~low_s
-    pb = o + d * (c * returns.t_bottom_s / (2.0 * st.air_index))[:, None]
-    land_b = ~has_s & returns.has_bottom & (pb[:, 2] - zg(pb[:, 0], pb[:, 1]) >= st.land_margin_m)
+    land_b = ~has_s & returns.has_bottom & (res_b >= st.land_margin_m)
     is_land = land_s | land_b
 
     # global plane: entry and normal for everyone to start with

@@ -160,3 +160,58 @@ def test_no_surface_returns_falls_back_to_the_level():
     assert ws.is_water.all()
     assert np.all(ws.flags & PointFlag.SURFACE_GLOBAL_FALLBACK)
     np.testing.assert_allclose(ws.entry_m[:, 2], 0.0, atol=1e-9)
+
+
+def sea_with_land(bottoms: bool, land_z=None):
+    """A wind sea of three sinusoids (crests up to 1.3 m, above the 1 m land margin) and, east
+    of x = 12 m, land rising from 3 m to 4.5 m above the mean level (``land_z``: flat at that
+    height instead); optionally a seabed echo 10 m (air range) below every sea pulse's surface
+    and none under the land (opaque)."""
+    x, y, d = beams(n_side=45, spacing_m=1.0)
+    amps = np.array([0.7, 0.4, 0.2])  # sigma = sqrt(sum a^2 / 2) = 0.59 m, Hs ~ 2.3 m
+    sea = (
+        amps[0] * np.sin(2 * np.pi * x / 37.0)
+        + amps[1] * np.sin(2 * np.pi * (0.6 * x + 0.8 * y) / 23.0 + 0.3)
+        + amps[2] * np.sin(2 * np.pi * y / 11.0 + 1.1)
+    )
+    land = x > 12.0
+    z = np.where(land, 3.0 + 0.15 * (x - 12.0) if land_z is None else land_z, sea)
+    o, r = from_hits(np.column_stack([x, y, z]), d)
+    tb = np.where(land, 0.0, 2 * (r + 10.0) * N_AIR / C) if bottoms else None
+    return make_returns(o, d, r, t_bottom_s=tb), sea, land
+
+
+def test_wave_crests_are_water_and_land_is_land():
+    for bottoms in (False, True):
+        ret, sea, land = sea_with_land(bottoms)
+        # the test's premise: many crests of the sea stand above the land margin
+        assert np.sum(~land & (sea > FIT.land_margin_m)) > 20
+        ws = fit_water_surface(ret, FIT)
+        np.testing.assert_array_equal(ws.is_land, land)
+        assert ws.is_water[~land].all()
+        assert not np.any(ws.flags[~land] & PointFlag.LAND)
+
+
+def test_isolated_high_point_over_water_is_not_land():
+    # a level sea with a seabed echo under every pulse, but one pulse's surface return is 1.5 m
+    # high (spray, a bird) and its bottom was missed: one high point is not land
+    o, d, r, *_ = tilted_returns(tilt_deg=0.0, z0=0.0)
+    tb = 2 * (r + 8.0) * N_AIR / C
+    i = len(r) // 2
+    r[i] -= 1.5 / -d[i, 2]
+    tb[i] = 0.0
+    ws = fit_water_surface(make_returns(o, d, r, t_bottom_s=tb), FIT)
+    assert not ws.is_land.any()
+    assert ws.flags[i] & PointFlag.SURFACE_OUTLIER
+    np.testing.assert_allclose(ws.entry_m[:, 2], 0.0, atol=1e-9)
+
+
+def test_flat_berm_does_not_take_the_water_level():
+    # a flat berm 3 m up is a denser height layer than a wave-spread sea; the sea's pulses see a
+    # seabed 10 m below, so the water level is the sea's, and the berm is land
+    ret, sea, land = sea_with_land(bottoms=True, land_z=3.0)
+    ws = fit_water_surface(ret, FIT)
+    # the sinusoids have zero mean; a plane fitted to a 45 m patch of them keeps a little tilt
+    # and offset (0.1 m here), far from the berm's 3 m
+    assert abs(ws.global_plane[0]) < 0.3
+    np.testing.assert_array_equal(ws.is_land, land)
