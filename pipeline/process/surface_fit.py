@@ -4,17 +4,17 @@ Method
 ------
 1. Surface points: ``p_s = origin + direction * c t_s / (2 n_air)`` for every pulse with a
    surface return.
-2. Water level and land: the water surface is the densest level layer of surface points: the
-   mode of a histogram of their heights (of those with a bottom return more than
-   ``level_min_depth_m`` below them when there are any: water under them; or
-   ``water_level_hint_m``) starts an iterated
-   least-squares *global plane* fitted to the points within the band
-   ``[-below_margin_m, +land_margin_m]`` around it. A surface point higher than the band is a
-   land candidate, and land only with no return below the water level in its pulse, enough
-   candidate neighbours and a neighbourhood height above the sea state measured from the
-   surface heights (:mod:`pipeline.process.surface_land`): a wave crest is water. A pulse
-   without a surface return whose straight (air) bottom point is higher than the band is land.
-   Points below the band are not water surface (flagged outliers).
+2. Water level and land (:mod:`pipeline.process.surface_land`): the water surface is the
+   densest level layer of surface points: the mode of a histogram of their heights (of those
+   with a bottom return more than ``level_min_depth_m`` below them when there are any: water
+   under them; or ``water_level_hint_m``) starts an iterated least-squares *global plane*
+   fitted to the points within the band ``[-below_margin_m, +land_margin_m]`` around it. A
+   surface point higher than the band is a land candidate unless its high neighbours mostly
+   have a return below the water level (water under them), and land if it is linked to
+   candidates whose neighbourhood is mostly candidates and stands ``land_sea_sigmas`` sea
+   sigmas (measured from the surface heights) above the level: a wave crest is water. A
+   pulse without a surface return whose straight (air) bottom point is higher than the band
+   is land. Points below the band are not water surface (flagged outliers).
 3. Local fit, batched: for each water pulse, the ``k_neighbours`` nearest water-surface points
    (horizontally, within ``radius_m``, from a ``scipy.spatial.cKDTree``) give the plane
    ``z = z_global(x, y) + a + b dx + c dy`` by weighted least squares on stacked 3x3 normal
@@ -43,7 +43,7 @@ from scipy.spatial import cKDTree
 from pipeline.config import setting
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.returns import DetectedReturns, PointFlag
-from pipeline.process.surface_land import land_surface_points
+from pipeline.process.surface_land import global_plane, land_surface_points, masked_median
 
 __all__ = ["SurfaceFitSettings", "WaterSurface", "fit_water_surface", "surface_points_m"]
 
@@ -83,6 +83,12 @@ class SurfaceFitSettings:
     land_neighbours: int = setting(32, ge=1, le=1024, doc="neighbours of the land support")
     land_support_fraction: float = setting(
         0.25, ge=0.0, le=1.0, doc="fewer land candidates among the neighbours: not land"
+    )
+    land_link_m: float = setting(
+        2.0,
+        gt=0.0,
+        le=1000.0,
+        doc="land candidates this close to land above the sea state are land too",
     )
     below_margin_m: float = setting(1.0, gt=0.0, doc="lower below the water level: not surface")
     water_level_hint_m: float | None = setting(
@@ -194,69 +200,6 @@ def surface_points_m(returns: DetectedReturns, air_index: float) -> np.ndarray:
     return np.where(returns.has_surface[:, None], p, 0.0)
 
 
-def _plane_lstsq(x, y, z):
-    """Least-squares ``z = z0 + gx x + gy y`` (minimum-norm slope if degenerate) and sigma."""
-    xm, ym = x.mean(), y.mean()
-    a = np.column_stack([np.ones_like(x), x - xm, y - ym])
-    coef, *_ = np.linalg.lstsq(a, z, rcond=1e-10)
-    resid = z - a @ coef
-    dof = max(len(z) - 3, 1)
-    sigma = float(np.sqrt(np.sum(resid**2) / dof))
-    return np.array([coef[0] - coef[1] * xm - coef[2] * ym, coef[1], coef[2]]), sigma
-
-
-def _global_plane(
-    ps: np.ndarray, st: SurfaceFitSettings, wet: np.ndarray | None = None
-) -> tuple[np.ndarray, float]:
-    """Water plane from surface points ``ps`` (m, 3): histogram mode, then iterated band fit.
-
-    ``wet`` (m,) bool marks points whose pulse has a return well below them (water under the
-    surface); when at least 3 are wet, the mode is theirs, so a flat, densely sampled land
-    level (a beach berm) cannot outvote a sea whose heights waves spread over metres.
-    """
-    z = ps[:, 2]
-    if st.water_level_hint_m is not None:
-        level = float(st.water_level_hint_m)
-    else:
-        zm = z[wet] if wet is not None and wet.sum() >= 3 else z
-        lo, hi = float(zm.min()), float(zm.max())
-        nbins = int(min(max(np.ceil((hi - lo) / st.level_bin_m), 1), 1_000_000))
-        counts, edges = np.histogram(zm, bins=nbins, range=(lo, lo + nbins * st.level_bin_m))
-        i = int(np.argmax(counts))
-        level = 0.5 * (edges[i] + edges[i + 1])
-    plane = np.array([level, 0.0, 0.0])
-    sigma = 0.0
-    for _ in range(6):
-        res = z - (plane[0] + plane[1] * ps[:, 0] + plane[2] * ps[:, 1])
-        band = (res > -st.below_margin_m) & (res < st.land_margin_m)
-        if band.sum() < 3:
-            break
-        new, sigma = _plane_lstsq(ps[band, 0], ps[band, 1], z[band])
-        # one robust pass: drop gross outliers of this fit, then refit
-        r2 = z[band] - (new[0] + new[1] * ps[band, 0] + new[2] * ps[band, 1])
-        keep = np.abs(r2) <= max(st.outlier_sigma * _MAD_TO_SIGMA * np.median(np.abs(r2)), 1e-9)
-        keep |= np.abs(r2) <= st.outlier_floor_m
-        if keep.sum() >= 3:
-            xb, yb, zb = ps[band, 0][keep], ps[band, 1][keep], z[band][keep]
-            new, sigma = _plane_lstsq(xb, yb, zb)
-        converged = np.allclose(new, plane, rtol=0.0, atol=1e-12)
-        plane = new
-        if converged:
-            break
-    return plane, sigma
-
-
-def _masked_median(v: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Row medians of ``v`` over ``valid`` entries (rows with no valid entry give 0)."""
-    cnt = valid.sum(axis=1)
-    s = np.sort(np.where(valid, v, np.inf), axis=1)
-    c = np.maximum(cnt, 1)
-    lo = np.take_along_axis(s, ((c - 1) // 2)[:, None], axis=1)[:, 0]
-    hi = np.take_along_axis(s, (c // 2)[:, None], axis=1)[:, 0]
-    hi = np.where(cnt >= 2, hi, lo)
-    return np.where(cnt > 0, 0.5 * (lo + hi), 0.0)
-
-
 def _solve(w, dx, dy, z, lam):
     """Batched weighted least squares with a ridge ``lam`` on the slopes; params and inverse."""
     sw = w.sum(1)
@@ -294,12 +237,12 @@ def _local_fit(tree, spts, qxy, st):
     lam = count * st.slope_prior_m**2
 
     def inliers(r):
-        scale = _MAD_TO_SIGMA * _masked_median(np.abs(r), valid)
+        scale = _MAD_TO_SIGMA * masked_median(np.abs(r), valid)
         thresh = np.maximum(st.outlier_sigma * scale, st.outlier_floor_m)
         return (valid & (np.abs(r) <= thresh[:, None])).astype(np.float64)
 
     # robust start: residuals from the global slope through the neighbours' median height
-    w = inliers(z - _masked_median(z, valid)[:, None]) if st.robust_iterations else valid * 1.0
+    w = inliers(z - masked_median(z, valid)[:, None]) if st.robust_iterations else valid * 1.0
     for it in range(st.robust_iterations + 1):
         params, inv, sums = _solve(w, dx, dy, z, lam)
         r = z - (params[:, :1] + params[:, 1:2] * dx + params[:, 2:3] * dy)
@@ -360,7 +303,7 @@ def fit_water_surface(
     pb = o + d * (c * returns.t_bottom_s / (2.0 * st.air_index))[:, None]
     if has_s.sum() >= 3:
         wet = returns.has_bottom & (ps[:, 2] - pb[:, 2] > st.level_min_depth_m)
-        gplane, gsigma = _global_plane(ps[has_s], st, wet[has_s])
+        gplane, gsigma = global_plane(ps[has_s], st, wet[has_s])
     else:
         level = st.water_level_hint_m
         gplane = np.array([st.fallback_water_level_m if level is None else level, 0.0, 0.0])

@@ -1,72 +1,170 @@
-"""Land or wave crest: which high surface points are land, from measured data only.
+"""Water level and land: the global water plane, and which high surface points are land.
 
-A surface point higher than ``land_margin_m`` above the global water plane is only a land
-*candidate*. Under a wind sea, crests routinely stand that high (a 10 m/s sea has a
-significant wave height ``Hs ~ 2 m``, so ~4 % of the surface points are more than 1 m above
-the mean level), and crest regions are metres wide, so a high neighbourhood alone does not make
-land. Land needs all of:
+Water level (:func:`global_plane`): the mode of a histogram of surface heights (of the points
+whose pulse has a bottom return well below them, when there are any, so that a flat, densely
+sampled land level such as a beach berm cannot outvote a sea that waves spread over metres)
+starts an iterated least-squares plane fitted to the points of the band
+``[-below_margin_m, +land_margin_m]`` around it.
 
-1. No water under it. Land is opaque: a candidate whose pulse has a later return (bottom or
-   in-column) below the water level was on water (a crest over a seabed or a water column).
-2. Spatial support. At least ``land_support_fraction`` of its ``land_neighbours`` nearest
-   surface points within ``land_radius_m`` are candidates too: an isolated high point whose
-   neighbours have water under them (spray, a crest whose own bottom was missed) is not land.
-   The fraction is taken over all neighbours, so a point on the edge of land (about half of
-   its neighbours are water) keeps its support.
-3. Higher than the measured sea. The robust (median) height of the candidate neighbours stands
-   at least ``land_sea_sigmas * sigma_sea`` above the water level, with ``sigma_sea`` the robust
-   standard deviation (1.4826 MAD) of the water-surface heights measured in the survey itself
-   (``Hs ~ 4 sigma_sea``). This alone separates crests from land where no pulse sees the
-   seabed (deep or turbid water): crest heights follow the sea's spread, land does not.
+Land (:func:`land_surface_points`): a surface point higher than ``land_margin_m`` above the
+water plane is only a land *candidate*. Under a wind sea, crests routinely stand that high (a
+10 m/s sea has a significant wave height ``Hs ~ 2 m``: ~4 % of the surface points are more
+than 1 m above the mean level), and crest regions are metres wide, so a high neighbourhood
+alone does not make land. A candidate needs
 
-``sigma_sea`` is estimated from the surface points whose pulse has water under it, plus those
-within the water band ``+-max(margin, land_sea_sigmas * sigma_sea)`` of the level (iterated from
-the margins): without seabed returns the band must widen with the sea, or a rough sea's
-truncated spread would be underestimated.
+1. no water under it: land is opaque, so a pulse with a later return (bottom or in-column)
+   below the water level was on water (a crest over a seabed or a water column). Decided by a
+   majority of the high points among its neighbours (a lone noise echo under land, or a lone
+   missed bottom among crests that show theirs, does not decide alone);
+
+and is land if it is linked to a *seed*, a candidate with
+
+2. spatial support: at least ``land_support_fraction`` of its ``land_neighbours`` nearest
+   surface points within ``land_radius_m`` are candidates too (an isolated high point among
+   water that shows its bottom is spray or a crest whose bottom was missed). Taken over all
+   neighbours, so a point on the edge of land (half of its neighbours water) keeps it;
+3. a height above the measured sea: the median height of its candidate neighbours is at least
+   ``land_sea_sigmas * sigma_sea`` above the level, ``sigma_sea`` being the robust standard
+   deviation (1.4826 MAD) of the sea-surface heights measured in the survey (``Hs ~ 4
+   sigma_sea``). Crest heights follow the sea's spread, land does not; this separates them
+   where no pulse sees the seabed (deep or turbid water).
+
+Linked (hysteresis, as in edge detection): a candidate within ``land_link_m`` of a seed through
+other candidates is land too: land lower than the waves (a beach face) connected to land above
+them is land, while a crest is separated from land by the troughs and the swash zone below
+``land_margin_m``.
+
+``sigma_sea`` comes from the median absolute height of the surface points within the water
+band, corrected for the band's truncation (:func:`sea_sigma_m`).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.optimize import brentq
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
+from scipy.special import ndtr, ndtri
 
-__all__ = ["land_surface_points", "sea_sigma_m"]
+__all__ = ["global_plane", "land_surface_points", "masked_median", "sea_sigma_m"]
 
 #: 1.4826 * MAD estimates the standard deviation of normally distributed heights.
 _MAD_TO_SIGMA = 1.4826
-#: Band iterations of the sea-state estimate (the band settles in two or three).
-_SEA_ITERATIONS = 5
+#: Largest sea sigma reported, in water bands (a band filled uniformly has no finite one).
+_MAX_SIGMA_BANDS = 100.0
 
 
-def sea_sigma_m(res_m: np.ndarray, water_below: np.ndarray, st) -> float:
+def _plane_lstsq(x, y, z):
+    """Least-squares ``z = z0 + gx x + gy y`` (minimum-norm slope if degenerate) and sigma."""
+    xm, ym = x.mean(), y.mean()
+    a = np.column_stack([np.ones_like(x), x - xm, y - ym])
+    coef, *_ = np.linalg.lstsq(a, z, rcond=1e-10)
+    resid = z - a @ coef
+    dof = max(len(z) - 3, 1)
+    sigma = float(np.sqrt(np.sum(resid**2) / dof))
+    return np.array([coef[0] - coef[1] * xm - coef[2] * ym, coef[1], coef[2]]), sigma
+
+
+def global_plane(ps: np.ndarray, st, wet: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    """Water plane from surface points: histogram mode, then iterated band fit.
+
+    Parameters
+    ----------
+    ps : (m, 3)
+        Surface points.
+    st : SurfaceFitSettings
+    wet : (m,) bool, optional
+        The point's pulse has a bottom return well below it (water under the surface); when
+        at least 3 are wet, the histogram mode is theirs.
+
+    Returns
+    -------
+    plane : (3,)
+        ``(z0_m, dz_dx, dz_dy)``.
+    sigma_m : float
+        Residual standard deviation of the band fit.
+    """
+    z = ps[:, 2]
+    if st.water_level_hint_m is not None:
+        level = float(st.water_level_hint_m)
+    else:
+        zm = z[wet] if wet is not None and wet.sum() >= 3 else z
+        lo, hi = float(zm.min()), float(zm.max())
+        nbins = int(min(max(np.ceil((hi - lo) / st.level_bin_m), 1), 1_000_000))
+        counts, edges = np.histogram(zm, bins=nbins, range=(lo, lo + nbins * st.level_bin_m))
+        i = int(np.argmax(counts))
+        level = 0.5 * (edges[i] + edges[i + 1])
+    plane = np.array([level, 0.0, 0.0])
+    sigma = 0.0
+    for _ in range(6):
+        res = z - (plane[0] + plane[1] * ps[:, 0] + plane[2] * ps[:, 1])
+        band = (res > -st.below_margin_m) & (res < st.land_margin_m)
+        if band.sum() < 3:
+            break
+        new, sigma = _plane_lstsq(ps[band, 0], ps[band, 1], z[band])
+        # one robust pass: drop gross outliers of this fit, then refit
+        r2 = z[band] - (new[0] + new[1] * ps[band, 0] + new[2] * ps[band, 1])
+        keep = np.abs(r2) <= max(st.outlier_sigma * _MAD_TO_SIGMA * np.median(np.abs(r2)), 1e-9)
+        keep |= np.abs(r2) <= st.outlier_floor_m
+        if keep.sum() >= 3:
+            xb, yb, zb = ps[band, 0][keep], ps[band, 1][keep], z[band][keep]
+            new, sigma = _plane_lstsq(xb, yb, zb)
+        converged = np.allclose(new, plane, rtol=0.0, atol=1e-12)
+        plane = new
+        if converged:
+            break
+    return plane, sigma
+
+
+def masked_median(v: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Row medians of ``v`` (m, k) over ``valid`` entries; (m,), rows with none give 0."""
+    cnt = valid.sum(axis=1)
+    s = np.sort(np.where(valid, v, np.inf), axis=1)
+    c = np.maximum(cnt, 1)
+    lo = np.take_along_axis(s, ((c - 1) // 2)[:, None], axis=1)[:, 0]
+    hi = np.take_along_axis(s, (c // 2)[:, None], axis=1)[:, 0]
+    hi = np.where(cnt >= 2, hi, lo)
+    return np.where(cnt > 0, 0.5 * (lo + hi), 0.0)
+
+
+def sea_sigma_m(res_m: np.ndarray, st) -> float:
     """Robust standard deviation of the sea-surface heights about the water level.
+
+    The median absolute height of the points within ``+-a`` of the level, ``a =
+    min(land_margin_m, below_margin_m)``, corrected for that truncation as for a normal sea:
+    ``median = sigma * Phi^-1((Phi(a / sigma) + 1/2) / 2)`` solved for ``sigma``. A fixed band
+    keeps land above it out of the estimate (a band widened with the estimate would take in
+    a beach face and feed on it).
 
     Parameters
     ----------
     res_m : (m,)
         Surface-point heights above the global water plane.
-    water_below : (m,) bool
-        The point's pulse has a later return below the water level (certainly water).
     st : SurfaceFitSettings
-        ``land_margin_m``, ``below_margin_m``, ``land_sea_sigmas``.
+        ``land_margin_m``, ``below_margin_m``.
 
     Returns
     -------
     float
-        ``1.4826 * median(|res|)`` over the water points (0 if there are none).
+        The sea's sigma (0 if no point is in the band; ``_MAX_SIGMA_BANDS * a`` if the band is
+        filled uniformly, a sea far rougher than the band).
     """
-    sigma = 0.0
-    for _ in range(_SEA_ITERATIONS):
-        hi = max(st.land_margin_m, st.land_sea_sigmas * sigma)
-        lo = max(st.below_margin_m, st.land_sea_sigmas * sigma)
-        sea = water_below | ((res_m > -lo) & (res_m < hi))
-        if not sea.any():
-            return 0.0
-        new = _MAD_TO_SIGMA * float(np.median(np.abs(res_m[sea])))
-        if new == sigma:
-            break
-        sigma = new
-    return sigma
+    a = min(st.land_margin_m, st.below_margin_m)
+    band = np.abs(res_m) < a
+    if not band.any():
+        return 0.0
+    med = float(np.median(np.abs(res_m[band])))
+    hi = _MAX_SIGMA_BANDS * a
+
+    def excess(sigma):
+        return sigma * ndtri(0.5 * (ndtr(a / sigma) + 0.5)) - med
+
+    if med <= 0.0:
+        return 0.0
+    if excess(hi) <= 0.0:
+        return hi
+    return float(brentq(excess, med, hi, xtol=1e-6 * a))
 
 
 def land_surface_points(
@@ -83,8 +181,7 @@ def land_surface_points(
     water_below : (m,) bool
         Their pulse has a later return (bottom or in-column) below the water level.
     st : SurfaceFitSettings
-        ``land_margin_m``, ``below_margin_m``, ``land_sea_sigmas``, ``land_radius_m``,
-        ``land_neighbours``, ``land_support_fraction``.
+        The ``land_*`` settings and ``below_margin_m``.
 
     Returns
     -------
@@ -93,30 +190,42 @@ def land_surface_points(
     sigma_sea_m : float
         Measured robust standard deviation of the sea-surface heights.
     sea_margin_m : float
-        Height the candidate neighbourhood must reach: ``max(land_margin_m,
-        land_sea_sigmas * sigma_sea_m)``.
+        ``max(land_margin_m, land_sea_sigmas * sigma_sea_m)``, the height of the seeds.
     """
     m = len(res_m)
-    sigma = sea_sigma_m(res_m, water_below, st)
+    sigma = sea_sigma_m(res_m, st)
     sea_margin = max(st.land_margin_m, st.land_sea_sigmas * sigma)
-    cand = (res_m >= st.land_margin_m) & ~water_below
+    high = res_m >= st.land_margin_m
     land = np.zeros(m, dtype=bool)
-    q = np.flatnonzero(cand)
+    q = np.flatnonzero(high)
     if not len(q):
         return land, sigma, sea_margin
     k = min(st.land_neighbours, m)
     _, idx = cKDTree(xy_m).query(xy_m[q], k=k, distance_upper_bound=st.land_radius_m, workers=-1)
     idx = np.asarray(idx).reshape(len(q), k)
-    valid = idx < m  # the point itself is always its own nearest neighbour
+    valid = idx < m  # the point itself is always among its nearest neighbours
     ic = np.where(valid, idx, 0)
+    nb_high = valid & high[ic]
+    # water under the high region: a majority vote of the high neighbours (the point among
+    # them), so that a lone late echo (noise under land) or a lone missed bottom (a crest
+    # among crests that show the seabed) does not decide alone
+    wet = (nb_high & water_below[ic]).sum(1) >= 0.5 * nb_high.sum(1)
+    cand = np.zeros(m, dtype=bool)
+    cand[q] = ~wet
     nb_cand = valid & cand[ic]
-    support = nb_cand.sum(1) / valid.sum(1)
+    support = nb_cand.sum(1) / np.maximum(valid.sum(1), 1)
     # robust height of the high region around the point: median of the candidate neighbours
-    h = np.sort(np.where(nb_cand, res_m[ic], np.inf), axis=1)
-    cnt = nb_cand.sum(1)  # >= 1 unless k duplicates of the point's position crowd it out
-    c = np.maximum(cnt, 1)
-    lo_h = np.take_along_axis(h, ((c - 1) // 2)[:, None], axis=1)[:, 0]
-    hi_h = np.take_along_axis(h, (c // 2)[:, None], axis=1)[:, 0]
-    height = np.where(cnt > 0, 0.5 * (lo_h + hi_h), -np.inf)
-    land[q] = (support >= st.land_support_fraction) & (height >= sea_margin)
+    height = np.where(nb_cand.any(1), masked_median(res_m[ic], nb_cand), -np.inf)
+    q, support, height = q[cand[q]], support[cand[q]], height[cand[q]]
+    if not len(q):
+        return land, sigma, sea_margin
+    seed = (support >= st.land_support_fraction) & (height >= sea_margin)
+    land[q] = seed
+    if seed.any() and not seed.all():
+        # hysteresis: candidates linked (within land_link_m, through other candidates) to a
+        # seed are land too; a crest is cut off from land by troughs and the swash zone
+        pairs = cKDTree(xy_m[q]).query_pairs(st.land_link_m, output_type="ndarray")
+        graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(q),) * 2)
+        _, comp = connected_components(graph, directed=False)
+        land[q] = np.isin(comp, comp[seed])
     return land, sigma, sea_margin

@@ -94,6 +94,7 @@ from pipeline.optics import SPEED_OF_LIGHT_M_S, water_group_index, water_phase_i
 from pipeline.process.refraction import RefractionSettings, seabed_points
 from pipeline.process.returns import DetectedReturns
 from pipeline.process.surface_fit import WaterSurface
+from pipeline.process.surface_land import masked_median as _masked_median
 
 __all__ = [
     "TpuSettings",
@@ -618,16 +619,6 @@ def _group_means(group, xy, dep):
     cnt = np.bincount(inv).astype(np.float64)
     xy = np.column_stack([np.bincount(inv, weights=xy[:, k]) / cnt for k in range(2)])
     return xy, np.bincount(inv, weights=dep) / cnt
-
-
-def _masked_median(v: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Row medians of ``v`` over its ``valid`` entries (0 for a row without any)."""
-    cnt = valid.sum(axis=1)
-    s = np.sort(np.where(valid, v, np.inf), axis=1)
-    c = np.maximum(cnt, 1)
-    lo = np.take_along_axis(s, ((c - 1) // 2)[:, None], axis=1)[:, 0]
-    hi = np.take_along_axis(s, (c // 2)[:, None], axis=1)[:, 0]
-    return np.where(cnt > 0, 0.5 * (lo + np.where(cnt >= 2, hi, lo)), 0.0)
 
 
 def seabed_gradient(

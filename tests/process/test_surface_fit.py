@@ -162,34 +162,50 @@ def test_no_surface_returns_falls_back_to_the_level():
     np.testing.assert_allclose(ws.entry_m[:, 2], 0.0, atol=1e-9)
 
 
+#: The test sea: components of equal amplitude; sigma = amplitude * sqrt(components / 2).
+SEA_COMPONENTS, SEA_AMPLITUDE_M = 8, 0.25
+
+
 def sea_with_land(bottoms: bool, land_z=None):
-    """A wind sea of three sinusoids (crests up to 1.3 m, above the 1 m land margin) and, east
-    of x = 12 m, land rising from 3 m to 4.5 m above the mean level (``land_z``: flat at that
-    height instead); optionally a seabed echo 10 m (air range) below every sea pulse's surface
-    and none under the land (opaque)."""
-    x, y, d = beams(n_side=45, spacing_m=1.0)
-    amps = np.array([0.7, 0.4, 0.2])  # sigma = sqrt(sum a^2 / 2) = 0.59 m, Hs ~ 2.3 m
-    sea = (
-        amps[0] * np.sin(2 * np.pi * x / 37.0)
-        + amps[1] * np.sin(2 * np.pi * (0.6 * x + 0.8 * y) / 23.0 + 0.3)
-        + amps[2] * np.sin(2 * np.pi * y / 11.0 + 1.1)
-    )
+    """A wind sea of eight sinusoids (sigma 0.5 m, crests above the 1 m land margin) west of
+    x = 12 m and, east of it, land: a foreshore rising 0.5 m per m to 1 m at x = 14 m, then a
+    beach face rising 0.3 m per m to 5.65 m (``land_z``: flat land at that height instead);
+    optionally a seabed echo 10 m (air range) below every sea pulse's surface and none under
+    the land (opaque).
+
+    Returns the returns, the sea heights, the land mask and the land heights.
+    """
+    x, y, d = beams(n_side=60, spacing_m=1.0)
+    j = np.arange(SEA_COMPONENTS)
+    wavelength_m = 6.0 + 18.0 * j / (SEA_COMPONENTS - 1)  # 6 m to 24 m
+    heading = 2.39996 * j  # golden-angle spread of directions
+    phase = 1.0 + 2.0 * j
+    arg = (x[:, None] * np.sin(heading) + y[:, None] * np.cos(heading)) / wavelength_m
+    sea = SEA_AMPLITUDE_M * np.sin(2 * np.pi * arg + phase).sum(axis=1)
     land = x > 12.0
-    z = np.where(land, 3.0 + 0.15 * (x - 12.0) if land_z is None else land_z, sea)
+    face = np.where(x < 14.0, 0.5 * (x - 12.0), 1.0 + 0.3 * (x - 14.0))
+    ground = face if land_z is None else np.full_like(x, land_z)
+    z = np.where(land, ground, sea)
     o, r = from_hits(np.column_stack([x, y, z]), d)
     tb = np.where(land, 0.0, 2 * (r + 10.0) * N_AIR / C) if bottoms else None
-    return make_returns(o, d, r, t_bottom_s=tb), sea, land
+    return make_returns(o, d, r, t_bottom_s=tb), sea, land, ground
 
 
 def test_wave_crests_are_water_and_land_is_land():
+    # the sea's sigma is 0.5 m, Hs = 4 sigma = 2 m: the beach face below Hs is land by its
+    # link to the land above it
+    hs_m = 4.0 * SEA_AMPLITUDE_M * np.sqrt(SEA_COMPONENTS / 2.0)
     for bottoms in (False, True):
-        ret, sea, land = sea_with_land(bottoms)
-        # the test's premise: many crests of the sea stand above the land margin
+        ret, sea, land, ground = sea_with_land(bottoms)
+        # the test's premise: many crests of the sea stand above the land margin, and land
+        # between the margin and the sea's Hs exists
         assert np.sum(~land & (sea > FIT.land_margin_m)) > 20
+        assert np.sum(land & (ground > FIT.land_margin_m) & (ground < hs_m)) > 100
         ws = fit_water_surface(ret, FIT)
-        np.testing.assert_array_equal(ws.is_land, land)
+        assert not ws.is_land[~land].any()
         assert ws.is_water[~land].all()
-        assert not np.any(ws.flags[~land] & PointFlag.LAND)
+        # land above the margin (the foreshore below it is in the water band: not asserted)
+        assert ws.is_land[land & (ground > FIT.land_margin_m + 0.1)].all()
 
 
 def test_isolated_high_point_over_water_is_not_land():
@@ -209,7 +225,7 @@ def test_isolated_high_point_over_water_is_not_land():
 def test_flat_berm_does_not_take_the_water_level():
     # a flat berm 3 m up is a denser height layer than a wave-spread sea; the sea's pulses see a
     # seabed 10 m below, so the water level is the sea's, and the berm is land
-    ret, sea, land = sea_with_land(bottoms=True, land_z=3.0)
+    ret, _, land, _ = sea_with_land(bottoms=True, land_z=3.0)
     ws = fit_water_surface(ret, FIT)
     # the sinusoids have zero mean; a plane fitted to a 45 m patch of them keeps a little tilt
     # and offset (0.1 m here), far from the berm's 3 m
