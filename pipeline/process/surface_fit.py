@@ -12,7 +12,8 @@ Method
    surface point higher than the band is a land candidate unless its high neighbours mostly
    have a return below the water level (water under them), and land if it is linked to
    candidates whose neighbourhood is mostly candidates and stands ``land_sea_sigmas`` sea
-   sigmas (measured from the surface heights) above the level: a wave crest is water. A
+   sigmas (measured from the surface heights) above the level, or to a region of candidates
+   far wider than a crest region: a wave crest is water. A
    pulse without a surface return whose straight (air) bottom point is higher than the band
    is land. Points below the band are not water surface (flagged outliers).
 3. Local fit, batched: for each water pulse, the ``k_neighbours`` nearest water-surface points
@@ -89,6 +90,12 @@ class SurfaceFitSettings:
         gt=0.0,
         le=1000.0,
         doc="land candidates this close to land above the sea state are land too",
+    )
+    land_extent_sigmas: float = setting(
+        400.0,
+        gt=0.0,
+        doc="a region of linked land candidates this wide, in sea sigmas, is land (a crest "
+        "region spans ~ a wavelength ~ 150 sigma)",
     )
     below_margin_m: float = setting(1.0, gt=0.0, doc="lower below the water level: not surface")
     water_level_hint_m: float | None = setting(

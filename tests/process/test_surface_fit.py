@@ -231,3 +231,24 @@ def test_flat_berm_does_not_take_the_water_level():
     # and offset (0.1 m here), far from the berm's 3 m
     assert abs(ws.global_plane[0]) < 0.3
     np.testing.assert_array_equal(ws.is_land, land)
+
+
+def test_wide_berm_below_the_wave_height_is_land():
+    # a flat berm 1.6 m up (above the 1 m margin, below Hs = 2 m of the test sea) over 160 m by
+    # 240 m, behind a foreshore; the sea shows its seabed. No part of it stands above the
+    # sea's crests, but it spans far more than a crest region (a few wavelengths of <= 24 m)
+    x, y, d = beams(n_side=160, spacing_m=1.5)  # 240 m square
+    j = np.arange(SEA_COMPONENTS)
+    wavelength_m = 6.0 + 18.0 * j / (SEA_COMPONENTS - 1)
+    heading, phase = 2.39996 * j, 1.0 + 2.0 * j
+    arg = (x[:, None] * np.sin(heading) + y[:, None] * np.cos(heading)) / wavelength_m
+    sea = SEA_AMPLITUDE_M * np.sin(2 * np.pi * arg + phase).sum(axis=1)
+    land = x > 40.0
+    ground = np.minimum(0.4 * (x - 40.0), 1.6)  # foreshore to the berm at x = 44 m
+    z = np.where(land, ground, sea)
+    o, r = from_hits(np.column_stack([x, y, z]), d)
+    tb = np.where(land, 0.0, 2 * (r + 10.0) * N_AIR / C)
+    ws = fit_water_surface(make_returns(o, d, r, t_bottom_s=tb), FIT)
+    assert np.sum(~land & (sea > FIT.land_margin_m)) > 100  # crests above the margin
+    assert not ws.is_land[~land].any()
+    assert ws.is_land[land & (ground > FIT.land_margin_m + 0.1)].all()
