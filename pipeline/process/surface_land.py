@@ -171,6 +171,18 @@ def sea_sigma_m(res_m: np.ndarray, st) -> float:
     return float(brentq(excess, med, hi, xtol=1e-6 * a))
 
 
+def _neighbours(tree, xy_m: np.ndarray, st) -> tuple[np.ndarray, np.ndarray]:
+    """The ``land_neighbours`` nearest points within ``land_radius_m`` of ``xy_m`` (c, 2).
+
+    Returns ``valid`` (c, k) bool and indices ``ic`` (c, k) (0 where not valid).
+    """
+    k = min(st.land_neighbours, tree.n)
+    _, idx = tree.query(xy_m, k=k, distance_upper_bound=st.land_radius_m, workers=-1)
+    idx = np.asarray(idx).reshape(len(xy_m), k)
+    valid = idx < tree.n  # a point itself is always among its nearest neighbours
+    return valid, np.where(valid, idx, 0)
+
+
 def land_surface_points(
     xy_m: np.ndarray, res_m: np.ndarray, water_below: np.ndarray, st
 ) -> tuple[np.ndarray, float, float]:
@@ -210,22 +222,25 @@ def land_surface_points(
     q = np.flatnonzero(high)
     if not len(q):
         return land, sigma, sea_margin
-    k = min(st.land_neighbours, m)
-    _, idx = cKDTree(xy_m).query(xy_m[q], k=k, distance_upper_bound=st.land_radius_m, workers=-1)
-    idx = np.asarray(idx).reshape(len(q), k)
-    valid = idx < m  # the point itself is always among its nearest neighbours
-    ic = np.where(valid, idx, 0)
-    nb_high = valid & high[ic]
+    tree = cKDTree(xy_m)
+    chunks = [q[i : i + st.chunk_size] for i in range(0, len(q), st.chunk_size)]
     # water under the high region: a majority vote of the high neighbours (the point among
     # them), so that a lone late echo (noise under land) or a lone missed bottom (a crest
     # among crests that show the seabed) does not decide alone
-    wet = (nb_high & water_below[ic]).sum(1) >= 0.5 * nb_high.sum(1)
     cand = np.zeros(m, dtype=bool)
-    cand[q] = ~wet
-    nb_cand = valid & cand[ic]
-    support = nb_cand.sum(1) / np.maximum(valid.sum(1), 1)
-    # robust height of the high region around the point: median of the candidate neighbours
-    height = np.where(nb_cand.any(1), masked_median(res_m[ic], nb_cand), -np.inf)
+    for qc in chunks:
+        valid, ic = _neighbours(tree, xy_m[qc], st)
+        nb_high = valid & high[ic]
+        cand[qc] = (nb_high & water_below[ic]).sum(1) < 0.5 * nb_high.sum(1)
+    support = np.zeros(len(q))
+    height = np.zeros(len(q))
+    for i, qc in zip(range(0, len(q), st.chunk_size), chunks, strict=True):
+        valid, ic = _neighbours(tree, xy_m[qc], st)
+        nb_cand = valid & cand[ic]
+        support[i : i + len(qc)] = nb_cand.sum(1) / np.maximum(valid.sum(1), 1)
+        # robust height of the high region around the point: median of candidate neighbours
+        med = masked_median(res_m[ic], nb_cand)
+        height[i : i + len(qc)] = np.where(nb_cand.any(1), med, -np.inf)
     q, support, height = q[cand[q]], support[cand[q]], height[cand[q]]
     if not len(q):
         return land, sigma, sea_margin
