@@ -4,12 +4,18 @@ Method
 ------
 1. Surface points: ``p_s = origin + direction * c t_s / (2 n_air)`` for every pulse with a
    surface return.
-2. Water level and land: the water surface is the densest level layer of surface points: the
-   mode of a histogram of their heights (or ``water_level_hint_m``) starts an iterated
-   least-squares *global plane* fitted to the points within the band
-   ``[-below_margin_m, +land_margin_m]`` around it. A surface point higher than the band is
-   land; a pulse without a surface return whose straight (air) bottom point is higher than the
-   band is land too. Points below the band are not water surface (flagged outliers).
+2. Water level and land (:mod:`pipeline.process.surface_land`): the water surface is the
+   densest level layer of surface points: the mode of a histogram of their heights (of those
+   with a bottom return more than ``level_min_depth_m`` below them when there are any: water
+   under them; or ``water_level_hint_m``) starts an iterated least-squares *global plane*
+   fitted to the points within the band ``[-below_margin_m, +land_margin_m]`` around it. A
+   surface point higher than the band is a land candidate unless its high neighbours mostly
+   have a return below the water level (water under them), and land if it is linked to
+   candidates whose neighbourhood is mostly candidates and stands ``land_sea_sigmas`` sea
+   sigmas (measured from the surface heights) above the level, or to a region of candidates
+   far wider than a crest region: a wave crest is water. A
+   pulse without a surface return whose straight (air) bottom point is higher than the band
+   is land. Points below the band are not water surface (flagged outliers).
 3. Local fit, batched: for each water pulse, the ``k_neighbours`` nearest water-surface points
    (horizontally, within ``radius_m``, from a ``scipy.spatial.cKDTree``) give the plane
    ``z = z_global(x, y) + a + b dx + c dy`` by weighted least squares on stacked 3x3 normal
@@ -36,13 +42,13 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from pipeline.config import setting
+from pipeline.constants import MAD_TO_SIGMA
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.returns import DetectedReturns, PointFlag
+from pipeline.process.surface_land import global_plane, land_surface_points, masked_median
 
 __all__ = ["SurfaceFitSettings", "WaterSurface", "fit_water_surface", "surface_points_m"]
 
-#: 1.4826 * MAD estimates the standard deviation of normally distributed residuals.
-_MAD_TO_SIGMA = 1.4826
 #: |N . d| below this: the beam runs along the surface (no usable entry point).
 _GRAZING_COS = 1e-6
 
@@ -65,12 +71,43 @@ class SurfaceFitSettings:
     outlier_floor_m: float = setting(
         0.02, ge=0.0, doc="residuals below this are never rejected (exact data)"
     )
-    land_margin_m: float = setting(1.0, gt=0.0, doc="higher above the water level: land")
+    land_margin_m: float = setting(
+        1.0, gt=0.0, doc="higher above the water level: land candidate (see surface_land)"
+    )
+    land_sea_sigmas: float = setting(
+        4.0,
+        ge=0.0,
+        doc="land stands this many measured sea-height sigmas above the level (Hs ~ 4 sigma)",
+    )
+    land_radius_m: float = setting(
+        5.0, gt=0.0, le=1000.0, doc="neighbour radius of the land support and height"
+    )
+    land_neighbours: int = setting(32, ge=1, le=1024, doc="neighbours of the land support")
+    land_support_fraction: float = setting(
+        0.25, ge=0.0, le=1.0, doc="fewer land candidates among the neighbours: not land"
+    )
+    land_link_m: float = setting(
+        2.0,
+        gt=0.0,
+        le=1000.0,
+        doc="land candidates this close to land above the sea state are land too",
+    )
+    land_extent_sigmas: float = setting(
+        400.0,
+        gt=0.0,
+        doc="a region of linked land candidates this wide, in sea sigmas, is land (a crest "
+        "region spans ~ a wavelength ~ 150 sigma)",
+    )
     below_margin_m: float = setting(1.0, gt=0.0, doc="lower below the water level: not surface")
     water_level_hint_m: float | None = setting(
         None, doc="known water level (local z) to start from instead of the histogram mode"
     )
     level_bin_m: float = setting(0.25, gt=0.0, doc="histogram bin of the water-level search")
+    level_min_depth_m: float = setting(
+        1.0,
+        ge=0.0,
+        doc="water-level search: surface points with a bottom this far below (air range) first",
+    )
     slope_prior_m: float = setting(
         0.05, ge=0.0, doc="ridge towards the global slope, as an equivalent spread"
     )
@@ -171,61 +208,6 @@ def surface_points_m(returns: DetectedReturns, air_index: float) -> np.ndarray:
     return np.where(returns.has_surface[:, None], p, 0.0)
 
 
-def _plane_lstsq(x, y, z):
-    """Least-squares ``z = z0 + gx x + gy y`` (minimum-norm slope if degenerate) and sigma."""
-    xm, ym = x.mean(), y.mean()
-    a = np.column_stack([np.ones_like(x), x - xm, y - ym])
-    coef, *_ = np.linalg.lstsq(a, z, rcond=1e-10)
-    resid = z - a @ coef
-    dof = max(len(z) - 3, 1)
-    sigma = float(np.sqrt(np.sum(resid**2) / dof))
-    return np.array([coef[0] - coef[1] * xm - coef[2] * ym, coef[1], coef[2]]), sigma
-
-
-def _global_plane(ps: np.ndarray, st: SurfaceFitSettings) -> tuple[np.ndarray, float]:
-    """Water plane from surface points ``ps`` (m, 3): histogram mode, then iterated band fit."""
-    z = ps[:, 2]
-    if st.water_level_hint_m is not None:
-        level = float(st.water_level_hint_m)
-    else:
-        lo, hi = float(z.min()), float(z.max())
-        nbins = int(min(max(np.ceil((hi - lo) / st.level_bin_m), 1), 1_000_000))
-        counts, edges = np.histogram(z, bins=nbins, range=(lo, lo + nbins * st.level_bin_m))
-        i = int(np.argmax(counts))
-        level = 0.5 * (edges[i] + edges[i + 1])
-    plane = np.array([level, 0.0, 0.0])
-    sigma = 0.0
-    for _ in range(6):
-        res = z - (plane[0] + plane[1] * ps[:, 0] + plane[2] * ps[:, 1])
-        band = (res > -st.below_margin_m) & (res < st.land_margin_m)
-        if band.sum() < 3:
-            break
-        new, sigma = _plane_lstsq(ps[band, 0], ps[band, 1], z[band])
-        # one robust pass: drop gross outliers of this fit, then refit
-        r2 = z[band] - (new[0] + new[1] * ps[band, 0] + new[2] * ps[band, 1])
-        keep = np.abs(r2) <= max(st.outlier_sigma * _MAD_TO_SIGMA * np.median(np.abs(r2)), 1e-9)
-        keep |= np.abs(r2) <= st.outlier_floor_m
-        if keep.sum() >= 3:
-            xb, yb, zb = ps[band, 0][keep], ps[band, 1][keep], z[band][keep]
-            new, sigma = _plane_lstsq(xb, yb, zb)
-        converged = np.allclose(new, plane, rtol=0.0, atol=1e-12)
-        plane = new
-        if converged:
-            break
-    return plane, sigma
-
-
-def _masked_median(v: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Row medians of ``v`` over ``valid`` entries (rows with no valid entry give 0)."""
-    cnt = valid.sum(axis=1)
-    s = np.sort(np.where(valid, v, np.inf), axis=1)
-    c = np.maximum(cnt, 1)
-    lo = np.take_along_axis(s, ((c - 1) // 2)[:, None], axis=1)[:, 0]
-    hi = np.take_along_axis(s, (c // 2)[:, None], axis=1)[:, 0]
-    hi = np.where(cnt >= 2, hi, lo)
-    return np.where(cnt > 0, 0.5 * (lo + hi), 0.0)
-
-
 def _solve(w, dx, dy, z, lam):
     """Batched weighted least squares with a ridge ``lam`` on the slopes; params and inverse."""
     sw = w.sum(1)
@@ -263,12 +245,12 @@ def _local_fit(tree, spts, qxy, st):
     lam = count * st.slope_prior_m**2
 
     def inliers(r):
-        scale = _MAD_TO_SIGMA * _masked_median(np.abs(r), valid)
+        scale = MAD_TO_SIGMA * masked_median(np.abs(r), valid)
         thresh = np.maximum(st.outlier_sigma * scale, st.outlier_floor_m)
         return (valid & (np.abs(r) <= thresh[:, None])).astype(np.float64)
 
     # robust start: residuals from the global slope through the neighbours' median height
-    w = inliers(z - _masked_median(z, valid)[:, None]) if st.robust_iterations else valid * 1.0
+    w = inliers(z - masked_median(z, valid)[:, None]) if st.robust_iterations else valid * 1.0
     for it in range(st.robust_iterations + 1):
         params, inv, sums = _solve(w, dx, dy, z, lam)
         r = z - (params[:, :1] + params[:, 1:2] * dx + params[:, 2:3] * dy)
@@ -326,8 +308,10 @@ def fit_water_surface(
     has_s = returns.has_surface
     flags = np.zeros(n, dtype=np.uint16)
 
+    pb = o + d * (c * returns.t_bottom_s / (2.0 * st.air_index))[:, None]
     if has_s.sum() >= 3:
-        gplane, gsigma = _global_plane(ps[has_s], st)
+        wet = returns.has_bottom & (ps[:, 2] - pb[:, 2] > st.level_min_depth_m)
+        gplane, gsigma = global_plane(ps[has_s], st, wet[has_s])
     else:
         level = st.water_level_hint_m
         gplane = np.array([st.fallback_water_level_m if level is None else level, 0.0, 0.0])
@@ -337,13 +321,20 @@ def fit_water_surface(
     def zg(x, y):
         return z0 + gx * x + gy * y
 
-    # land / water decision per pulse
+    # land / water decision per pulse: a high surface point is land only with no water under
+    # it, neighbours that are land candidates too, and a height above the measured sea
     res_s = np.where(has_s, ps[:, 2] - zg(ps[:, 0], ps[:, 1]), 0.0)
-    land_s = has_s & (res_s >= st.land_margin_m)
+    res_b = pb[:, 2] - zg(pb[:, 0], pb[:, 1])
+    pc = o + d * (c * returns.t_column_s / (2.0 * st.air_index))[:, None]
+    water_below = (returns.has_bottom & (res_b < 0.0)) | (
+        returns.has_column & (pc[:, 2] - zg(pc[:, 0], pc[:, 1]) < 0.0)
+    )
+    land_s = np.zeros(n, dtype=bool)
+    if has_s.any():
+        land_s[has_s] = land_surface_points(ps[has_s, :2], res_s[has_s], water_below[has_s], st)[0]
     low_s = has_s & (res_s <= -st.below_margin_m)
     water_s = has_s & ~land_s & ~low_s
-    pb = o + d * (c * returns.t_bottom_s / (2.0 * st.air_index))[:, None]
-    land_b = ~has_s & returns.has_bottom & (pb[:, 2] - zg(pb[:, 0], pb[:, 1]) >= st.land_margin_m)
+    land_b = ~has_s & returns.has_bottom & (res_b >= st.land_margin_m)
     is_land = land_s | land_b
 
     # global plane: entry and normal for everyone to start with

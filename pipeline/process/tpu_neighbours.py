@@ -17,6 +17,7 @@ from pipeline.constants import MAD_TO_SIGMA
 from pipeline.process.refraction import RefractionSettings
 from pipeline.process.returns import DetectedReturns
 from pipeline.process.surface_fit import WaterSurface
+from pipeline.process.surface_land import masked_median
 from pipeline.process.tpu_settings import (
     DEPTH,
     RANDOM_TERMS,
@@ -50,16 +51,6 @@ def _group_means(group, xy, dep):
     cnt = np.bincount(inv).astype(np.float64)
     xy = np.column_stack([np.bincount(inv, weights=xy[:, k]) / cnt for k in range(2)])
     return xy, np.bincount(inv, weights=dep) / cnt
-
-
-def _masked_median(v: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Row medians of ``v`` over its ``valid`` entries (0 for a row without any)."""
-    cnt = valid.sum(axis=1)
-    s = np.sort(np.where(valid, v, np.inf), axis=1)
-    c = np.maximum(cnt, 1)
-    lo = np.take_along_axis(s, ((c - 1) // 2)[:, None], axis=1)[:, 0]
-    hi = np.take_along_axis(s, (c // 2)[:, None], axis=1)[:, 0]
-    return np.where(cnt > 0, 0.5 * (lo + np.where(cnt >= 2, hi, lo)), 0.0)
 
 
 def seabed_gradient(
@@ -114,7 +105,7 @@ def seabed_gradient(
         w = valid.astype(np.float64)
         p = _plane_fit(w, dx, dy, z, ridge_m**2)
         r = np.abs(z - (p[:, :1] + p[:, 1:2] * dx + p[:, 2:3] * dy))
-        scale = MAD_TO_SIGMA * _masked_median(r, valid)
+        scale = MAD_TO_SIGMA * masked_median(r, valid)
         keep = valid & (r <= np.maximum(3.0 * scale, 0.01)[:, None])
         w = keep.astype(np.float64)
         p = _plane_fit(w, dx, dy, z, ridge_m**2)

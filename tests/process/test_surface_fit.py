@@ -160,3 +160,95 @@ def test_no_surface_returns_falls_back_to_the_level():
     assert ws.is_water.all()
     assert np.all(ws.flags & PointFlag.SURFACE_GLOBAL_FALLBACK)
     np.testing.assert_allclose(ws.entry_m[:, 2], 0.0, atol=1e-9)
+
+
+#: The test sea: components of equal amplitude; sigma = amplitude * sqrt(components / 2).
+SEA_COMPONENTS, SEA_AMPLITUDE_M = 8, 0.25
+
+
+def sea_with_land(bottoms: bool, land_z=None):
+    """A wind sea of eight sinusoids (sigma 0.5 m, crests above the 1 m land margin) west of
+    x = 12 m and, east of it, land: a foreshore rising 0.5 m per m to 1 m at x = 14 m, then a
+    beach face rising 0.3 m per m to 5.65 m (``land_z``: flat land at that height instead);
+    optionally a seabed echo 10 m (air range) below every sea pulse's surface and none under
+    the land (opaque).
+
+    Returns the returns, the sea heights, the land mask and the land heights.
+    """
+    x, y, d = beams(n_side=60, spacing_m=1.0)
+    j = np.arange(SEA_COMPONENTS)
+    wavelength_m = 6.0 + 18.0 * j / (SEA_COMPONENTS - 1)  # 6 m to 24 m
+    heading = 2.39996 * j  # golden-angle spread of directions
+    phase = 1.0 + 2.0 * j
+    arg = (x[:, None] * np.sin(heading) + y[:, None] * np.cos(heading)) / wavelength_m
+    sea = SEA_AMPLITUDE_M * np.sin(2 * np.pi * arg + phase).sum(axis=1)
+    land = x > 12.0
+    face = np.where(x < 14.0, 0.5 * (x - 12.0), 1.0 + 0.3 * (x - 14.0))
+    ground = face if land_z is None else np.full_like(x, land_z)
+    z = np.where(land, ground, sea)
+    o, r = from_hits(np.column_stack([x, y, z]), d)
+    tb = np.where(land, 0.0, 2 * (r + 10.0) * N_AIR / C) if bottoms else None
+    return make_returns(o, d, r, t_bottom_s=tb), sea, land, ground
+
+
+def test_wave_crests_are_water_and_land_is_land():
+    # the sea's sigma is 0.5 m, Hs = 4 sigma = 2 m: the beach face below Hs is land by its
+    # link to the land above it
+    hs_m = 4.0 * SEA_AMPLITUDE_M * np.sqrt(SEA_COMPONENTS / 2.0)
+    for bottoms in (False, True):
+        ret, sea, land, ground = sea_with_land(bottoms)
+        # the test's premise: many crests of the sea stand above the land margin, and land
+        # between the margin and the sea's Hs exists
+        assert np.sum(~land & (sea > FIT.land_margin_m)) > 20
+        assert np.sum(land & (ground > FIT.land_margin_m) & (ground < hs_m)) > 100
+        ws = fit_water_surface(ret, FIT)
+        assert not ws.is_land[~land].any()
+        assert ws.is_water[~land].all()
+        # land above the margin (the foreshore below it is in the water band: not asserted)
+        assert ws.is_land[land & (ground > FIT.land_margin_m + 0.1)].all()
+
+
+def test_isolated_high_point_over_water_is_not_land():
+    # a level sea with a seabed echo under every pulse, but one pulse's surface return is 1.5 m
+    # high (spray, a bird) and its bottom was missed: one high point is not land
+    o, d, r, *_ = tilted_returns(tilt_deg=0.0, z0=0.0)
+    tb = 2 * (r + 8.0) * N_AIR / C
+    i = len(r) // 2
+    r[i] -= 1.5 / -d[i, 2]
+    tb[i] = 0.0
+    ws = fit_water_surface(make_returns(o, d, r, t_bottom_s=tb), FIT)
+    assert not ws.is_land.any()
+    assert ws.flags[i] & PointFlag.SURFACE_OUTLIER
+    np.testing.assert_allclose(ws.entry_m[:, 2], 0.0, atol=1e-9)
+
+
+def test_flat_berm_does_not_take_the_water_level():
+    # a flat berm 3 m up is a denser height layer than a wave-spread sea; the sea's pulses see a
+    # seabed 10 m below, so the water level is the sea's, and the berm is land
+    ret, _, land, _ = sea_with_land(bottoms=True, land_z=3.0)
+    ws = fit_water_surface(ret, FIT)
+    # the sinusoids have zero mean; a plane fitted to a 45 m patch of them keeps a little tilt
+    # and offset (0.1 m here), far from the berm's 3 m
+    assert abs(ws.global_plane[0]) < 0.3
+    np.testing.assert_array_equal(ws.is_land, land)
+
+
+def test_wide_berm_below_the_wave_height_is_land():
+    # a flat berm 1.6 m up (above the 1 m margin, below Hs = 2 m of the test sea) over 160 m by
+    # 240 m, behind a foreshore; the sea shows its seabed. No part of it stands above the
+    # sea's crests, but it spans far more than a crest region (a few wavelengths of <= 24 m)
+    x, y, d = beams(n_side=160, spacing_m=1.5)  # 240 m square
+    j = np.arange(SEA_COMPONENTS)
+    wavelength_m = 6.0 + 18.0 * j / (SEA_COMPONENTS - 1)
+    heading, phase = 2.39996 * j, 1.0 + 2.0 * j
+    arg = (x[:, None] * np.sin(heading) + y[:, None] * np.cos(heading)) / wavelength_m
+    sea = SEA_AMPLITUDE_M * np.sin(2 * np.pi * arg + phase).sum(axis=1)
+    land = x > 40.0
+    ground = np.minimum(0.4 * (x - 40.0), 1.6)  # foreshore to the berm at x = 44 m
+    z = np.where(land, ground, sea)
+    o, r = from_hits(np.column_stack([x, y, z]), d)
+    tb = np.where(land, 0.0, 2 * (r + 10.0) * N_AIR / C)
+    ws = fit_water_surface(make_returns(o, d, r, t_bottom_s=tb), FIT)
+    assert np.sum(~land & (sea > FIT.land_margin_m)) > 100  # crests above the margin
+    assert not ws.is_land[~land].any()
+    assert ws.is_land[land & (ground > FIT.land_margin_m + 0.1)].all()
