@@ -1,4 +1,4 @@
-"""The ``bathy`` command line: ``bathy run [SCENE] [--out DIR]``, ``bathy validate SCENE``."""
+"""The ``bathy`` command line: ``run``, ``validate``, ``keys`` and ``stress`` (extreme cases)."""
 
 from __future__ import annotations
 
@@ -22,7 +22,27 @@ def _parser() -> argparse.ArgumentParser:
     val = sub.add_parser("validate", help="check a scene file; exit 2 if it is invalid")
     val.add_argument("scene", help="scene TOML file")
     sub.add_parser("keys", help="list every scene key with its default, unit and bounds")
+    st = sub.add_parser("stress", help="run the extreme-case suite; exit 1 if a case fails")
+    st.add_argument("--out", default="out/stress", help="output folder, one subfolder per case")
+    st.add_argument("--only", nargs="+", default=[], metavar="NAME", help="run these cases")
+    st.add_argument("--fast", action="store_true", help="only the fast subset")
     return p
+
+
+def _stress(args) -> int:
+    """``bathy stress``: one line per case; 1 if any case fails (a known failure does not)."""
+    from pipeline.stress import run_cases, select_cases
+
+    try:
+        cases = select_cases(args.only, args.fast)
+    except ValueError as exc:
+        print(f"bathy stress: {exc}", file=sys.stderr)
+        return EXIT_BAD_SCENE
+    print(f"bathy stress: {len(cases)} cases -> {args.out}")
+    results = run_cases(cases, args.out)
+    counts = {k: sum(r.status == k for r in results) for k in ("PASS", "KNOWN", "FAIL")}
+    print(f"{counts['PASS']} passed, {counts['KNOWN']} known failures, {counts['FAIL']} failed")
+    return 1 if counts["FAIL"] else 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -37,6 +57,8 @@ def main(argv: list[str] | None = None) -> int:
 
             print("\n".join(describe(Scene)))
             return 0
+        if args.command == "stress":
+            return _stress(args)
         path = Path(args.scene) if getattr(args, "scene", None) else DEFAULT_SCENE_PATH
         scene = load_scene(path)
         if args.command == "validate":
