@@ -239,6 +239,8 @@ CASES: tuple[StressCase, ...] = (
             ("water.wind_speed_m_s", 40.0),
             ("water_surface.kind", "waves"),
         ),
+        # 3 TIR sub-rays on seed 7, none on seeds 8 and 9: the return retraces the refracted
+        # ray, so it meets TIR only where that ray crosses the wave mesh again
         expect=("subray_flag:tir_return",),
         fast=False,
     ),
@@ -354,6 +356,16 @@ CASES: tuple[StressCase, ...] = (
         overrides=(("flight.area_m", [0.0, 0.001, 0.0, 0.001]),),
     ),
     StressCase("photon", "the photon-counting base", base="photon", expect=("class:40",)),
+    StressCase(
+        "photon_seed12",
+        "the photon-counting base drawn with seed 12",
+        base="photon",
+        overrides=(("scene.seed", 12),),
+        expect=("class:40", "datum_error:0.2"),
+        known_failure="process/detect_photons.py takes the highest histogram bin for the"
+        " surface: in every window of seed 12 that is the 2 m seabed (surface at z = -2.56 m,"
+        " bottom detected fraction 0, grid datum -2.56 m; seeds 11, 13-18 pass)",
+    ),
     StressCase(
         "photon_zero_photons",
         "photon counting, 1e-30 J pulses, no sun, no dark counts: no event at all",
