@@ -1,4 +1,4 @@
-"""The ``bathy`` command line: ``run [SCENE] [--out DIR]``, ``validate``, ``plan``, ``keys``."""
+"""The ``bathy`` command line: ``run``, ``validate``, ``plan``, ``keys``, ``stress``."""
 
 from __future__ import annotations
 
@@ -33,7 +33,27 @@ def _parser() -> argparse.ArgumentParser:
     pl = sub.add_parser("plan", help="the stages a scene runs, and why the others are left out")
     pl.add_argument("scene", nargs="?", help="scene TOML file (default: built-in scene)")
     sub.add_parser("keys", help="list every scene key with its default, unit and bounds")
+    st = sub.add_parser("stress", help="run the extreme-case suite; exit 1 if a case fails")
+    st.add_argument("--out", default="out/stress", help="output folder, one subfolder per case")
+    st.add_argument("--only", nargs="+", default=[], metavar="NAME", help="run these cases")
+    st.add_argument("--fast", action="store_true", help="only the fast subset")
     return p
+
+
+def _stress(args) -> int:
+    """``bathy stress``: one line per case; 1 if any case fails (a known failure does not)."""
+    from pipeline.stress import run_cases, select_cases
+
+    try:
+        cases = select_cases(args.only, args.fast)
+    except ValueError as exc:
+        print(f"bathy stress: {exc}", file=sys.stderr)
+        return EXIT_BAD_SCENE
+    print(f"bathy stress: {len(cases)} cases -> {args.out}")
+    results = run_cases(cases, args.out)
+    counts = {k: sum(r.status == k for r in results) for k in ("PASS", "KNOWN", "FAIL")}
+    print(f"{counts['PASS']} passed, {counts['KNOWN']} known failures, {counts['FAIL']} failed")
+    return 1 if counts["FAIL"] else 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -47,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.command is None:
         parser.print_usage(sys.stderr)
-        print("bathy: a command is required (run, validate, plan, keys)", file=sys.stderr)
+        print("bathy: a command is required (run, validate, plan, keys, stress)", file=sys.stderr)
         return EXIT_BAD_SCENE
     # imported late so `bathy --help` stays fast
     from pipeline.scene import DEFAULT_SCENE_PATH, Scene, load_scene
@@ -58,6 +78,8 @@ def main(argv: list[str] | None = None) -> int:
 
             print("\n".join(describe(Scene)))
             return 0
+        if args.command == "stress":
+            return _stress(args)
         path = Path(args.scene) if getattr(args, "scene", None) else DEFAULT_SCENE_PATH
         scene = load_scene(path)
         if args.command == "validate":

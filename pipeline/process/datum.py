@@ -18,6 +18,12 @@ local-plane surface fit rejects crests under a steep sea (flagged LAND, class 1,
 7/18; on a 10 m/s sea 4.5 % of the returns, mostly crests), and leaving them out put the datum
 0.10 m into the troughs. GNSS height errors common to the surface and seabed returns cancel in
 ``datum − z``, as they do in the points' ``depth_m``.
+
+A survey with no surface return at all (zero photons, an all-ground scene) has nothing that
+measured the water level: its datum is ``process.datum.fallback_water_level_m`` (source
+``"fallback"``), the level the surface fit also falls back to by default
+(``process.surface_fit.fallback_water_level_m``), so whatever was measured stays referenced
+to one level and the run completes.
 """
 
 from __future__ import annotations
@@ -28,7 +34,6 @@ import numpy as np
 
 from pipeline.config import setting
 from pipeline.constants import MAD_TO_SIGMA
-from pipeline.errors import BathyError
 from pipeline.process.classify import GROUND
 from pipeline.process.returns import Points, ReturnKind
 
@@ -49,6 +54,13 @@ class DatumSettings:
         doc="mean water level (local z, m) the grid's depths are below, e.g. from a tide "
         "gauge; default: the robust mean of the survey's measured surface returns",
     )
+    fallback_water_level_m: float = setting(
+        0.0,
+        ge=-1000.0,
+        le=1000.0,
+        doc="datum (local z, m) of a survey with no surface return to estimate one from; "
+        "keep it equal to process.surface_fit.fallback_water_level_m",
+    )
 
 
 @dataclass(frozen=True)
@@ -60,7 +72,8 @@ class Datum:
     water_level_m : float
         Local z of the datum.
     source : str
-        ``"user"`` (``process.datum.water_level_m``) or ``"surface_mean"``.
+        ``"user"`` (``process.datum.water_level_m``), ``"surface_mean"``, or ``"fallback"``
+        (``process.datum.fallback_water_level_m``: no surface return in the survey).
     n_surface_points : int
         Surface returns the estimate used (0 for a user datum).
     """
@@ -90,11 +103,8 @@ def survey_datum(points: Points, settings: DatumSettings | None = None) -> Datum
     Returns
     -------
     Datum
-
-    Raises
-    ------
-    BathyError
-        No user level and no surface return to estimate one from.
+        The user's level; else the surface returns' gated mean; else, when there is no
+        surface return, the fallback level.
     """
     s = settings or DatumSettings()
     if s.water_level_m is not None:
@@ -102,9 +112,9 @@ def survey_datum(points: Points, settings: DatumSettings | None = None) -> Datum
     water = (points.kind == ReturnKind.SURFACE) & (points.classification != GROUND)
     z = points.xyz_m[water, 2]
     if z.size == 0:
-        raise BathyError(
-            "no surface return to estimate the datum from: set `process.datum.water_level_m`"
-        )
+        # nothing measured the water level (zero photons, all ground): the fallback, recorded
+        # as such in evaluation.json, rather than no outputs at all
+        return Datum(float(s.fallback_water_level_m), "fallback", 0)
     med = np.median(z)
     mad_sigma = MAD_TO_SIGMA * np.median(np.abs(z - med))
     # a flat calm sea has MAD 0: then keep what sits at the median (to the mm)

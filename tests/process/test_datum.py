@@ -99,3 +99,19 @@ def test_spray_and_land_do_not_move_the_datum():
     clean = survey_datum(pts.select(np.setdiff1d(np.arange(len(cls)), surf[:400])))
     datum = survey_datum(pts.replace(xyz_m=z, classification=cls))
     assert datum.water_level_m == pytest.approx(clean.water_level_m, abs=1e-9)
+
+
+def test_a_survey_without_surface_returns_still_gets_a_datum():
+    """Zero photons (or only ground): nothing measured the water level. The run must still
+    complete; the datum is the named fallback level (the level the surface fit also falls back
+    to), recorded as such, so a point at z = -3 m lies 3.25 m below a 0.25 m fallback."""
+    pts = _points(n_side=4)
+    bottoms = pts.select(pts.kind == 2)
+    bottoms = bottoms.replace(xyz_m=bottoms.xyz_m * np.array([1.0, 1.0, 0.0]) - [0.0, 0.0, 3.0])
+    datum = survey_datum(bottoms, DatumSettings(fallback_water_level_m=0.25))
+    assert datum.source == "fallback" and datum.n_surface_points == 0
+    grid = grid_seabed(bottoms, 5.0, bounds_m=(0, 50, 0, 50), datum_m=datum.water_level_m)
+    assert np.nanmax(np.abs(grid.depth_m - 3.25)) < 1e-9
+    # no point at all: the same level, and an empty grid
+    empty = survey_datum(bottoms.select(np.zeros(len(bottoms), bool)), DatumSettings())
+    assert empty.water_level_m == 0.0 and empty.source == "fallback"

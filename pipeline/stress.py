@@ -1,0 +1,420 @@
+"""``bathy stress``: the extreme-case suite, each case run end to end on a tiny scene.
+
+Every case is data (:class:`StressCase`): a base scene built here (a few thousand pulses), the
+scene keys it overrides, and what it expects. A run case goes through every stage the scene
+needs (:func:`pipeline.run.run_scene`: simulate, detect, process, TPU, grid, outputs,
+evaluation) and must complete, leave every numeric output finite (``points.laz`` coordinates,
+depths, uncertainties and confidences, ``grid.tif``'s valid cells, every number in
+``evaluation.json`` and ``manifest.json``; JSON null is allowed where a quantity does not
+exist) and meet its own expectations. A bad-input case writes its scene to TOML, runs
+``bathy run`` through :func:`pipeline.cli.main` and expects exit status 2 with one stderr line
+naming the key.
+
+A case whose failure comes from a known defect elsewhere carries ``known_failure`` (the measured
+reason): it is reported as "known failure", not PASS, and does not fail the suite; if it passes,
+the suite fails, so the table is updated when the defect is fixed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import math
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pipeline.stress_support import CHECKS, read_outputs, to_toml, with_overrides
+
+__all__ = ["StressCase", "CaseResult", "CASES", "scene_data", "run_case", "run_cases"]
+
+
+@dataclass(frozen=True)
+class StressCase:
+    """One extreme case: a base scene, the keys it overrides, and what it expects.
+
+    Attributes
+    ----------
+    name : str
+        Short name (``bathy stress --only NAME``).
+    why : str
+        What the case exercises.
+    overrides : tuple of (str, object)
+        Dotted scene keys and their values, set on a copy of the base.
+    expect : tuple of str
+        Checks (:data:`CHECKS`), each ``"check"`` or ``"check:argument"``; a run case always
+        also checks that it completes and that its outputs are finite.
+    base : str
+        ``"palmer"`` (full waveform) or ``"photon"`` (photon counting).
+    exit_status : int
+        0: run end to end with :func:`pipeline.run.run_scene`; 2: bad input, ``bathy run``
+        must exit 2 with one line naming ``expect``'s key.
+    fast : bool
+        In the fast subset (``--fast``, the test suite).
+    known_failure : str
+        Non-empty: the case fails because of this known defect (reported, not PASS).
+    """
+
+    name: str
+    why: str
+    overrides: tuple[tuple[str, Any], ...] = ()
+    expect: tuple[str, ...] = ()
+    base: str = "palmer"
+    exit_status: int = 0
+    fast: bool = True
+    known_failure: str = ""
+
+
+@dataclass(frozen=True)
+class CaseResult:
+    """Outcome of one case: ``status`` is PASS, FAIL or KNOWN (a known failure)."""
+
+    name: str
+    status: str
+    seconds: float
+    detail: str
+
+    def line(self) -> str:
+        """The case's one report line."""
+        label = {"KNOWN": "known failure"}.get(self.status, self.status)
+        return f"{self.name:<22} {label:<13} {self.seconds:6.1f} s  {self.detail}".rstrip()
+
+
+def scene_data(case: StressCase) -> dict[str, Any]:
+    """The case's scene as a TOML-like mapping: its base with the overrides set."""
+    return with_overrides(case.base, f"stress_{case.name}", case.overrides)
+
+
+# ---------------------------------------------------------------------------------------------
+# running a case
+
+
+def _bad_input(case: StressCase, out: Path) -> str:
+    """Run ``bathy run`` on the case's scene file: exit 2 with one line naming the key."""
+    from pipeline.cli import main
+
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "scene.toml"
+    path.write_text(to_toml(scene_data(case)))
+    err, std = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(std):
+        status = main(["run", str(path), "--out", str(out / "run")])
+    lines = [ln for ln in err.getvalue().splitlines() if ln.strip()]
+    if status != case.exit_status:
+        return f"exit {status}, expected {case.exit_status}: {' | '.join(lines)[:200]}"
+    if len(lines) != 1:
+        return f"{len(lines)} stderr lines, expected 1"
+    missing = [k for k in case.expect if k not in lines[0]]
+    return f"message does not name {missing}: {lines[0]}" if missing else ""
+
+
+def _end_to_end(case: StressCase, out: Path) -> str:
+    """Run the case's scene through :func:`pipeline.run.run_scene`; check its outputs."""
+    from pipeline.run import run_scene
+    from pipeline.scene import parse_scene
+
+    out.mkdir(parents=True, exist_ok=True)
+    log_lines: list[str] = []
+    try:
+        scene = parse_scene(scene_data(case), source=case.name)
+        run_scene(scene, out, log=log_lines.append)
+    except Exception as exc:  # the suite reports every crash as the case's failure
+        (out / "traceback.txt").write_text(traceback.format_exc())
+        where = traceback.extract_tb(exc.__traceback__)[-1]
+        return (
+            f"raised {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
+            f" ({Path(where.filename).name}:{where.lineno} in {where.name})"
+        )
+    finally:
+        (out / "run.log").write_text("\n".join(log_lines) + "\n")
+    try:
+        outputs, problems = read_outputs(out)
+    except Exception as exc:  # unreadable output: a failure of the case, not of the suite
+        return f"outputs unreadable: {type(exc).__name__}: {exc}"
+    for item in case.expect:
+        name, _, arg = item.partition(":")
+        msg = CHECKS[name](outputs, arg)
+        if msg:
+            problems.append(msg)
+    return "; ".join(problems)
+
+
+def run_case(case: StressCase, out_dir: str | Path) -> CaseResult:
+    """Run one case into ``out_dir/<case name>`` and judge it."""
+    out = Path(out_dir) / case.name
+    t0 = time.perf_counter()
+    failure = _bad_input(case, out) if case.exit_status else _end_to_end(case, out)
+    seconds = time.perf_counter() - t0
+    if case.known_failure:
+        if failure:
+            return CaseResult(case.name, "KNOWN", seconds, f"{case.known_failure} [{failure}]")
+        return CaseResult(
+            case.name, "FAIL", seconds, "known failure now passes: update the case table"
+        )
+    return CaseResult(case.name, "FAIL" if failure else "PASS", seconds, failure)
+
+
+def select_cases(only: Sequence[str] = (), fast: bool = False) -> list[StressCase]:
+    """The cases named in ``only`` (all if empty), the fast subset if ``fast``.
+
+    Raises
+    ------
+    ValueError
+        When a name in ``only`` is not a case.
+    """
+    names = {c.name for c in CASES}
+    unknown = [n for n in only if n not in names]
+    if unknown:
+        raise ValueError(f"no stress case {', '.join(unknown)}; cases: {', '.join(sorted(names))}")
+    return [c for c in CASES if (not only or c.name in only) and (c.fast or not fast)]
+
+
+def run_cases(
+    cases: Sequence[StressCase], out_dir: str | Path, log: Callable[[str], None] = print
+) -> list[CaseResult]:
+    """Run ``cases`` one after the other, logging each one's report line as it ends."""
+    results = []
+    for case in cases:
+        results.append(run_case(case, out_dir))
+        log(results[-1].line())
+    return results
+
+
+# ---------------------------------------------------------------------------------------------
+# the case table
+
+_FLAT = (("seabed.slope_deg", 0.0), ("seabed.roughness_rms_m", 0.0))
+#: Two equal Gaussian echoes show two peaks only more than 2 sigma apart; the base's system
+#: response is the preset's 1.5 ns pulse and 1.0 ns detector response (FWHM in quadrature),
+#: and depth = c dt / (2 n_group) at nadir (less off nadir): 0.168 m.
+_RESOLVABLE_M = (
+    (2.0 * math.hypot(1.5e-9, 1.0e-9) / (2.0 * math.sqrt(2.0 * math.log(2.0))))
+    * 299_792_458.0
+    / (2.0 * 1.3638)
+)
+#: 20 km up with the base's echo levels: energy x 50^2, the base's two-way air loss, and a
+#: 100 m seabed mesh over the ~18.6 km extent (the 1 m one would need 44 GB: bad_mesh_extent)
+_FAR = (
+    ("flight.altitude_m", 20000.0),
+    ("system.pulse_energy_j", 2.0e-5 * 50.0**2),
+    ("atmosphere.extinction_per_m", 1.5e-4 / 50.0),
+    ("seabed.mesh_resolution_m", 100.0),
+)
+#: Known defects (measured on these scenes); the fix belongs in a module others are editing.
+_NO_SATURATED = (
+    "process/detect.py never sets DetectorFlag.SATURATED: samples at the top code "
+    "2^bit_depth-1 are not flagged, clipped echoes are timed late and stay classified"
+)
+_NOISE_FLOOR = (
+    "process/detect.py _detect_block: the noise sigma, from the MAD of first differences of "
+    "integer samples, is quantised (1.05 counts for 1.53 true at 1.5-count electronic noise): "
+    "the 5-sigma threshold is ~3.4 sigma, ~15 % of signal-free pulses get a false surface"
+)
+
+CASES: tuple[StressCase, ...] = (
+    StressCase(
+        "baseline",
+        "the base scene: water 2-6 m deep and land",
+        expect=("class:40", "class:41", "class:45", "class:2", "grid_cells:5"),
+    ),
+    StressCase(
+        "grazing",
+        "oscillating scan at 59.9 deg with 30 deg roll: beams up to ~90 deg off nadir",
+        overrides=(
+            ("scanner.kind", "oscillating"),
+            ("scanner.scan_half_angle_deg", 59.9),
+            ("attitude.roll_amplitude_deg", 30.0),
+            ("attitude.roll_period_s", 0.5),
+        ),
+        expect=("class:40", "subray_flag:miss"),
+    ),
+    StressCase(
+        "tir",
+        "58 deg Palmer over a 40 m/s wind sea: bottom echoes totally reflected on the way up",
+        overrides=(
+            ("scanner.off_nadir_deg", 58.0),
+            ("water.wind_speed_m_s", 40.0),
+            ("water_surface.kind", "waves"),
+        ),
+        # 3 TIR sub-rays on seed 7, none on seeds 8 and 9: the return retraces the refracted
+        # ray, so it meets TIR only where that ray crosses the wave mesh again
+        expect=("subray_flag:tir_return",),
+        fast=False,
+    ),
+    StressCase(
+        "clear_water",
+        "water extinction 0: no attenuation, no column decay to measure",
+        overrides=(("water.extinction_per_m", 0.0),),
+        expect=("class:40", "rmse:0.1"),
+    ),
+    StressCase(
+        "opaque_water",
+        "water extinction 100 /m: no bottom; the column decays within the pulse, so no pulse"
+        " measures a detection limit and none gets a class-45 point (README, class 45 depth)",
+        overrides=(("water.extinction_per_m", 100.0),),
+        expect=("no_class:40", "no_class:45"),
+    ),
+    StressCase(
+        "zero_photons",
+        "1e-30 J pulses, receiver efficiency 1e-30, no sun, no dark counts: noise only",
+        overrides=(
+            ("system.pulse_energy_j", 1e-30),
+            ("system.receiver_efficiency", 1e-30),
+            ("system.dark_count_rate_hz", 0.0),
+            ("background.solar_irradiance_w_m2_nm", 0.0),
+        ),
+        expect=("no_detections",),
+        known_failure=_NOISE_FLOOR,
+    ),
+    StressCase(
+        "saturation",
+        "1 J pulses: the digitiser reaches its top code in every pulse",
+        overrides=(("system.pulse_energy_j", 1.0),),
+        expect=("detector_flag:SATURATED", "datum_error:0.2", "rmse:0.1"),
+        known_failure=_NO_SATURATED + " (grid datum -5.77 m; 303 class-40 points, RMSE 5.72 m)",
+    ),
+    StressCase(
+        "depth_0.05m",
+        "a flat seabed 5 cm deep: surface and bottom echoes merge",
+        overrides=(("seabed.depth_m", 0.05), *_FLAT),
+        expect=(f"min_depth:40:{_RESOLVABLE_M:.3f}",),
+    ),
+    StressCase(
+        "depth_100m",
+        "a flat seabed 100 m deep, 1 us window: exp(-30) round trip, no bottom",
+        overrides=(("seabed.depth_m", 100.0), ("detector.window_s", 1.0e-6), *_FLAT),
+        expect=("no_class:40", "class:45", "max_depth:45:100.0"),
+    ),
+    StressCase(
+        "altitude_1m",
+        "flight altitude at its lower bound, 1 m, the base's pulses: the echoes clip",
+        overrides=(("flight.altitude_m", 1.0),),
+        expect=("detector_flag:SATURATED", "datum_error:0.2"),
+        known_failure=_NO_SATURATED + " (grid datum -4.56 m)",
+    ),
+    StressCase(
+        "altitude_1m_dim",
+        "1 m altitude, pulse energy x (1/400)^2: the base's echo levels at 1/400 of its range",
+        overrides=(("flight.altitude_m", 1.0), ("system.pulse_energy_j", 2.0e-5 / 400.0**2)),
+        expect=("class:40", "class:41", "datum_error:0.2"),
+    ),
+    StressCase(
+        "altitude_20000m",
+        "20 km altitude (the upper bound), flat 2 m seabed, the base's echo levels at 50 x its"
+        " range (pulse energy x 50^2, air extinction / 50): the 7 km Palmer circle puts no"
+        " pulse in the 40 m area",
+        overrides=(*_FAR, *_FLAT),
+        expect=("class:41", "class:40", "datum_error:0.2", "rmse:0.1"),
+        fast=False,
+    ),
+    StressCase(
+        "altitude_20000m_land",
+        "the same over the base's 5.33 deg plane: land rising to ~680 m west of x = -21 m",
+        overrides=(*_FAR, ("seabed.roughness_rms_m", 0.0)),
+        expect=("class:2", "class:41", "datum_error:0.2"),
+        fast=False,
+    ),
+    StressCase(
+        "wind_40",
+        "a 40 m/s wind sea (significant wave height ~34 m) under the base Palmer scan",
+        overrides=(("water.wind_speed_m_s", 40.0), ("water_surface.kind", "waves")),
+        expect=("class:40",),
+        fast=False,
+    ),
+    StressCase(
+        "coordinates_1e7",
+        "frame origin at 1e7 m easting and northing",
+        overrides=(("frame.origin_easting_m", 1.0e7), ("frame.origin_northing_m", 1.0e7)),
+        expect=("class:40", "world_offset:1e7"),
+    ),
+    StressCase(
+        "all_land",
+        "the seabed 5 m above the water everywhere, no water level given",
+        overrides=(("seabed.depth_m", -5.0), *_FLAT),
+        expect=("no_class:40", "class:2", "no_class:41"),
+        known_failure="with no water in the scene the surface fit (surface_fit / surface_land)"
+        " takes the land for the water level: 1324 land returns classed 41 at z 4.93-5.08 m,"
+        " grid datum +4.99 m, no class 2",
+    ),
+    StressCase(
+        "all_land_known_level",
+        "the seabed 5 m above the water everywhere, the water level given (0 m)",
+        overrides=(
+            ("seabed.depth_m", -5.0),
+            ("process.surface_fit.water_level_hint_m", 0.0),
+            ("process.datum.water_level_m", 0.0),
+            *_FLAT,
+        ),
+        expect=("no_class:40", "class:2", "no_class:41"),
+    ),
+    StressCase(
+        "empty_area",
+        "the smallest area, 1 mm x 1 mm: one pulse",
+        overrides=(("flight.area_m", [0.0, 0.001, 0.0, 0.001]),),
+    ),
+    StressCase("photon", "the photon-counting base", base="photon", expect=("class:40",)),
+    StressCase(
+        "photon_seed12",
+        "the photon-counting base drawn with seed 12",
+        base="photon",
+        overrides=(("scene.seed", 12),),
+        expect=("class:40", "datum_error:0.2"),
+        known_failure="process/detect_photons.py takes the highest histogram bin for the"
+        " surface: in every window of seed 12 that is the 2 m seabed (surface at z = -2.56 m,"
+        " bottom detected fraction 0, grid datum -2.56 m; seeds 11, 13-18 pass)",
+    ),
+    StressCase(
+        "photon_zero_photons",
+        "photon counting, 1e-30 J pulses, no sun, no dark counts: no event at all",
+        base="photon",
+        overrides=(
+            ("system.pulse_energy_j", 1e-30),
+            ("system.dark_count_rate_hz", 0.0),
+            ("background.solar_irradiance_w_m2_nm", 0.0),
+        ),
+        expect=("no_detections",),
+    ),
+    StressCase(
+        "photon_opaque_water",
+        "photon counting in water of extinction 100 /m over the 2 m seabed",
+        base="photon",
+        overrides=(("water.extinction_per_m", 100.0),),
+        expect=("no_class:40", "max_depth:45:2.0"),
+        known_failure="run_survey._no_bottom_points puts a photon pulse's class-45 point at the"
+        " end of the range gate: 'no bottom down to 77 m' over a 2 m seabed",
+    ),
+    StressCase(
+        "photon_saturation",
+        "photon counting with 20 x the pulse energy: the receiver flags every shot saturated",
+        base="photon",
+        overrides=(("system.pulse_energy_j", 1e-6),),
+        expect=("receiver_flag:saturated", "detector_flag:SATURATED"),
+        known_failure="process/detect_photons.py sets no DetectorFlag.SATURATED",
+    ),
+    StressCase(
+        "posteriors",
+        "the base scene with emcee depth posteriors on 8 points",
+        overrides=(("process.posterior_min_pulses", 8),),
+        expect=("posteriors:8",),
+    ),
+    StressCase(
+        "bad_mesh_extent",
+        "20 km altitude with the base's 1 m seabed mesh over the 18.6 km extent: 44 GB",
+        overrides=(("flight.altitude_m", 20000.0),),
+        expect=("seabed.mesh_resolution_m",),
+        exit_status=2,
+    ),
+) + tuple(
+    StressCase(name, why, overrides=((key, value),), expect=(key,), exit_status=2)
+    for name, why, key, value in (
+        ("bad_altitude_low", "flight altitude below its bound", "flight.altitude_m", 0.5),
+        ("bad_altitude_high", "flight altitude above its bound", "flight.altitude_m", 20001.0),
+        ("bad_wind", "wind above its bound", "water.wind_speed_m_s", 41.0),
+        ("bad_extinction", "extinction above its bound", "water.extinction_per_m", 101.0),
+        ("bad_pulse_energy", "zero pulse energy (bound > 0)", "system.pulse_energy_j", 0.0),
+        ("bad_depth_nan", "a NaN seabed depth", "seabed.depth_m", math.nan),
+    )
+)

@@ -1,0 +1,61 @@
+"""``bathy stress``: the fast subset of the extreme cases runs end to end and meets its
+expectations (known failures are reported as such, never as PASS); the command reports one
+line per case and its exit status says whether a case failed."""
+
+import dataclasses
+import math
+
+import pytest
+
+from pipeline.cli import main
+from pipeline.stress import CASES, run_case, run_cases, select_cases
+from pipeline.stress_support import to_toml
+
+
+def test_fast_subset_passes_or_fails_only_as_known(tmp_path):
+    cases = select_cases(fast=True)
+    assert len(cases) >= 20
+    results = run_cases(cases, tmp_path, log=lambda _: None)
+    bad = [r.line() for r in results if r.status == "FAIL"]
+    assert not bad, "\n".join(bad)
+    for case, r in zip(cases, results, strict=True):
+        assert r.status == ("KNOWN" if case.known_failure else "PASS"), r.line()
+    # every numeric output was checked: a run case leaves its three outputs behind
+    for case in cases:
+        if case.exit_status == 0:
+            assert (tmp_path / case.name / "points.laz").exists()
+            assert (tmp_path / case.name / "evaluation.json").exists()
+
+
+def test_a_case_that_misses_its_expectation_fails_and_a_fixed_known_failure_too(tmp_path):
+    base = next(c for c in CASES if c.name == "baseline")
+    wrong = dataclasses.replace(base, name="wrong", expect=("class:99",))
+    r = run_case(wrong, tmp_path)
+    assert r.status == "FAIL" and "no class-99 point" in r.detail
+    # a known failure that now passes must be noticed, so the table gets updated
+    healed = dataclasses.replace(base, name="healed", known_failure="was broken")
+    r = run_case(healed, tmp_path)
+    assert r.status == "FAIL" and "update the case table" in r.detail
+
+
+def test_cli_reports_one_line_per_case_and_exit_status(tmp_path, capsys):
+    out = str(tmp_path / "s")
+    assert main(["stress", "--out", out, "--only", "empty_area", "bad_wind"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[1].split()[:2] == ["empty_area", "PASS"]
+    assert lines[2].split()[:2] == ["bad_wind", "PASS"]
+    assert lines[3] == "2 passed, 0 known failures, 0 failed"
+    assert main(["stress", "--out", out, "--only", "no_such_case"]) == 2
+    assert "no stress case no_such_case" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("value", [1.5, -3, True, 'a "b"', [0.0, 1e-300], math.nan])
+def test_scene_toml_round_trips(value):
+    import tomllib
+
+    data = {"scene": {"name": "x"}, "process": {"detect": {"v": value}}}
+    back = tomllib.loads(to_toml(data))["process"]["detect"]["v"]
+    if isinstance(value, float) and math.isnan(value):
+        assert math.isnan(back)
+    else:
+        assert back == value
