@@ -361,10 +361,9 @@ CASES: tuple[StressCase, ...] = (
         "the photon-counting base drawn with seed 12",
         base="photon",
         overrides=(("scene.seed", 12),),
+        # was a known failure (the highest histogram bin, the 2 m seabed, taken for the
+        # surface): passes since the surface is the first significant return
         expect=("class:40", "datum_error:0.2"),
-        known_failure="process/detect_photons.py takes the highest histogram bin for the"
-        " surface: in every window of seed 12 that is the 2 m seabed (surface at z = -2.56 m,"
-        " bottom detected fraction 0, grid datum -2.56 m; seeds 11, 13-18 pass)",
     ),
     StressCase(
         "photon_zero_photons",

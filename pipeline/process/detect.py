@@ -45,6 +45,7 @@ from scipy.special import ndtr
 from pipeline.config import setting
 from pipeline.constants import FWHM_TO_SIGMA, MAD_TO_SIGMA
 from pipeline.process.detect_merged import column_decay, fit_merged, merged_bottoms
+from pipeline.process.detect_near import column_excess
 from pipeline.process.returns import DetectorFlag
 
 __all__ = [
@@ -211,6 +212,13 @@ def _parabolic_peak(y: np.ndarray, idx: np.ndarray):
 
 #: Waveforms detected at once (bounds the float64 temporaries to a few tens of MB).
 BLOCK_PULSES = 8192
+#: Candidates up to this many FWHM past the minimum separation are tested against the column
+#: carried back from below them (:mod:`pipeline.process.detect_near`): the surface +
+#: column-onset hump (2.5 + 5 FWHM of 1.8 ns: 13.5 ns, ~1.5 m of water).
+NEAR_SURFACE_FWHM = 5.0
+#: ... where the column just past that zone is at least this fraction of the surface peak (a
+#: 150 m survey: 0.7-0.9; a 400 m one, and the column-tail tests: 0.1-0.2).
+BRIGHT_COLUMN_FRACTION = 0.5
 
 
 def detect_full_waveform(
@@ -313,7 +321,19 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     trend = np.maximum(filt - resid, 0.0)
     local_var = noise_f[:, None] ** 2 + shot_noise_counts * trend * kernel_sq
     local_thr = s.threshold_sigma * np.sqrt(local_var)
+    # just below the surface the flank trend fails on the surface + column-onset hump: there
+    # a candidate must stand above the column extrapolated back from the samples after it
     cand = rpeak & after & has_s[:, None] & (resid > local_thr)
+    # where the column onset is as bright as the surface echo the flank trend undershoots the
+    # hump they make: a candidate just below the surface must also stand above the column
+    # carried back from below it (it may only lose candidates: the test is one-sided)
+    zone = math.ceil(sep + NEAR_SURFACE_FWHM * fwhm_samples)
+    i_zone = np.minimum(i_s + zone, m - 1)
+    bright = has_s & (filt[np.arange(n), i_zone] > BRIGHT_COLUMN_FRACTION * amp_s)
+    near = cand & bright[:, None] & (cols <= i_zone[:, None])
+    if near.any():
+        excess, column = column_excess(filt, 3.0 * noise_f, gap + math.ceil(sep), 4 * gap)
+        cand &= ~(near & column & (excess <= local_thr))
     has_b = cand.any(axis=1)
     pick = cand
     if s.bottom_pick == "last":

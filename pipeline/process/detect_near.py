@@ -1,0 +1,71 @@
+"""Bottom candidates just below the surface, tested against the water column they sit on.
+
+Within a few FWHM of the surface echo the waveform can be a hump: the surface echo and the
+onset of the column's volume backscatter, which at low altitude or in bright water is as strong
+as the surface echo itself (a 150 m survey: surface peak ~290 counts on a column of ~250). A
+flank trend undershoots such a hump, and the noise bumps on its shoulder passed as bottoms
+0.6-0.8 m deep over 14-34 m of water. The column there is known better from below: it decays
+exponentially (Beer-Lambert down and up, a straight line in log space), so its level under a
+candidate is the level of the samples after the candidate carried back along the pulse's
+measured decay. A candidate must stand
+above that. Where no column follows (the samples after it are at the noise: a seabed ended
+it, or the column is too faint to matter), the flank-trend test stays as it was.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["column_excess"]
+
+#: Steepest column decay carried back, per sample (the ln-slope fit of a faint column is noisy).
+MAX_DECAY_PER_SAMPLE = 0.5
+
+
+def column_excess(
+    filt: np.ndarray, floor: np.ndarray, offset: int, width: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each sample's excess over the column carried back from the samples after it.
+
+    The column after sample ``t`` is measured on two windows of ``width`` samples,
+    ``[t + offset, t + offset + width)`` and the next; their means give its level and its
+    decay rate ``k = ln(m1 / m2) / width`` (clipped to ``[0, MAX_DECAY_PER_SAMPLE]``), and the
+    column under ``t`` is ``m1 exp(k (offset + (width − 1) / 2))``. Measured locally, the decay
+    follows whatever lies below the candidate and not the shallower hump.
+
+    Parameters
+    ----------
+    filt : (n_pulses, n_samples) float
+        Matched-filtered waveforms, baseline removed.
+    floor : (n_pulses,) float
+        Level below which a sample holds no column (a few filtered noise σ).
+    offset, width : int
+        Where the windows start after ``t`` (clear of the candidate's own echo) and their length.
+
+    Returns
+    -------
+    excess : (n_pulses, n_samples) float
+        ``filt`` minus the column carried back.
+    column : (n_pulses, n_samples) bool
+        Where both windows lie within the waveform and most of their samples are above
+        ``floor``: only there does a column follow, and is ``excess`` meaningful.
+    """
+    n, m = filt.shape
+
+    def window(v, start):
+        c = np.concatenate([np.zeros((n, 1)), np.cumsum(v, axis=1)], axis=1)
+        lo = np.clip(np.arange(m) + start, 0, m)
+        hi = np.clip(np.arange(m) + start + width, 0, m)
+        return (c[:, hi] - c[:, lo]), (hi - lo)[None, :]
+
+    s1, n1 = window(filt, offset)
+    s2, n2 = window(filt, offset + width)
+    a1, _ = window((filt > floor[:, None]).astype(np.float64), offset)
+    a2, _ = window((filt > floor[:, None]).astype(np.float64), offset + width)
+    inside = (n1 == width) & (n2 == width)
+    column = inside & (a1 > 0.5 * width) & (a2 > 0.5 * width)
+    m1 = np.maximum(s1 / width, 1e-300)
+    m2 = np.maximum(s2 / width, 1e-300)
+    k = np.clip(np.log(m1 / m2) / width, 0.0, MAX_DECAY_PER_SAMPLE)
+    carried = m1 * np.exp(k * (offset + 0.5 * (width - 1)))
+    return filt - carried, column
