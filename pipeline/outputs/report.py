@@ -123,7 +123,8 @@ def _waveform_section(sim, ctx, pts) -> str:
     )
     if limit.size:  # one no-bottom pulse in place of the median bottom
         pick = (pick[:1] + pick[-1:] if len(pick) == 3 else pick) + [int(limit[0])]
-    pick = pick[:N_WAVEFORMS] or [0]
+    # shallow to deep, the no-bottom pulse last
+    pick = sorted(pick[:N_WAVEFORMS] or [0], key=lambda i: np.nan_to_num(depth40[i], nan=np.inf))
     t_ns = np.arange(kept.samples.shape[1]) * ctx.instrument.sample_interval_s * 1e9
     marks = []
     for i in pick:
@@ -338,9 +339,16 @@ def _limits_section(pts, evaluation) -> str:
     ]
     if nb:
         rows += [[f"no_bottom: {k}", v] for k, v in nb.items()]
+    text = (
+        "The deepest bottoms found are the extinction depth only where the bottom was lost "
+        f"there: class-45 points (no bottom down to the pulse's detection limit) mark it; here "
+        f"{d45.size} class-45 against {d40.size} class-40 points. Without them, the deepest "
+        "bottoms found are the deepest seabed the survey covered."
+    )
     return (
         "<h2 id='limits'>9. Depth limits</h2>"
         + img(F.depth_limits(d40, d45, shallow, deep), "depth limits")
+        + para(text)
         + table(["", "value"], rows)
     )
 
