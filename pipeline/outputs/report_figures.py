@@ -69,15 +69,18 @@ def _map_axes(ax, title: str) -> None:
 
 
 def coverage_map(x_m, y_m, res_m, count, area_m, covered: float | None) -> bytes:
-    """Point density per cell (points/m²) with the asked area outlined."""
+    """Density of the gridded (class-40) points per cell, points/m², the asked area outlined.
+
+    ``covered``: share of the asked area with a point of any class (the run's coverage figure).
+    """
     fig = _figure()
     ax = fig.add_subplot()
     dens = np.where(count > 0, count / res_m**2, np.nan)
     im = _show(ax, dens, x_m, y_m, res_m, cmap="viridis")
-    fig.colorbar(im, ax=ax, label="soundings per m² (all classes)")
+    fig.colorbar(im, ax=ax, label="class-40 soundings per m²")
     _area(ax, area_m)
-    cov = "" if covered is None else f"\n{covered:.0%} of the asked area has a point"
-    _map_axes(ax, f"Point density, {res_m:g} m cells{cov}")
+    cov = "" if covered is None else f"\n{covered:.0%} of the asked area has a point (any class)"
+    _map_axes(ax, f"Bathymetric point density, {res_m:g} m cells{cov}")
     ax.legend(loc="upper right", fontsize=8)
     return png(fig)
 

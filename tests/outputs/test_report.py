@@ -173,3 +173,25 @@ def test_a_cube_is_detected_by_a_point_on_its_top_inside_its_rotated_footprint()
     assert found["detected"]
     points.depth_m = np.array([3.5, 3.0, 3.5, 3.0])
     assert not cube_detection((cube,), points, truth)[0]["detected"]
+
+
+@pytest.mark.parametrize("north_first", [True, False])
+def test_maps_are_drawn_north_up_whichever_way_the_rows_run(north_first):
+    # two rows of cells: the northern one 0 (black), the southern one 1 (white); a GeoTIFF-like
+    # grid lists the north row first, another order the south row first
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from pipeline.outputs.report_figures import _show
+
+    y = np.array([15.0, 5.0]) if north_first else np.array([5.0, 15.0])
+    values = np.where(y[:, None] > 10.0, 0.0, 1.0) * np.ones((2, 3))
+    fig = Figure(figsize=(3, 2), dpi=50)
+    canvas = FigureCanvasAgg(fig)
+    ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
+    ax.set_axis_off()
+    _show(ax, values, np.array([5.0, 15.0, 25.0]), y, 10.0, cmap="gray", vmin=0.0, vmax=1.0)
+    canvas.draw()
+    rgba = np.asarray(canvas.buffer_rgba())
+    top, bottom = rgba[5, rgba.shape[1] // 2, 0], rgba[-5, rgba.shape[1] // 2, 0]
+    assert top < 50 and bottom > 200, (top, bottom)
