@@ -79,8 +79,8 @@ def coverage_map(x_m, y_m, res_m, count, area_m, covered: float | None) -> bytes
     im = _show(ax, dens, x_m, y_m, res_m, cmap="viridis")
     fig.colorbar(im, ax=ax, label="class-40 soundings per m²")
     _area(ax, area_m)
-    cov = "" if covered is None else f"\n{covered:.0%} of the asked area has a point (any class)"
-    _map_axes(ax, f"Bathymetric point density, {res_m:g} m cells{cov}")
+    cov = "" if covered is None else f"\n{covered:.0%} of the asked area has any point"
+    _map_axes(ax, f"Class-40 density, {res_m:g} m cells{cov}")
     ax.legend(loc="upper right", fontsize=8)
     return png(fig)
 
