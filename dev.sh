@@ -11,6 +11,8 @@ VENV=${VENV:-.venv}
 PYTHON=${PYTHON:-python3}
 # open3d needs libusb at import time; libgomp for its threads.
 APT_PACKAGES="libusb-1.0-0 libgomp1"
+# the tests alone also need a headless browser: report.html is opened in it (not for the demo)
+APT_PACKAGES_TEST="chromium"
 
 log() { printf '[dev.sh %(%H:%M:%S)T] %s\n' -1 "$*"; }
 
@@ -50,6 +52,7 @@ install_python() {
 
 cmd=${1:-test}
 [ $# -gt 0 ] && shift
+if [ "$cmd" = test ]; then APT_PACKAGES="$APT_PACKAGES $APT_PACKAGES_TEST"; fi
 install_system
 install_python
 export MPLBACKEND=Agg

@@ -382,4 +382,19 @@ def run_survey(scene, plan: Plan, out: Path, clock: StageClock, log=print, progr
             log,
             area_covered=covered,
         )
+        from pipeline.outputs.report import write_survey_report
+
+        files["report"] = write_survey_report(
+            out / "report.html",
+            scene,
+            plan,
+            sim,
+            processed,
+            ctx,
+            grid,
+            unc,
+            post,
+            evaluation,
+            clock,
+        )
     return files, evaluation

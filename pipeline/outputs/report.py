@@ -1,0 +1,389 @@
+"""``report.html``: one self-contained page per survey run, in the order a hydrographer reads.
+
+Scene and stage plan (with times), coverage, example waveforms, depth, TVU, IHO S-44 orders,
+error against the truth, uncertainty calibration, depth limits, feature detection. Figures are
+PNGs embedded as base64 ``data:`` URIs: the page loads no external resource.
+
+Written by the evaluate stage of :mod:`pipeline.run_survey`, which alone may meet the truth
+(``sim.truth``): the errors are recomputed here with the same functions and truth callables as
+:mod:`pipeline.survey_report` (the maps and histograms need them per point and per cell).
+Profiler scenes get no report: their figures are their output
+(:mod:`pipeline.outputs.profiler_report`).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.evaluate import error_stats, grid_errors_m, point_errors_m, tpu_coverage
+from pipeline.iho import tvu_allowance_m
+from pipeline.outputs import report_figures as F
+from pipeline.outputs.atomic import atomic_path
+from pipeline.outputs.report_html import img, page, para, table
+from pipeline.process.classify import BATHYMETRIC_POINT
+
+__all__ = ["write_survey_report", "depth_bands", "cube_detection", "CUBE_TOP_TOLERANCE_M"]
+
+#: A cube counts as detected when a class-40 point in its footprint lies within this of the
+#: true depth of its top (the brief's rule; IHO S-44 states no tolerance of its own).
+CUBE_TOP_TOLERANCE_M = 0.3
+#: Class of the no-bottom-found-at points (pipeline.process.classify).
+NO_BOTTOM_CLASS = 45
+#: Coverage factors of the TPU calibration plot.
+CALIBRATION_KS = (0.5, 1.0, 1.5, 1.96, 2.5, 3.0)
+#: Waveforms shown at most.
+N_WAVEFORMS = 3
+
+
+def depth_bands(true_depth_m: np.ndarray, err_m: np.ndarray, n_target: int = 6) -> list[dict]:
+    """Error statistics per band of true depth (bands 1, 2 or 5 × 10^n m wide, ~``n_target``).
+
+    Returns one dict per non-empty band: ``from_m``, ``to_m``, the :class:`ErrorStats` fields
+    and ``special_m``, the Special-order TVU allowance at the band's middle.
+    """
+    ok = np.isfinite(true_depth_m) & np.isfinite(err_m)
+    d, e = true_depth_m[ok], err_m[ok]
+    if not d.size:
+        return []
+    raw = max(float(d.max() - d.min()), 1e-3) / n_target
+    decade = 10.0 ** math.floor(math.log10(raw))
+    step = next(m * decade for m in (1, 2, 5, 10) if m * decade >= raw)
+    start = math.floor(d.min() / step) * step
+    # the last band holds the deepest point (bands are [from, to))
+    edges = start + step * np.arange(int((d.max() - start) // step) + 2)
+    out = []
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        sel = (d >= lo) & (d < hi)
+        if sel.any():
+            st = error_stats(e[sel]).to_dict()
+            special = float(tvu_allowance_m(0.5 * (lo + hi), "special"))
+            out.append({"from_m": float(lo), "to_m": float(hi), **st, "special_m": special})
+    return out
+
+
+def cube_detection(features, points, truth_depth_m) -> list[dict]:
+    """Per cube feature: class-40 points on its top, and whether it counts as detected.
+
+    A point is on the top when it lies inside the cube's (rotated) footprint and its depth is
+    within :data:`CUBE_TOP_TOLERANCE_M` of the true depth at the cube's centre (its top).
+    """
+    is40 = points.classification == BATHYMETRIC_POINT
+    xy, depth = points.xyz_m[is40, :2], points.depth_m[is40]
+    out = []
+    for f in features:
+        if f.kind != "cube":
+            continue
+        h = math.radians(f.heading_deg)
+        dx, dy = xy[:, 0] - f.x_m, xy[:, 1] - f.y_m
+        along = dx * math.sin(h) + dy * math.cos(h)
+        across = dx * math.cos(h) - dy * math.sin(h)
+        inside = (np.abs(along) <= 0.5 * f.size_m) & (np.abs(across) <= 0.5 * f.size_m)
+        top = float(truth_depth_m(np.array([f.x_m]), np.array([f.y_m]))[0])
+        on_top = inside & (np.abs(depth - top) <= CUBE_TOP_TOLERANCE_M)
+        out.append(
+            {
+                "x_m": f.x_m,
+                "y_m": f.y_m,
+                "size_m": f.size_m,
+                "top_depth_m": top,
+                "points_in_footprint": int(inside.sum()),
+                "points_on_top": int(on_top.sum()),
+                "detected": bool(on_top.any()),
+            }
+        )
+    return out
+
+
+def _waveform_section(sim, ctx, pts) -> str:
+    kept, r = sim.kept, sim.returns
+    if kept is None or not kept.pulse_id.size:
+        return para(
+            "No waveform was kept in this run: the chunk loop keeps waveforms only for the "
+            "depth posteriors (process.posterior_*), which did not run."
+        )
+    order = np.argsort(r.pulse_id)
+    idx = order[np.searchsorted(r.pulse_id, kept.pulse_id, sorter=order)]
+    # what the pulses became: a class-40 bottom (its depth) or a class-45 no-bottom limit
+    depth40 = np.full(kept.pulse_id.size, np.nan)
+    is40 = pts.classification == BATHYMETRIC_POINT
+    hit = np.isin(kept.pulse_id, pts.pulse_id[is40])
+    o40 = np.argsort(pts.pulse_id[is40])
+    at = o40[np.searchsorted(pts.pulse_id[is40], kept.pulse_id[hit], sorter=o40)]
+    depth40[hit] = pts.depth_m[is40][at]
+    pick = []
+    if hit.any():  # the shallowest, median and deepest class-40 bottom kept
+        ranked = np.flatnonzero(hit)[np.argsort(depth40[hit])]
+        pick = sorted({int(ranked[0]), int(ranked[len(ranked) // 2]), int(ranked[-1])})
+    limit = np.flatnonzero(
+        np.isin(kept.pulse_id, pts.pulse_id[pts.classification == NO_BOTTOM_CLASS])
+    )
+    if limit.size:  # one no-bottom pulse in place of the median bottom
+        pick = (pick[:1] + pick[-1:] if len(pick) == 3 else pick) + [int(limit[0])]
+    # shallow to deep, the no-bottom pulse last
+    pick = sorted(pick[:N_WAVEFORMS] or [0], key=lambda i: np.nan_to_num(depth40[i], nan=np.inf))
+    t_ns = np.arange(kept.samples.shape[1]) * ctx.instrument.sample_interval_s * 1e9
+    marks = []
+    for i in pick:
+        j = idx[i]
+        m = {"title": f"pulse {int(kept.pulse_id[i])}"}
+        if r.has_surface[j]:
+            m["surface"] = (r.t_surface_s[j] - kept.t0_s[i]) * 1e9
+        if np.isfinite(depth40[i]):
+            m["bottom"] = (r.t_bottom_s[j] - kept.t0_s[i]) * 1e9
+            m["title"] += f": class-40 bottom at {depth40[i]:.2f} m depth"
+        elif r.t_no_bottom_s is not None and r.t_no_bottom_s[j] > 0:
+            m["no-bottom limit"] = (r.t_no_bottom_s[j] - kept.t0_s[i]) * 1e9
+            m["title"] += ": no bottom found down to its limit (class 45)"
+        marks.append(m)
+    fig = F.waveforms(t_ns, kept.samples[pick].astype(float), marks)
+    return img(fig, "example waveforms") + para(
+        f"{len(pick)} of the {kept.pulse_id.size} waveforms kept for the posteriors (the "
+        "shallowest and deepest class-40 bottoms, a class-45 pulse), with the detector's times."
+    )
+
+
+def _stage_rows(plan, clock) -> list[list[Any]]:
+    times = clock.to_dict()
+    rows = []
+    for st in plan:
+        t = times.get(st.name)
+        if st.runs and t is None and st.name == "evaluate":
+            wall = cpu = "running (writes this report)"
+        else:
+            wall = None if t is None else t["wall_s"]
+            cpu = None if t is None else t["cpu_s"]
+        rows.append([st.name, "run" if st.runs else "skip", wall, cpu, st.reason])
+    wall, cpu = (sum(t[k] for t in times.values()) for k in ("wall_s", "cpu_s"))
+    return [*rows, ["total so far", "", wall, cpu, "the stages timed before this report"]]
+
+
+def write_survey_report(
+    path: Path, scene, plan, sim, processed, ctx, grid, unc, post, evaluation, clock
+) -> Path:
+    """Write ``report.html`` at ``path`` (atomically) and return the path.
+
+    Parameters are those of :func:`pipeline.survey_report.evaluate_survey` (plus the ``plan``
+    and the ``evaluation`` it returned); ``sim.truth`` is read for the errors only.
+    """
+    truth, pts = sim.truth, processed.points
+    level_m = scene.water_surface.level_m
+    fl, res = scene.flight, grid.resolution_m
+    gx, gy = grid.x_m, grid.y_m
+    s = []
+    info = [
+        ["scene", scene.scene.name],
+        ["description", scene.scene.description],
+        ["receiver", scene.detector.mode],
+        ["pulses", evaluation["pulses"]],
+        ["lines", f"{sim.lines.n_lines}, swath {sim.lines.swath_width_m:.1f} m"],
+        ["altitude (m), pulse rate (Hz)", f"{fl.altitude_m:g}, {scene.scanner.prf_hz:g}"],
+        ["area asked: flight.area_m (m)", str(list(fl.area_m))],
+        ["grid cell (m)", res],
+        ["seed", scene.scene.seed],
+    ]
+    s.append("<h2 id='scene'>1. Scene and stage plan</h2>" + table(["", ""], info))
+    s.append(
+        table(["stage", "", "wall (s)", "CPU (s)", "what / why not"], _stage_rows(plan, clock))
+    )
+    s.append("<h2 id='coverage'>2. Coverage</h2>")
+    s.append(
+        img(
+            F.coverage_map(gx, gy, res, grid.count, fl.area_m, evaluation["area_covered"]),
+            "coverage",
+        )
+    )
+    s.append("<h2 id='waveforms'>3. Example waveforms</h2>" + _waveform_section(sim, ctx, pts))
+    depth = np.where(grid.count > 0, grid.depth_m, np.nan)
+    for sec, values, label, title, cmap in (
+        (
+            "depth",
+            depth,
+            "depth below the datum (m)",
+            "Gridded depth (mean of class 40)",
+            "viridis_r",
+        ),
+        ("tvu", unc.cells.tvu95_m, "TVU at 95 % (m)", "Propagated TVU (95 %) per cell", "magma_r"),
+    ):
+        heading = "4. Depth" if sec == "depth" else "5. Total vertical uncertainty"
+        fig = F.grid_map(gx, gy, res, values, fl.area_m, label, title, cmap=cmap)
+        s.append(f"<h2 id='{sec}'>{heading}</h2>" + img(fig, f"{sec} map"))
+    s.append("<h2 id='iho'>6. IHO S-44 orders</h2>")
+    labels = list(unc.summary["orders"])
+    s.append(img(F.order_map(gx, gy, res, unc.cells.order, labels, fl.area_m), "IHO order map"))
+    iho_truth = evaluation["error"].get("iho_grid") or {}
+    rows = []
+    for lab, v in unc.summary["orders"].items():
+        key = "1a" if lab == "1a/1b" else lab
+        t = iho_truth.get(key, {}).get("fraction_within")
+        rows.append([lab, v["count"], v["fraction"], v["at_least"], t])
+    s.append(
+        table(
+            [
+                "order",
+                "cells (strictest met)",
+                "fraction",
+                "this or stricter",
+                "grid cells within its TVU (truth)",
+            ],
+            rows,
+        )
+    )
+    s.append(
+        para(
+            f"{unc.summary['n_cells']} cells with data; the order met comes from the propagated"
+            " uncertainty, the last column from the error against the truth."
+        )
+    )
+    s.append(_error_section(truth, pts, grid, level_m, fl.area_m, evaluation))
+    s.append(_calibration_section(unc, ctx, truth, evaluation))
+    s.append(_limits_section(pts, evaluation))
+    s.append(_features_section(scene, pts, truth))
+    with atomic_path(path) as tmp:
+        tmp.write_text(page(f"bathy report: {scene.scene.name}", s), encoding="utf-8")
+    return Path(path)
+
+
+def _error_section(truth, pts, grid, level_m, area_m, evaluation) -> str:
+    is40 = pts.select(pts.classification == BATHYMETRIC_POINT)
+    err, true_d = point_errors_m(is40, truth_depth_m=truth.depth_m)
+    gerr, _ = grid_errors_m(grid, truth_depth_m=lambda x, y: level_m - truth.seabed.height_m(x, y))
+    bands = depth_bands(true_d, err)
+    fig = F.error_figure(grid.x_m, grid.y_m, grid.resolution_m, gerr, area_m, err, true_d, bands)
+    ev = evaluation["error"]
+    rows = [
+        [name, st["n"], st["bias_m"], st["std_m"], st["rmse_m"], st["p95_abs_m"], st["max_abs_m"]]
+        for name, st in (
+            ("points, refraction corrected", ev["points"]),
+            ("points, uncorrected", ev.get("points_uncorrected")),
+            ("grid cells", ev.get("grid")),
+        )
+        if st
+    ]
+    band_rows = [
+        [
+            f"{b['from_m']:g}–{b['to_m']:g}",
+            b["n"],
+            b["bias_m"],
+            b["rmse_m"],
+            b["p95_abs_m"],
+            b["special_m"],
+        ]
+        for b in bands
+    ]
+    return (
+        "<h2 id='error'>7. Error against the truth</h2>"
+        + img(fig, "error against truth")
+        + para(ev["sign"] + "; points: depth below the local water surface, grid: below the datum.")
+        + table(["", "n", "bias (m)", "sd (m)", "RMSE (m)", "|error| 95 % (m)", "max (m)"], rows)
+        + table(
+            [
+                "true depth (m)",
+                "points",
+                "bias (m)",
+                "RMSE (m)",
+                "|error| 95 % (m)",
+                "Special TVU (m)",
+            ],
+            band_rows,
+        )
+    )
+
+
+def _calibration_section(unc, ctx, truth, evaluation) -> str:
+    group = None
+    if ctx.instrument.photon_counting:  # as the evaluate stage: a window's shots are one draw
+        group = unc.points40.pulse_id // ctx.instrument.shots_per_window
+    cov = tpu_coverage(
+        unc.points40,
+        unc.tpu40.sigma_depth_m,
+        truth_depth_m=truth.depth_m,
+        ks=CALIBRATION_KS,
+        group=group,
+    )
+    post = evaluation.get("posterior_against_truth")
+    post = post if post and post.get("n") else None
+    rows = [
+        [c["k"], c["nominal"], c["fraction_within"], c["standard_error"]] for c in cov["intervals"]
+    ]
+    text = (
+        f"True depth within ±k σ_depth of the measured depth, {cov['n']} class-40 points with a "
+        "TPU; a calibrated σ follows the nominal curve."
+    )
+    if post is None:
+        text += " Depth posteriors did not run: no posterior coverage."
+    return (
+        "<h2 id='calibration'>8. Uncertainty calibration</h2>"
+        + img(F.calibration(cov["intervals"], post), "calibration")
+        + para(text)
+        + table(["k", "nominal", "observed", "standard error"], rows)
+    )
+
+
+def _limits_section(pts, evaluation) -> str:
+    d40 = pts.depth_m[pts.classification == BATHYMETRIC_POINT]
+    d45 = pts.depth_m[pts.classification == NO_BOTTOM_CLASS]
+    shallow = float(np.percentile(d40, 1)) if d40.size else None
+    deep = float(np.percentile(d40, 99)) if d40.size else None
+    nb = evaluation.get("no_bottom")
+    rows = [
+        ["shallow limit: 1st percentile of class-40 depths (m)", shallow],
+        ["shallowest class-40 depth (m)", float(d40.min()) if d40.size else None],
+        ["extinction depth: 99th percentile of class-40 depths (m)", deep],
+        ["deepest class-40 depth (m)", float(d40.max()) if d40.size else None],
+        ["class-45 (no bottom down to) points", int(d45.size)],
+        ["median class-45 limit depth (m)", float(np.median(d45)) if d45.size else None],
+    ]
+    if nb:
+        rows += [[f"no_bottom: {k}", v] for k, v in nb.items()]
+    text = (
+        "The deepest bottoms found are the extinction depth only where the bottom was lost "
+        f"there: class-45 points (no bottom down to the pulse's detection limit) mark it; here "
+        f"{d45.size} class-45 against {d40.size} class-40 points. Without them, the deepest "
+        "bottoms found are the deepest seabed the survey covered."
+    )
+    return (
+        "<h2 id='limits'>9. Depth limits</h2>"
+        + img(F.depth_limits(d40, d45, shallow, deep), "depth limits")
+        + para(text)
+        + table(["", "value"], rows)
+    )
+
+
+def _features_section(scene, pts, truth) -> str:
+    head = "<h2 id='features'>10. Feature detection</h2>"
+    if not scene.seabed.features:
+        return head + para("The scene has no seabed features.")
+    found = cube_detection(scene.seabed.features, pts, truth.depth_m)
+    rule = (
+        f"Rule: a cube is detected when at least one class-40 point inside its footprint lies "
+        f"within {CUBE_TOP_TOLERANCE_M:g} m of the true depth of its top (taken at its centre). "
+        "Features other than cubes are not scored."
+    )
+    if not found:
+        return head + para(rule) + para("The scene's features include no cube.")
+    rows = [
+        [
+            f["x_m"],
+            f["y_m"],
+            f["size_m"],
+            f["top_depth_m"],
+            f["points_in_footprint"],
+            f["points_on_top"],
+            "yes" if f["detected"] else "no",
+        ]
+        for f in found
+    ]
+    hdr = [
+        "x (m)",
+        "y (m)",
+        "side (m)",
+        "top depth (m)",
+        "points in footprint",
+        "on top",
+        "detected",
+    ]
+    return head + para(rule) + table(hdr, rows)

@@ -1,0 +1,197 @@
+"""report.html: written by every survey run, self-contained, every figure a PNG, opens in a browser.
+
+The run is a tiny Palmer survey (40 m x 40 m asked, 3 kHz, no posteriors, one 2 m cube: ~5 s).
+The helpers' figures are checked against hand-built data with an analytic answer.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import math
+import os
+import re
+import shutil
+import subprocess
+import tomllib
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from pipeline.outputs.report import CUBE_TOP_TOLERANCE_M, cube_detection, depth_bands
+from pipeline.run import run_scene
+from pipeline.scene import parse_scene
+
+ROOT = Path(__file__).resolve().parents[2]
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+SECTIONS = (
+    "scene",
+    "coverage",
+    "waveforms",
+    "depth",
+    "tvu",
+    "iho",
+    "error",
+    "calibration",
+    "limits",
+    "features",
+)
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    data = tomllib.loads((ROOT / "data_synthetic" / "scenes" / "palmer_survey.toml").read_text())
+    data["flight"]["area_m"] = [0.0, 40.0, 0.0, 40.0]
+    data["scanner"]["prf_hz"] = 3000.0
+    data["process"].update(posterior_pulses_per_km2=0.0, posterior_min_pulses=0)
+    data["seabed"]["features"] = [{"kind": "cube", "x_m": 20.0, "y_m": 20.0, "size_m": 2.0}]
+    out = tmp_path_factory.mktemp("report")
+    manifest = run_scene(parse_scene(data), out, log=lambda _: None)
+    return out / "report.html", manifest
+
+
+def test_every_survey_run_writes_report_html_listed_in_the_manifest(report):
+    path, manifest = report
+    assert manifest["files"]["report"] == "report.html"
+    on_disk = json.loads((path.parent / "manifest.json").read_text())
+    assert on_disk["files"]["report"] == "report.html"
+    text = path.read_text(encoding="utf-8")
+    for sec in SECTIONS:
+        assert f"id='{sec}'" in text, sec
+    # in the order a hydrographer reads
+    where = [text.index(f"id='{sec}'") for sec in SECTIONS]
+    assert where == sorted(where)
+    # posteriors did not run: the waveform section says why there is no figure
+    assert "No waveform was kept" in text
+    assert "Rule: a cube is detected" in text
+
+
+def test_report_is_self_contained_and_every_image_is_a_png(report):
+    import matplotlib.image as mpimg
+
+    text = report[0].read_text(encoding="utf-8")
+    # nothing fetched from elsewhere: no link, no external src, no url()
+    assert not re.search(r"<link|href=|url\(|@import", text)
+    srcs = re.findall(r'<img[^>]*src="([^"]*)"', text)
+    # coverage, depth, TVU, orders, error, calibration, limits (no waveform kept)
+    assert len(srcs) == text.count("<img") == 7
+    for src in srcs:
+        prefix = "data:image/png;base64,"
+        assert src.startswith(prefix)
+        raw = base64.b64decode(src[len(prefix) :], validate=True)
+        assert raw[:8] == PNG_SIGNATURE
+        pixels = mpimg.imread(io.BytesIO(raw), format="png")
+        assert pixels.shape[0] > 200 and pixels.shape[1] > 300, pixels.shape
+        assert np.ptp(pixels[..., :3]) > 0  # not a blank canvas
+
+
+def _chromium() -> str | None:
+    found = shutil.which("chromium") or shutil.which("chromium-browser")
+    if found is None:
+        msg = "chromium is not on PATH: `bash dev.sh test` installs it (Debian package chromium)"
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(msg)
+        pytest.skip(msg)
+    return found
+
+
+def test_report_renders_in_headless_chromium(report, tmp_path):
+    """Every image decodes in a real browser (the page's own script sets body[data-images]),
+    no console message (an uncaught error would log one), and a screenshot is drawn."""
+    exe = _chromium()
+    url = report[0].resolve().as_uri()
+    common = [
+        exe,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        f"--user-data-dir={tmp_path / 'profile'}",
+    ]
+    dom = subprocess.run(
+        [*common, "--enable-logging=stderr", "--v=0", "--dump-dom", url],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    )
+    assert 'data-images="ok"' in dom.stdout
+    console = [ln for ln in dom.stderr.splitlines() if ":CONSOLE" in ln]
+    assert console == []
+    shot = tmp_path / "shot.png"
+    subprocess.run(
+        [*common, f"--screenshot={shot}", "--window-size=1280,2000", url],
+        capture_output=True,
+        timeout=120,
+        check=True,
+    )
+    assert shot.read_bytes()[:8] == PNG_SIGNATURE
+
+
+def test_depth_bands_hold_each_point_once_with_its_band_statistics():
+    # depths 0..12 m (the deepest point exactly on a band edge); errors +0.1 m above 6 m,
+    # -0.2 m below: bands of 2 m (12 / 6), biases exact
+    depth = np.linspace(0.0, 12.0, 121)
+    err = np.where(depth < 6.0, 0.1, -0.2)
+    bands = depth_bands(depth, err)
+    assert [b["from_m"] for b in bands] == [0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0]
+    assert sum(b["n"] for b in bands) == depth.size
+    assert [round(b["bias_m"], 12) for b in bands] == [0.1, 0.1, 0.1, -0.2, -0.2, -0.2, -0.2]
+    # IHO S-44 Special order at 1 m: sqrt(0.25^2 + (0.0075 * 1)^2)
+    assert bands[0]["special_m"] == pytest.approx(math.hypot(0.25, 0.0075))
+
+
+def test_a_cube_is_detected_by_a_point_on_its_top_inside_its_rotated_footprint():
+    # a 2 m cube at (10, 10) turned 45 degrees; the seabed a plane 5 m deep, the cube's top 3 m
+    cube = SimpleNamespace(kind="cube", x_m=10.0, y_m=10.0, size_m=2.0, heading_deg=45.0)
+    ridge = SimpleNamespace(kind="ridge", x_m=0.0, y_m=0.0, size_m=1.0, heading_deg=0.0)
+
+    def truth(x, y):
+        along = (x - 10.0) * math.sin(math.pi / 4) + (y - 10.0) * math.cos(math.pi / 4)
+        across = (x - 10.0) * math.cos(math.pi / 4) - (y - 10.0) * math.sin(math.pi / 4)
+        return np.where((np.abs(along) <= 1.0) & (np.abs(across) <= 1.0), 3.0, 5.0)
+
+    xy = np.array(
+        [
+            [10.5, 10.0],  # inside, on the top within tolerance
+            [10.9, 10.9],  # inside the unrotated square, outside the turned one (along 1.27 m)
+            [10.0, 10.5],  # inside, 0.5 m below the top: not on it
+            [10.0, 9.5],  # inside, on the top, but class 1
+        ]
+    )
+    depth = np.array([3.0 + 0.8 * CUBE_TOP_TOLERANCE_M, 3.0, 3.5, 3.0])
+    points = SimpleNamespace(
+        xyz_m=np.c_[xy, -depth],
+        depth_m=depth,
+        classification=np.array([40, 40, 40, 1], dtype=np.uint8),
+    )
+    (found,) = cube_detection((cube, ridge), points, truth)
+    assert found["top_depth_m"] == 3.0
+    assert found["points_in_footprint"] == 2 and found["points_on_top"] == 1
+    assert found["detected"]
+    points.depth_m = np.array([3.5, 3.0, 3.5, 3.0])
+    assert not cube_detection((cube,), points, truth)[0]["detected"]
+
+
+@pytest.mark.parametrize("north_first", [True, False])
+def test_maps_are_drawn_north_up_whichever_way_the_rows_run(north_first):
+    # two rows of cells: the northern one 0 (black), the southern one 1 (white); a GeoTIFF-like
+    # grid lists the north row first, another order the south row first
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from pipeline.outputs.report_figures import _show
+
+    y = np.array([15.0, 5.0]) if north_first else np.array([5.0, 15.0])
+    values = np.where(y[:, None] > 10.0, 0.0, 1.0) * np.ones((2, 3))
+    fig = Figure(figsize=(3, 2), dpi=50)
+    canvas = FigureCanvasAgg(fig)
+    ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
+    ax.set_axis_off()
+    _show(ax, values, np.array([5.0, 15.0, 25.0]), y, 10.0, cmap="gray", vmin=0.0, vmax=1.0)
+    canvas.draw()
+    rgba = np.asarray(canvas.buffer_rgba())
+    top, bottom = rgba[5, rgba.shape[1] // 2, 0], rgba[-5, rgba.shape[1] // 2, 0]
+    assert top < 50 and bottom > 200, (top, bottom)
