@@ -177,6 +177,8 @@ def simulate_detections(
                 "pulse_id": pulses.pulse_id,
                 "origin_meas_m": pulses.origin_meas_m,
                 "direction_meas": pulses.direction_meas,
+                "t_emit_s": pulses.t_s,  # the shot's timestamp and flight line, as recorded
+                "line_id": pulses.line_id,
                 **{f.name: getattr(found, f.name) for f in dataclasses.fields(found)},
             }
         )
@@ -228,6 +230,8 @@ def _returns(parts: list[dict[str, np.ndarray]]) -> DetectedReturns:
         bottom_amplitude=cat["bottom_amplitude"],
         # in-column returns (full waveform only; photon detections leave them empty)
         **{k: cat[k] for k in DetectedReturns.COLUMN_FIELDS if k in cat},
+        t_emit_s=cat["t_emit_s"],
+        line_id=cat["line_id"],
     )
 
 
@@ -356,13 +360,20 @@ def run_survey(scene, plan: Plan, out: Path, clock: StageClock, log=print, progr
                 unc = with_posteriors(unc, grid, post.point_index, p.converged, p.depth_m["std"])
     with clock.stage("outputs"):
         from pipeline.outputs.las import write_points_laz
+        from pipeline.outputs.netcdf import write_grid_nc
         from pipeline.outputs.raster import write_grid_tif
 
         files = {
             "points": write_points_laz(
-                out / "points.laz", processed.points, crs=fr.crs, origin_m=origin
+                out / "points.laz",
+                processed.points,
+                crs=fr.crs,
+                origin_m=origin,
+                returns=sim.returns,
+                amplitude_full_scale=ctx.instrument.amplitude_full_scale,
             ),
-            "grid": write_grid_tif(out / "grid.tif", grid),
+            "grid": write_grid_tif(out / "grid.tif", grid, unc.cells),
+            "grid_nc": write_grid_nc(out / "grid.nc", grid, unc.cells),
         }
     with clock.stage("evaluate"):
         from pipeline.survey_report import evaluate_survey

@@ -7,15 +7,20 @@ Layout
   survive next to UTM-sized eastings/northings (int32 covers +-2147 km around the offset at
   1 mm). The exact origin is kept in a ``bathy`` VLR (JSON) so the reader returns the same local
   frame.
-* CRS: an OGC WKT VLR (``header.add_crs``; the WKT bit of the global encoding is set).
+* CRS: an OGC WKT 1 VLR (the WKT LAS 1.4 R15 specifies; the WKT bit of the global encoding is
+  set): a compound CRS, the horizontal CRS + a local vertical CRS named for what z is (height
+  above the scene's mean water level, :func:`pipeline.outputs.las_fields.las_crs`).
 * Class meanings: the LAS 1.4 Classification Lookup VLR (``LASF_Spec``, record 0) names every
   class code present in the file, so readers see that the user-definable code 64 is "water
   column" next to the topo-bathy classes 40-45 (:mod:`pipeline.process.classify`). Its
   descriptions are at most 15 ASCII letters, digits and spaces (the record's size, and what
   laspy reads back).
-* Standard fields: classification (ASPRS codes of :mod:`pipeline.process.classify`), return
-  number / number of returns, synthetic flag for derived (synthetic) points, point source id 0,
-  GPS time 0 (no timing in points), intensity 0.
+* Standard fields: classification (ASPRS codes of :mod:`pipeline.process.classify`); return
+  number / number of returns 1..n in time order over *all* the points of a pulse, class 45 and
+  64 and derived points included (:mod:`pipeline.process.return_order`); synthetic flag on
+  every derived point (``PointFlag.SYNTHETIC``, class 45, derived surface). Given the
+  detections (``returns``): GPS time, intensity, scan angle and point source ID (flight line)
+  of :mod:`pipeline.outputs.las_fields`; without them those four are 0.
 * Extra bytes (LAS 1.4 extra-bytes VLR): ``depth_m`` (f8; below the *local fitted* water
   surface, as its description says; the grid's datum is in ``grid.tif`` and
   ``evaluation.json``), ``uncertainty_v_m``, ``uncertainty_h_m``, ``confidence`` (f4),
@@ -34,11 +39,13 @@ from typing import Any
 import laspy
 import numpy as np
 import pyproj
-from laspy.vlrs.known import ClassificationLookupVlr
+from laspy.vlrs.known import ClassificationLookupVlr, WktCoordinateSystemVlr
 
 from pipeline.outputs.atomic import atomic_path
-from pipeline.process.classify import CLASS_NAMES
-from pipeline.process.returns import PointFlag, Points
+from pipeline.outputs.las_fields import SCAN_ANGLE_UNIT_DEG, las_crs, pulse_fields
+from pipeline.process.classify import CLASS_NAMES, NO_BOTTOM_FOUND_AT
+from pipeline.process.return_order import time_order_numbers
+from pipeline.process.returns import DetectedReturns, PointFlag, Points, ReturnKind
 
 __all__ = ["LOOKUP_NAMES", "LazContents", "write_points_laz", "read_points_laz"]
 
@@ -87,6 +94,12 @@ class LazContents:
     offsets: np.ndarray
     #: Class code -> description from the Classification Lookup VLR (empty if none).
     class_names: dict[int, str] = field(default_factory=dict)
+    #: Standard per-point fields, ``(n,)``: GPS time (s), intensity, scan angle (degrees),
+    #: point source ID.
+    gps_time_s: np.ndarray | None = None
+    intensity: np.ndarray | None = None
+    scan_angle_deg: np.ndarray | None = None
+    point_source_id: np.ndarray | None = None
 
 
 def _lookup_name(code: int) -> str:
@@ -113,6 +126,8 @@ def write_points_laz(
     origin_m: Sequence[float] = (0.0, 0.0, 0.0),
     scale_m: float = 0.001,
     compress: bool | None = None,
+    returns: DetectedReturns | None = None,
+    amplitude_full_scale: float = 65536.0,
 ) -> Path:
     """Write ``points`` as LAS 1.4 point format 6 (LAZ if ``.laz``), atomically.
 
@@ -128,6 +143,14 @@ def write_points_laz(
         World coordinates of the local origin.
     scale_m : float
         Coordinate quantum (default 1 mm).
+    compress : bool, optional
+        LAZ or LAS; default by the suffix.
+    returns : DetectedReturns, optional
+        The detections the points come from, with ``t_emit_s`` and ``line_id``: GPS time,
+        intensity, scan angle and point source ID of every point (else 0).
+    amplitude_full_scale : float
+        The receiver's dynamic range in amplitude units (intensity scale
+        ``65536 / amplitude_full_scale``).
 
     Returns
     -------
@@ -145,7 +168,6 @@ def write_points_laz(
         raise ValueError(f"`origin_m` must be 3 finite numbers; got {origin_m!r}")
     if not (np.isfinite(scale_m) and scale_m > 0):
         raise ValueError(f"`scale_m` must be finite and > 0; got {scale_m!r}")
-    crs = pyproj.CRS.from_user_input(crs)
     offsets = np.round(origin)
     scales = np.full(3, float(scale_m))
 
@@ -160,7 +182,12 @@ def write_points_laz(
     header.add_extra_dims(
         [laspy.ExtraBytesParams(name=n, type=t, description=desc) for n, t, desc in extras]
     )
-    header.add_crs(crs)
+    # LAS 1.4 R15: the WKT VLR holds OGC WKT 1 (laspy's add_crs writes pyproj's WKT2)
+    wkt1 = las_crs(crs).to_wkt("WKT1_GDAL")
+    if wkt1 is None:
+        raise ValueError(f"`crs` has no OGC WKT 1 form (LAS 1.4 needs one): {crs!r}")
+    header.vlrs.append(WktCoordinateSystemVlr(wkt1))
+    header.global_encoding.wkt = True
     header.vlrs.append(_classification_lookup(points.classification))
     meta = {"origin_m": origin.tolist(), "frame": "local = world - origin_m; z up; metres"}
     header.vlrs.append(
@@ -182,9 +209,20 @@ def write_points_laz(
         )
     las.X, las.Y, las.Z = (ints[:, i].astype(np.int32) for i in range(3))
     las.classification = points.classification
-    las.return_number = np.clip(points.return_number, 1, 15)
-    las.number_of_returns = np.clip(points.number_of_returns, 1, 15)
-    las.synthetic = (points.flags & np.uint16(PointFlag.SYNTHETIC)) != 0
+    # numbered here whatever the caller's numbering: a file's pulses always read 1..n
+    number, total = time_order_numbers(points.pulse_id, points.kind, points.xyz_m[:, 2])
+    las.return_number, las.number_of_returns = number, total
+    las.synthetic = (
+        ((points.flags & np.uint16(PointFlag.SYNTHETIC)) != 0)
+        | (points.kind == ReturnKind.DERIVED_SURFACE)
+        | (points.classification == NO_BOTTOM_FOUND_AT)
+    )
+    if returns is not None:
+        pf = pulse_fields(points, returns, amplitude_full_scale)
+        las.gps_time = pf.gps_time_s
+        las.intensity = pf.intensity
+        las.scan_angle = pf.scan_angle
+        las.point_source_id = pf.point_source_id
     las.depth_m = points.depth_m
     las.uncertainty_v_m = points.uncertainty_v_m.astype(np.float32)
     las.uncertainty_h_m = points.uncertainty_h_m.astype(np.float32)
@@ -247,4 +285,8 @@ def read_points_laz(path: str | Path) -> LazContents:
         scales=np.asarray(hdr.scales, dtype=np.float64),
         offsets=np.asarray(hdr.offsets, dtype=np.float64),
         class_names=class_names,
+        gps_time_s=np.asarray(las.gps_time, dtype=np.float64),
+        intensity=np.asarray(las.intensity, dtype=np.uint16),
+        scan_angle_deg=np.asarray(las.scan_angle, dtype=np.float64) * SCAN_ANGLE_UNIT_DEG,
+        point_source_id=np.asarray(las.point_source_id, dtype=np.uint16),
     )

@@ -1,38 +1,64 @@
-"""``grid.tif`` (GeoTIFF) and ``grid.nc`` (NetCDF, CF conventions) from a :class:`Grid`.
+"""``grid.tif``: a Cloud Optimized GeoTIFF of the grid and its per-cell uncertainty.
 
-GeoTIFF: three float32 bands ``depth_m`` (mean depth, positive down), ``spread_m`` (standard
-deviation) and ``count``; nodata ``-9999`` where a cell is empty (NaN inside the pipeline;
-``count`` is 0 there, never nodata); CRS and world affine transform (cell corners, "Area"
-registration); DEFLATE with the floating-point predictor, 256 x 256 tiles. Band names go in the
-band descriptions, units in band tags, and the local origin in dataset tags.
+Layout
+------
+Six float32 bands, in this order (:data:`TIF_BANDS`): ``depth_m`` (mean depth, positive down,
+below the survey's datum), ``tvu95_m`` and ``thu95_m`` (the cell's 95 % total vertical and
+horizontal uncertainty, :mod:`pipeline.process.cell_uncertainty`), ``iho_order`` (strictest
+IHO S-44 order met, the codes of :func:`pipeline.iho.strictest_order`: 0 exclusive,
+1 special, 2 order 1a/1b, 3 order 2, 4 none), ``count`` (points per cell) and ``spread_m``
+(standard deviation of the cell's depths). Every band has its name as band description and
+its unit as band unit (GDAL ``SetUnitType``: ``m``, or ``1`` for codes and counts). Nodata is
+``-9999`` where a cell has no value (NaN inside the pipeline; ``count`` is 0 there, never
+nodata); written without ``cells`` the three uncertainty bands are nodata throughout.
 
-NetCDF: written with :class:`scipy.io.netcdf_file` (NetCDF-3 64-bit offset, no xarray or
-netCDF4 needed): ``x``/``y`` world coordinates of the cell centres, every grid statistic as a
-variable with ``_FillValue``, and a ``crs`` grid-mapping variable holding the WKT.
-
-Both are written atomically (temporary file, then rename).
+Cloud Optimized: the file is made by GDAL's COG driver (a GeoTIFF built in memory, then
+copied), so it has 256 x 256 DEFLATE tiles with the floating-point predictor, overviews
+(at least one level, halving down to one tile; NEAREST resampling, so every overview value is
+a real cell value and the order codes and counts stay valid), the IFDs ahead of the data, and
+``LAYOUT=COG`` in the ``IMAGE_STRUCTURE`` metadata. CRS and world affine transform (cell
+corners, "Area" registration); the local origin and the depth's datum in dataset tags.
+Written atomically (temporary file, then rename).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pyproj
 import rasterio
+import rasterio.shutil
 from affine import Affine
-from scipy.io import netcdf_file
+from rasterio.io import MemoryFile
 
 from pipeline.outputs.atomic import atomic_path
+from pipeline.process.cell_uncertainty import CellUncertainty
 from pipeline.process.grid import Grid
 
-__all__ = ["NODATA", "TIF_BANDS", "GridRaster", "write_grid_tif", "read_grid_tif", "write_grid_nc"]
+__all__ = [
+    "NODATA",
+    "TIF_BANDS",
+    "GridRaster",
+    "grid_layers",
+    "write_grid_tif",
+    "read_grid_tif",
+    "depth_reference",
+]
 
 #: Nodata value of the written files (an impossible depth, exact in float32).
 NODATA = -9999.0
 #: Band order of ``grid.tif``: (name, unit).
-TIF_BANDS = (("depth_m", "m"), ("spread_m", "m"), ("count", "1"))
+TIF_BANDS = (
+    ("depth_m", "m"),
+    ("tvu95_m", "m"),
+    ("thu95_m", "m"),
+    ("iho_order", "1"),
+    ("count", "1"),
+    ("spread_m", "m"),
+)
 _TILE = 256
 
 
@@ -41,6 +67,7 @@ class GridRaster:
     """What :func:`read_grid_tif` returns: bands by name (NaN where nodata), georeferencing."""
 
     bands: dict[str, np.ndarray]
+    units: dict[str, str]
     transform: Affine
     crs: pyproj.CRS | None
     nodata: float
@@ -48,16 +75,68 @@ class GridRaster:
     profile: dict
 
 
-def _band_data(grid: Grid, name: str) -> np.ndarray:
-    a = getattr(grid, name).astype(np.float64)
-    return np.where(np.isfinite(a), a, NODATA).astype(np.float32)
+def grid_layers(grid: Grid, cells: CellUncertainty | None) -> dict[str, np.ndarray]:
+    """Every written layer as float64 ``(ny, nx)``, NaN where a cell has no value.
+
+    ``iho_order`` is NaN where the cell is empty (code -1); without ``cells`` the uncertainty
+    layers are NaN throughout.
+    """
+    nan = np.full(grid.shape, np.nan)
+    out = {
+        "depth_m": grid.depth_m.astype(np.float64),
+        "count": grid.count.astype(np.float64),
+        "spread_m": grid.spread_m.astype(np.float64),
+        "tvu95_m": nan,
+        "thu95_m": nan,
+        "iho_order": nan,
+    }
+    if cells is not None:
+        if cells.order.shape != grid.shape:
+            raise ValueError(f"`cells` has shape {cells.order.shape}; the grid {grid.shape}")
+        order = cells.order.astype(np.float64)
+        out["tvu95_m"] = cells.tvu95_m.astype(np.float64)
+        out["thu95_m"] = cells.thu95_m.astype(np.float64)
+        out["iho_order"] = np.where(order < 0, np.nan, order)
+    return out
 
 
-def write_grid_tif(path: str | Path, grid: Grid) -> Path:
-    """Write ``grid`` as a tiled, DEFLATE-compressed GeoTIFF, atomically; returns ``path``."""
+def depth_reference(grid: Grid) -> str:
+    """In words, what the grid's depths are below."""
+    if grid.datum_m is None:
+        return "positive down, below the fitted local water surface"
+    return (
+        f"positive down, below the survey's mean water level (datum) at local z = "
+        f"{grid.datum_m!r} m, height {grid.datum_m + float(grid.origin_m[2])!r} m in the "
+        "scene's local vertical frame"
+    )
+
+
+def _overview_count(shape: tuple[int, int]) -> int:
+    """Halvings until the larger side fits one tile, and at least one (a COG has overviews)."""
+    return max(1, math.ceil(math.log2(max(max(shape) / _TILE, 1.0))))
+
+
+def write_grid_tif(path: str | Path, grid: Grid, cells: CellUncertainty | None = None) -> Path:
+    """Write ``grid`` (and its cell uncertainty) as a Cloud Optimized GeoTIFF, atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file.
+    grid : Grid
+        The bathymetry grid; its ``crs`` is required.
+    cells : CellUncertainty, optional
+        Per-cell TVU, THU and IHO order of ``grid`` (``SurveyUncertainty.cells``).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     if grid.crs is None:
         raise ValueError("`grid.crs` is required for a GeoTIFF; grid with `crs=...`")
     path = Path(path)
+    layers = grid_layers(grid, cells)
     ny, nx = grid.shape
     profile = {
         "driver": "GTiff",
@@ -68,90 +147,53 @@ def write_grid_tif(path: str | Path, grid: Grid) -> Path:
         "crs": rasterio.crs.CRS.from_wkt(grid.crs.to_wkt()),
         "transform": grid.transform,
         "nodata": NODATA,
-        "compress": "deflate",
-        "predictor": 3,
-        "tiled": True,
-        "blockxsize": _TILE,
-        "blockysize": _TILE,
     }
-    with atomic_path(path) as tmp, rasterio.open(tmp, "w", **profile) as dst:
-        for i, (name, unit) in enumerate(TIF_BANDS, start=1):
-            dst.write(_band_data(grid, name), i)
-            dst.set_band_description(i, name)
-            dst.update_tags(i, units=unit)
-        dst.update_tags(
-            origin_easting_m=repr(float(grid.origin_m[0])),
-            origin_northing_m=repr(float(grid.origin_m[1])),
-            origin_height_m=repr(float(grid.origin_m[2])),
-            resolution_m=repr(float(grid.resolution_m)),
-            depth=(
-                "positive down, below the fitted local water surface"
-                if grid.datum_m is None
-                else f"positive down, below the datum (mean water level) at local z = "
-                f"{grid.datum_m!r} m, height {grid.datum_m + float(grid.origin_m[2])!r} m"
-            ),
-            datum_water_level_m="" if grid.datum_m is None else repr(float(grid.datum_m)),
-            registration="cell-centre (area): transform gives cell corners",
-        )
+    with MemoryFile() as mem:
+        with mem.open(**profile) as dst:
+            for i, (name, unit) in enumerate(TIF_BANDS, start=1):
+                a = layers[name]
+                dst.write(np.where(np.isfinite(a), a, NODATA).astype(np.float32), i)
+                dst.set_band_description(i, name)
+                dst.set_band_unit(i, unit)
+            dst.update_tags(
+                origin_easting_m=repr(float(grid.origin_m[0])),
+                origin_northing_m=repr(float(grid.origin_m[1])),
+                origin_height_m=repr(float(grid.origin_m[2])),
+                resolution_m=repr(float(grid.resolution_m)),
+                depth=depth_reference(grid),
+                datum_water_level_m="" if grid.datum_m is None else repr(float(grid.datum_m)),
+                iho_order="0 exclusive, 1 special, 2 order 1a/1b, 3 order 2, 4 none met",
+                tvu95_m="95 % total vertical uncertainty of the cell depth",
+                thu95_m="95 % total horizontal uncertainty of the cell position",
+                registration="cell-centre (area): transform gives cell corners",
+            )
+        with mem.open() as src, atomic_path(path) as tmp:
+            rasterio.shutil.copy(
+                src,
+                tmp,
+                driver="COG",
+                compress="DEFLATE",
+                predictor=3,
+                blocksize=_TILE,
+                overview_resampling="NEAREST",
+                overview_count=_overview_count(grid.shape),
+            )
     return path
 
 
 def read_grid_tif(path: str | Path) -> GridRaster:
     """Read a file written by :func:`write_grid_tif` (nodata back to NaN)."""
     with rasterio.open(path) as src:
-        bands = {}
+        bands, units = {}, {}
         for i in range(1, src.count + 1):
             name = src.descriptions[i - 1] or f"band{i}"
             a = src.read(i).astype(np.float64)
             bands[name] = np.where(a == src.nodata, np.nan, a)
+            units[name] = src.units[i - 1] or ""
         tags = src.tags()
         origin = np.array(
             [float(tags.get(k, 0.0)) for k in ("origin_easting_m", "origin_northing_m")]
             + [float(tags.get("origin_height_m", 0.0))]
         )
         crs = pyproj.CRS.from_wkt(src.crs.to_wkt()) if src.crs else None
-        return GridRaster(bands, src.transform, crs, src.nodata, origin, dict(src.profile))
-
-
-def write_grid_nc(path: str | Path, grid: Grid) -> Path:
-    """Write every grid statistic to a CF-style NetCDF-3 file, atomically; returns ``path``."""
-    path = Path(path)
-    ny, nx = grid.shape
-    with atomic_path(path) as tmp:
-        f = netcdf_file(tmp, "w", version=2)
-        try:
-            f.Conventions = "CF-1.8"
-            f.title = "bathymetric lidar grid"
-            f.origin_m = np.asarray(grid.origin_m, dtype=np.float64)
-            f.registration = "cell-centre"
-            f.createDimension("y", ny)
-            f.createDimension("x", nx)
-            x = f.createVariable("x", "f8", ("x",))
-            x[:] = grid.x_m + grid.origin_m[0]
-            x.standard_name, x.units = "projection_x_coordinate", "m"
-            y = f.createVariable("y", "f8", ("y",))
-            y[:] = grid.y_m + grid.origin_m[1]
-            y.standard_name, y.units = "projection_y_coordinate", "m"
-            crs = f.createVariable("crs", "i4", ())
-            if grid.crs is not None:
-                wkt = grid.crs.to_wkt().encode("utf-8")  # NetCDF-3 text is bytes (may hold "°")
-                crs.crs_wkt = wkt
-                crs.spatial_ref = wkt
-            for name, unit in (
-                ("depth_m", "m"),
-                ("median_depth_m", "m"),
-                ("spread_m", "m"),
-                ("z_m", "m"),
-            ):
-                v = f.createVariable(name, "f4", ("y", "x"))
-                v._FillValue = np.float32(NODATA)
-                v.units = unit
-                v.grid_mapping = "crs"
-                v[:] = _band_data(grid, name)
-            cnt = f.createVariable("count", "i4", ("y", "x"))
-            cnt.units = "1"
-            cnt.grid_mapping = "crs"
-            cnt[:] = grid.count.astype(np.int32)
-        finally:
-            f.close()
-    return path
+        return GridRaster(bands, units, src.transform, crs, src.nodata, origin, dict(src.profile))

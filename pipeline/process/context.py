@@ -78,6 +78,10 @@ class Instrument:
         Index of air for the air range (the surface fit's).
     shots_per_window : int
         Photon counting: shots accumulated per detection window (one sounding).
+    amplitude_full_scale : float
+        The receiver's dynamic range in the detections' amplitude units, what LAS 1.4 scales
+        intensity by (``65536 / dynamic range``): full waveform, the digitiser's
+        ``2**bit_depth`` codes; photon counting, 65536 (an intensity unit per photon).
     """
 
     mode: str
@@ -89,6 +93,7 @@ class Instrument:
     pre_trigger_s: float
     air_index: float
     shots_per_window: int
+    amplitude_full_scale: float = 65536.0
 
     @property
     def photon_counting(self) -> bool:
@@ -111,6 +116,9 @@ def instrument(scene, air_index: float) -> Instrument:
         pre_trigger_s=det.pre_trigger_s,
         air_index=air_index,
         shots_per_window=scene.process.photon_detect.shots_per_window,
+        amplitude_full_scale=(
+            65536.0 if det.mode == "photon_counting" else float(2**det.bit_depth)
+        ),
     )
 
 

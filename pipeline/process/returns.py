@@ -161,6 +161,11 @@ class DetectedReturns:
         Round-trip time down to which a pulse without a bottom establishes there is none (its
         detection limit, :mod:`pipeline.process.detection_limit`); ``> t_surface_s`` where
         known, 0 where not estimated (and where there is a bottom).
+    t_emit_s : (n,) float64, optional
+        Emission (firing) time of the pulse on the survey clock, seconds: what the system's
+        timing records per shot (the LAS GPS time of its points).
+    line_id : (n,) int64, optional
+        Index (>= 0) of the flight line the pulse was fired on, as the flight log records it.
     """
 
     pulse_id: np.ndarray
@@ -182,6 +187,8 @@ class DetectedReturns:
     column_confidence: np.ndarray | None = None
     column_amplitude: np.ndarray | None = None
     t_no_bottom_s: np.ndarray | None = None
+    t_emit_s: np.ndarray | None = None
+    line_id: np.ndarray | None = None
 
     #: The fields of the in-column return (a detector's output passes them on by these names).
     COLUMN_FIELDS: ClassVar[tuple[str, ...]] = (
@@ -250,6 +257,13 @@ class DetectedReturns:
                     "(with a surface) where not 0"
                 )
             s(self, "t_no_bottom_s", tn)
+        if self.t_emit_s is not None:
+            s(self, "t_emit_s", _array("t_emit_s", self.t_emit_s, np.float64, (n,)))
+        if self.line_id is not None:
+            lid = _array("line_id", self.line_id, np.int64, (n,))
+            if np.any(lid < 0):
+                raise ValueError("`line_id` must be >= 0")
+            s(self, "line_id", lid)
         for opt, mask in (
             ("surface_amplitude", "has_surface"),
             ("bottom_amplitude", "has_bottom"),

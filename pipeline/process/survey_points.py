@@ -15,6 +15,7 @@ import numpy as np
 from pipeline.process.classify import NO_BOTTOM_FOUND_AT, ClassifySettings
 from pipeline.process.context import ProcessingContext
 from pipeline.process.refraction import ProcessedPoints, georeference, seabed_points
+from pipeline.process.return_order import number_all_returns
 from pipeline.process.returns import DetectedReturns, PointFlag, Points
 
 __all__ = ["process_detections", "no_bottom_points"]
@@ -54,10 +55,10 @@ def process_detections(
         refraction_settings=ctx.refraction,
         classify_settings=classify,
     )
-    processed = dataclasses.replace(
-        processed,
-        points=Points.concatenate([processed.points, no_bottom_points(returns, processed, ctx)]),
-    )
+    # the class-45 points join their pulses' echo sequence: number every pulse again (LAS
+    # return numbers 1..n in time order, the class-45 point after its surface)
+    points = Points.concatenate([processed.points, no_bottom_points(returns, processed, ctx)])
+    processed = dataclasses.replace(processed, points=number_all_returns(points))
     if water_column:
         processed = add_water_column_points(processed, returns, ctx.refraction, classify)
     return processed
@@ -95,6 +96,11 @@ def no_bottom_points(
     pts = seabed_points(probe, processed.surface, ctx.refraction)
     bad = PointFlag.LAND | PointFlag.GRAZING | PointFlag.ABOVE_SURFACE
     pts = pts.select((pts.flags & np.uint16(bad)) == 0)
+    # made by processing, not measured: LAS's synthetic flag; no echo of its own, so amplitude
+    # 0 where the detector reports amplitudes (None would drop every point's amplitude when the
+    # points are joined)
     return pts.replace(
-        classification=np.full(pts.pulse_id.shape, NO_BOTTOM_FOUND_AT, dtype=np.uint8)
+        classification=np.full(pts.pulse_id.shape, NO_BOTTOM_FOUND_AT, dtype=np.uint8),
+        flags=pts.flags | np.uint16(PointFlag.SYNTHETIC),
+        amplitude=None if returns.bottom_amplitude is None else np.zeros(len(pts)),
     )

@@ -39,7 +39,8 @@ def test_round_trip(tmp_path):
     path = write_points_laz(tmp_path / "points.laz", pts, crs=32633, origin_m=ORIGIN)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["points.laz"]  # no temp left
     back = read_points_laz(path)
-    assert back.crs == pyproj.CRS.from_epsg(32633)
+    # compound: the horizontal CRS given + the local vertical frame of z
+    assert back.crs.is_compound and back.crs.sub_crs_list[0] == pyproj.CRS.from_epsg(32633)
     np.testing.assert_array_equal(back.origin_m, ORIGIN)
     np.testing.assert_array_equal(back.offsets, np.round(ORIGIN))
     q = back.points
@@ -48,7 +49,10 @@ def test_round_trip(tmp_path):
     np.testing.assert_array_equal(q.kind, pts.kind)
     np.testing.assert_array_equal(q.flags, pts.flags)
     np.testing.assert_array_equal(q.detector_flags, pts.detector_flags)
-    np.testing.assert_array_equal(q.return_number, pts.return_number)
+    # one point per (random, 40-bit) pulse: "1 of 1" whatever numbering the points came with
+    assert np.unique(pts.pulse_id).size == len(pts)
+    np.testing.assert_array_equal(q.return_number, 1)
+    np.testing.assert_array_equal(q.number_of_returns, 1)
     # quantisation: half a millimetre, plus float64 rounding of world = local + origin
     assert np.max(np.abs(q.xyz_m - pts.xyz_m)) <= 0.0005 + 1e-8
     np.testing.assert_array_equal(q.depth_m, pts.depth_m)  # stored as f8
@@ -67,8 +71,10 @@ def test_laz_header(tmp_path):
     assert hdr.global_encoding.wkt
     np.testing.assert_array_equal(hdr.scales, [0.001] * 3)
     las = laspy.read(path)
+    # synthetic: flagged by processing, or a derived surface point (kind 3); no class 45 here
+    assert 45 not in pts.classification
     np.testing.assert_array_equal(
-        np.asarray(las.synthetic, bool), (pts.flags & PointFlag.SYNTHETIC) != 0
+        np.asarray(las.synthetic, bool), ((pts.flags & PointFlag.SYNTHETIC) != 0) | (pts.kind == 3)
     )
     assert "amplitude" not in las.point_format.extra_dimension_names
     assert read_points_laz(path).points.amplitude is None

@@ -1,11 +1,11 @@
-"""grid.tif and grid.nc round trips."""
+"""grid.tif round trip (grid.nc: test_grid_outputs.py)."""
 
 import numpy as np
 import pyproj
 import pytest
-from scipy.io import netcdf_file
+import rasterio
 
-from pipeline.outputs.raster import NODATA, read_grid_tif, write_grid_nc, write_grid_tif
+from pipeline.outputs.raster import NODATA, TIF_BANDS, read_grid_tif, write_grid_tif
 from pipeline.process.grid import grid_points
 
 ORIGIN = (500_000.0, 6_200_000.0, 0.0)
@@ -27,7 +27,11 @@ def test_tif_round_trip(tmp_path):
     path = write_grid_tif(tmp_path / "grid.tif", g)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["grid.tif"]
     r = read_grid_tif(path)
-    assert list(r.bands) == ["depth_m", "spread_m", "count"]
+    assert list(r.bands) == [name for name, _ in TIF_BANDS]
+    assert r.units == dict(TIF_BANDS)
+    # no cell uncertainty given: those bands are nodata throughout
+    for name in ("tvu95_m", "thu95_m", "iho_order"):
+        assert np.isnan(r.bands[name]).all()
     assert r.crs == pyproj.CRS.from_epsg(25832)
     assert r.nodata == NODATA
     assert tuple(r.transform)[:6] == pytest.approx(tuple(g.transform)[:6], abs=0)
@@ -39,23 +43,11 @@ def test_tif_round_trip(tmp_path):
     assert np.isnan(r.bands["depth_m"]).sum() == (g.count == 0).sum() > 0
     p = r.profile
     assert p["tiled"] and p["compress"].lower() == "deflate" and p["blockxsize"] == 256
+    with rasterio.open(path) as src:
+        assert src.tags(ns="IMAGE_STRUCTURE")["LAYOUT"] == "COG"
 
 
 def test_tif_needs_crs(tmp_path):
     g = grid_points([0.5], [0.5], [3.0], resolution_m=1.0)
     with pytest.raises(ValueError, match="crs"):
         write_grid_tif(tmp_path / "grid.tif", g)
-
-
-def test_nc_round_trip(tmp_path):
-    g = sample_grid()
-    path = write_grid_nc(tmp_path / "grid.nc", g)
-    with netcdf_file(path, "r", mmap=False) as f:
-        np.testing.assert_allclose(f.variables["x"][:], g.x_m + ORIGIN[0])
-        np.testing.assert_allclose(f.variables["y"][:], g.y_m + ORIGIN[1])
-        dep = f.variables["depth_m"][:].astype(np.float64)
-        dep[dep == NODATA] = np.nan
-        np.testing.assert_allclose(dep, g.depth_m, rtol=2**-23, equal_nan=True)
-        np.testing.assert_array_equal(f.variables["count"][:], g.count)
-        wkt = f.variables["crs"].crs_wkt.decode()
-    assert pyproj.CRS.from_wkt(wkt) == pyproj.CRS.from_epsg(25832)

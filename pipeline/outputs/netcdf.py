@@ -1,0 +1,213 @@
+"""``grid.nc``: the grid and its per-cell uncertainty as CF-1.8 NetCDF-4 (via xarray).
+
+Variables, on dimensions ``(y, x)`` (row 0 north, as in ``grid.tif``):
+
+* ``x``, ``y``: world coordinates of the cell centres, ``standard_name``
+  ``projection_x_coordinate`` / ``projection_y_coordinate``, ``units = "m"``, ``axis``.
+* ``crs``: the grid-mapping variable (CF §5.6): pyproj's CF attributes of the horizontal CRS
+  (``grid_mapping_name`` and its parameters, ``crs_wkt``) and ``spatial_ref`` (the same WKT,
+  what GDAL reads). Every data variable names it in ``grid_mapping``.
+* ``depth``: mean depth of the cell, ``units = "m"``, ``positive = "down"``, ``standard_name =
+  "sea_floor_depth_below_sea_surface"``. Why this name: the grid's datum is the survey's mean
+  water level (:mod:`pipeline.process.datum`), the water surface averaged over the waves *at
+  survey time*, tide included: CF's ``..._below_mean_sea_level`` is a level averaged over the
+  tides (and ``..._below_geoid`` / ``..._below_geopotential_datum`` a realised vertical datum),
+  neither of which a survey of minutes measures; ``..._below_sea_surface`` is the depth below
+  the sea surface at the time of measurement, which is what the datum realises. The datum's
+  local z is in the ``datum_water_level_m`` attribute and the ``comment``.
+* ``median_depth``: likewise, the cell's median.
+* ``tvu95``, ``thu95``: 95 % total vertical / horizontal uncertainty of the cell (m),
+  ``iho_order``: strictest IHO S-44 order met (``flag_values`` / ``flag_meanings``), ``count``
+  (``standard_name = "sea_floor_depth_below_sea_surface number_of_observations"``), ``spread``
+  (standard deviation of the cell's depths, m); ``depth``'s ``ancillary_variables`` names them.
+
+Float variables are float32 with ``_FillValue = -9999`` (empty cells), ``iho_order`` int8 with
+``_FillValue = -1`` (the code of an empty cell), ``count`` int32 (0 where empty). Written
+atomically (temporary file, then rename).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pyproj
+
+from pipeline.iho import CLASSIFIED_ORDERS, NO_DATA, NO_ORDER
+from pipeline.outputs.atomic import atomic_path
+from pipeline.outputs.raster import NODATA, depth_reference, grid_layers
+from pipeline.process.cell_uncertainty import CellUncertainty
+from pipeline.process.grid import Grid
+
+__all__ = ["DEPTH_STANDARD_NAME", "ORDER_FLAG_MEANINGS", "write_grid_nc"]
+
+#: CF standard name of the grid's depth (see the module's docstring for why).
+DEPTH_STANDARD_NAME = "sea_floor_depth_below_sea_surface"
+#: ``flag_meanings`` of ``iho_order``, for the codes 0 .. NO_ORDER.
+ORDER_FLAG_MEANINGS = " ".join(
+    [f"order_{name}" for name in CLASSIFIED_ORDERS] + ["no_order_met"]
+).replace("order_1a", "order_1a_or_1b")
+
+
+def _grid_mapping(crs: pyproj.CRS | None) -> dict[str, object]:
+    """CF grid-mapping attributes of the horizontal CRS (WKT alone if CF has no mapping)."""
+    if crs is None:
+        return {}
+    wkt = crs.to_wkt()
+    try:
+        attrs = dict(crs.to_cf())
+    except Exception:  # pyproj raises for CRSs CF has no grid mapping for
+        attrs = {}
+    attrs.setdefault("crs_wkt", wkt)
+    attrs["spatial_ref"] = wkt
+    return attrs
+
+
+def write_grid_nc(path: str | Path, grid: Grid, cells: CellUncertainty | None = None) -> Path:
+    """Write ``grid`` (and its cell uncertainty) as CF-1.8 NetCDF-4, atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file.
+    grid : Grid
+        The bathymetry grid, ``(ny, nx)``.
+    cells : CellUncertainty, optional
+        Its per-cell TVU, THU and IHO order; without it those variables are all fill values.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    import xarray as xr  # imported here: only the NetCDF writer needs xarray
+
+    path = Path(path)
+    layers = grid_layers(grid, cells)
+    dims = ("y", "x")
+    common = {"grid_mapping": "crs"}
+    depth_attrs = {
+        "standard_name": DEPTH_STANDARD_NAME,
+        "units": "m",
+        "positive": "down",
+        **({} if grid.datum_m is None else {"datum_water_level_m": float(grid.datum_m)}),
+        "comment": depth_reference(grid),
+        **common,
+    }
+
+    def f32(name: str) -> np.ndarray:
+        return layers[name].astype(np.float32)
+
+    order = layers["iho_order"]
+    data = {
+        "depth": (
+            dims,
+            f32("depth_m"),
+            {
+                "long_name": "mean depth of the cell's bathymetric points",
+                "cell_methods": "area: mean",
+                "ancillary_variables": "tvu95 thu95 iho_order count spread",
+                **depth_attrs,
+            },
+        ),
+        "median_depth": (
+            dims,
+            grid.median_depth_m.astype(np.float32),
+            {
+                "long_name": "median depth of the cell's bathymetric points",
+                "cell_methods": "area: median",
+                **depth_attrs,
+            },
+        ),
+        "tvu95": (
+            dims,
+            f32("tvu95_m"),
+            {
+                "long_name": "total vertical uncertainty of the cell depth, 95 % confidence",
+                "units": "m",
+                **common,
+            },
+        ),
+        "thu95": (
+            dims,
+            f32("thu95_m"),
+            {
+                "long_name": "total horizontal uncertainty of the cell position, 95 % confidence",
+                "units": "m",
+                **common,
+            },
+        ),
+        "iho_order": (
+            dims,
+            np.where(np.isfinite(order), order, NO_DATA).astype(np.int8),
+            {
+                "long_name": "strictest IHO S-44 (6th ed.) order met by the cell",
+                "flag_values": np.arange(NO_ORDER + 1, dtype=np.int8),
+                "flag_meanings": ORDER_FLAG_MEANINGS,
+                **common,
+            },
+        ),
+        "count": (
+            dims,
+            grid.count.astype(np.int32),
+            {
+                "long_name": "bathymetric points in the cell",
+                "standard_name": f"{DEPTH_STANDARD_NAME} number_of_observations",
+                "units": "1",
+                **common,
+            },
+        ),
+        "spread": (
+            dims,
+            f32("spread_m"),
+            {
+                "long_name": "standard deviation of the cell's point depths",
+                "cell_methods": "area: standard_deviation",
+                "units": "m",
+                **common,
+            },
+        ),
+        "crs": ((), np.int32(0), _grid_mapping(grid.crs)),
+    }
+    coords = {
+        "x": (
+            "x",
+            grid.x_m + grid.origin_m[0],
+            {
+                "standard_name": "projection_x_coordinate",
+                "long_name": "easting of the cell centre",
+                "units": "m",
+                "axis": "X",
+            },
+        ),
+        "y": (
+            "y",
+            grid.y_m + grid.origin_m[1],
+            {
+                "standard_name": "projection_y_coordinate",
+                "long_name": "northing of the cell centre",
+                "units": "m",
+                "axis": "Y",
+            },
+        ),
+    }
+    ds = xr.Dataset(
+        data,
+        coords=coords,
+        attrs={
+            "Conventions": "CF-1.8",
+            "title": "Bathymetric lidar grid",
+            "source": "bathy pipeline (airborne bathymetric lidar survey)",
+            "resolution_m": float(grid.resolution_m),
+            "origin_m": np.asarray(grid.origin_m, dtype=np.float64),
+            "registration": "cell centres; cells are resolution_m wide",
+        },
+    )
+    fill = {"_FillValue": np.float32(NODATA), "zlib": True, "complevel": 4}
+    encoding = {name: dict(fill) for name in ("depth", "median_depth", "tvu95", "thu95", "spread")}
+    encoding["iho_order"] = {"_FillValue": np.int8(NO_DATA), "zlib": True, "complevel": 4}
+    encoding["count"] = {"_FillValue": None, "zlib": True, "complevel": 4}
+    encoding["x"] = encoding["y"] = {"_FillValue": None}
+    with atomic_path(path) as tmp:
+        ds.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=encoding)
+    return path
