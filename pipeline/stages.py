@@ -105,8 +105,8 @@ STAGES: tuple[Stage, ...] = (
     Stage("grid", "datum and bathymetry grid", _survey),
     Stage("tpu", "propagated uncertainty, per cell, IHO orders", _survey),
     Stage("posterior", "emcee depth posteriors of a bounded sample", _survey_and(_posterior)),
-    Stage("outputs", "points.laz, grid.tif", _survey),
-    Stage("evaluate", "points and grid against the truth", _survey),
+    Stage("outputs", "points.laz, grid.tif (COG), grid.nc (CF)", _survey),
+    Stage("evaluate", "points and grid against the truth; report.html", _survey),
 )
 
 

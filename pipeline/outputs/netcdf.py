@@ -28,6 +28,7 @@ atomically (temporary file, then rename).
 
 from __future__ import annotations
 
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -208,6 +209,12 @@ def write_grid_nc(path: str | Path, grid: Grid, cells: CellUncertainty | None = 
     encoding["iho_order"] = {"_FillValue": np.int8(NO_DATA), "zlib": True, "complevel": 4}
     encoding["count"] = {"_FillValue": None, "zlib": True, "complevel": 4}
     encoding["x"] = encoding["y"] = {"_FillValue": None}
-    with atomic_path(path) as tmp:
-        ds.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=encoding)
+    # the HDF5 library under NetCDF-4 opens its file by name, more than once: it writes into a
+    # private folder of the system's temporary directory, and the finished bytes go to disk
+    # atomically (a run killed meanwhile leaves the output folder clean)
+    with tempfile.TemporaryDirectory(prefix="bathy-nc-") as d:
+        staged = Path(d) / "grid.nc"
+        ds.to_netcdf(staged, format="NETCDF4", engine="netcdf4", encoding=encoding)
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(staged.read_bytes())
     return path

@@ -167,10 +167,12 @@ def write_grid_tif(path: str | Path, grid: Grid, cells: CellUncertainty | None =
                 thu95_m="95 % total horizontal uncertainty of the cell position",
                 registration="cell-centre (area): transform gives cell corners",
             )
-        with mem.open() as src, atomic_path(path) as tmp:
+        # the COG driver writes side files next to its target (overviews): it writes into
+        # GDAL's memory filesystem, and the finished bytes go to disk atomically
+        with mem.open() as src, MemoryFile() as cog:
             rasterio.shutil.copy(
                 src,
-                tmp,
+                cog.name,
                 driver="COG",
                 compress="DEFLATE",
                 predictor=3,
@@ -178,6 +180,10 @@ def write_grid_tif(path: str | Path, grid: Grid, cells: CellUncertainty | None =
                 overview_resampling="NEAREST",
                 overview_count=_overview_count(grid.shape),
             )
+            cog.seek(0)
+            data = cog.read()
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(data)
     return path
 
 

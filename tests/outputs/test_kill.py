@@ -24,7 +24,14 @@ pytestmark = [
     pytest.mark.slow,
     pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/PID/fd"),
 ]
-OUTPUTS = {"points.laz", "grid.tif", "evaluation.json", "manifest.json"}
+OUTPUTS = {
+    "points.laz",
+    "grid.tif",
+    "grid.nc",
+    "evaluation.json",
+    "report.html",
+    "manifest.json",
+}
 TIMEOUT_S = 300.0
 
 
@@ -104,6 +111,13 @@ def _assert_complete_or_nothing(work):
     if "grid.tif" in names:
         with rasterio.open(out / "grid.tif") as src:
             assert src.read().shape == (src.count, src.height, src.width)
+    if "grid.nc" in names:
+        import xarray as xr
+
+        with xr.open_dataset(out / "grid.nc") as ds:
+            assert ds["depth"].shape == (ds.sizes["y"], ds.sizes["x"])
+    if "report.html" in names:
+        assert (out / "report.html").read_text().rstrip().endswith("</html>")
     for name in names & {"evaluation.json", "manifest.json"}:
         json.loads((out / name).read_text())
     return names
@@ -127,7 +141,7 @@ def test_killed_before_any_output_leaves_no_folder(tmp_path, scene_file):
         assert list(work.iterdir()) == [], trigger  # the folder comes with its first file
 
 
-@pytest.mark.parametrize("nth_write", [1, 2, 3, 4])
+@pytest.mark.parametrize("nth_write", [1, 2, 3, 4, 5, 6])
 def test_killed_while_writing_leaves_only_complete_files(tmp_path, scene_file, nth_write):
     """SIGKILL as the ``nth_write`` output (points, grid, evaluation, manifest) is written."""
     work = tmp_path / "run"
