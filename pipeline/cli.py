@@ -50,7 +50,7 @@ def _stress(args) -> int:
         print(f"bathy stress: {exc}", file=sys.stderr)
         return EXIT_BAD_SCENE
     print(f"bathy stress: {len(cases)} cases -> {args.out}")
-    results = run_cases(cases, args.out)
+    results = run_cases(cases, args.out, cli_main=main)
     counts = {k: sum(r.status == k for r in results) for k in ("PASS", "KNOWN", "FAIL")}
     print(f"{counts['PASS']} passed, {counts['KNOWN']} known failures, {counts['FAIL']} failed")
     return 1 if counts["FAIL"] else 0
@@ -97,9 +97,8 @@ def main(argv: list[str] | None = None) -> int:
         old = existing_outputs(out)
         if old and not args.overwrite:
             raise SceneError(
-                f"output folder {out} already holds outputs ({', '.join(old[:4])}"
-                f"{', ...' if len(old) > 4 else ''}); give --overwrite to replace them, or"
-                " another --out"
+                f"output folder {out} already holds outputs ({', '.join(old)}); give"
+                " --overwrite to replace them, or another --out"
             )
         clear_outputs(out)
         stream = sys.stderr if args.json else sys.stdout

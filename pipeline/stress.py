@@ -20,6 +20,8 @@ from __future__ import annotations
 import contextlib
 import io
 import math
+import subprocess
+import sys
 import time
 import traceback
 from collections.abc import Callable, Sequence
@@ -88,21 +90,34 @@ def scene_data(case: StressCase) -> dict[str, Any]:
     return with_overrides(case.base, f"stress_{case.name}", case.overrides)
 
 
+#: The CLI's entry point: ``argv`` in, exit status out.
+CliMain = Callable[[list[str]], int]
+
 # ---------------------------------------------------------------------------------------------
 # running a case
 
 
-def _bad_input(case: StressCase, out: Path) -> str:
-    """Run ``bathy run`` on the case's scene file: exit 2 with one line naming the key."""
-    from pipeline.cli import main
+def _bad_input(case: StressCase, out: Path, cli_main: CliMain | None) -> str:
+    """Run ``bathy run`` on the case's scene file: exit 2 with one line naming the key.
 
+    ``cli_main`` is :func:`pipeline.cli.main` when the CLI runs the suite (handed in: this
+    module does not import the CLI that imports it); without it, ``python -m pipeline.cli``.
+    """
     out.mkdir(parents=True, exist_ok=True)
     path = out / "scene.toml"
     path.write_text(to_toml(scene_data(case)))
-    err, std = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(std):
-        status = main(["run", str(path), "--out", str(out / "run")])
-    lines = [ln for ln in err.getvalue().splitlines() if ln.strip()]
+    argv = ["run", str(path), "--out", str(out / "run")]
+    if cli_main is not None:
+        err, std = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(std):
+            status = cli_main(argv)
+        stderr = err.getvalue()
+    else:
+        res = subprocess.run(
+            [sys.executable, "-m", "pipeline.cli", *argv], capture_output=True, text=True
+        )
+        status, stderr = res.returncode, res.stderr
+    lines = [ln for ln in stderr.splitlines() if ln.strip()]
     if status != case.exit_status:
         return f"exit {status}, expected {case.exit_status}: {' | '.join(lines)[:200]}"
     if len(lines) != 1:
@@ -142,11 +157,11 @@ def _end_to_end(case: StressCase, out: Path) -> str:
     return "; ".join(problems)
 
 
-def run_case(case: StressCase, out_dir: str | Path) -> CaseResult:
+def run_case(case: StressCase, out_dir: str | Path, cli_main: CliMain | None = None) -> CaseResult:
     """Run one case into ``out_dir/<case name>`` and judge it."""
     out = Path(out_dir) / case.name
     t0 = time.perf_counter()
-    failure = _bad_input(case, out) if case.exit_status else _end_to_end(case, out)
+    failure = _bad_input(case, out, cli_main) if case.exit_status else _end_to_end(case, out)
     seconds = time.perf_counter() - t0
     if case.known_failure:
         if failure:
@@ -173,12 +188,15 @@ def select_cases(only: Sequence[str] = (), fast: bool = False) -> list[StressCas
 
 
 def run_cases(
-    cases: Sequence[StressCase], out_dir: str | Path, log: Callable[[str], None] = print
+    cases: Sequence[StressCase],
+    out_dir: str | Path,
+    log: Callable[[str], None] = print,
+    cli_main: CliMain | None = None,
 ) -> list[CaseResult]:
     """Run ``cases`` one after the other, logging each one's report line as it ends."""
     results = []
     for case in cases:
-        results.append(run_case(case, out_dir))
+        results.append(run_case(case, out_dir, cli_main))
         log(results[-1].line())
     return results
 

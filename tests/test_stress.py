@@ -15,7 +15,7 @@ from pipeline.stress_support import to_toml
 def test_fast_subset_passes_or_fails_only_as_known(tmp_path):
     cases = select_cases(fast=True)
     assert len(cases) >= 20
-    results = run_cases(cases, tmp_path, log=lambda _: None)
+    results = run_cases(cases, tmp_path, log=lambda _: None, cli_main=main)
     bad = [r.line() for r in results if r.status == "FAIL"]
     assert not bad, "\n".join(bad)
     for case, r in zip(cases, results, strict=True):

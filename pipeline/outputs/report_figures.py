@@ -251,5 +251,6 @@ def depth_limits(
     ax.set_xlabel("depth below the water surface (m)")
     ax.set_ylabel("points")
     ax.set_title("Depth range: shallow limit and extinction depth")
-    ax.legend(fontsize=8)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=8)
     return png(fig)

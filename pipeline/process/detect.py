@@ -216,9 +216,6 @@ BLOCK_PULSES = 8192
 #: carried back from below them (:mod:`pipeline.process.detect_near`): the surface +
 #: column-onset hump (2.5 + 5 FWHM of 1.8 ns: 13.5 ns, ~1.5 m of water).
 NEAR_SURFACE_FWHM = 5.0
-#: ... where the column just past that zone is at least this fraction of the surface peak (a
-#: 150 m survey: 0.7-0.9; a 400 m one, and the column-tail tests: 0.1-0.2).
-BRIGHT_COLUMN_FRACTION = 0.5
 
 
 def detect_full_waveform(
@@ -324,16 +321,21 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     # just below the surface the flank trend fails on the surface + column-onset hump: there
     # a candidate must stand above the column extrapolated back from the samples after it
     cand = rpeak & after & has_s[:, None] & (resid > local_thr)
-    # where the column onset is as bright as the surface echo the flank trend undershoots the
-    # hump they make: a candidate just below the surface must also stand above the column
-    # carried back from below it (it may only lose candidates: the test is one-sided)
+    # just below the surface the flank trend undershoots the hump of the surface echo and the
+    # column onset (worst where the column is as bright as the surface echo, at low altitude):
+    # a candidate there must also stand above the column carried back from below it (the test
+    # is one-sided: it only removes candidates)
     zone = math.ceil(sep + NEAR_SURFACE_FWHM * fwhm_samples)
     i_zone = np.minimum(i_s + zone, m - 1)
-    bright = has_s & (filt[np.arange(n), i_zone] > BRIGHT_COLUMN_FRACTION * amp_s)
-    near = cand & bright[:, None] & (cols <= i_zone[:, None])
+    near = cand & has_s[:, None] & (cols <= i_zone[:, None])
     if near.any():
-        excess, column = column_excess(filt, 3.0 * noise_f, gap + math.ceil(sep), 4 * gap)
-        cand &= ~(near & column & (excess <= local_thr))
+        width = 4 * gap
+        excess, column, carried = column_excess(filt, 3.0 * noise_f, gap + math.ceil(sep), width)
+        # the carried-back level is a mean of ~width/2 independent filtered samples, scaled
+        # up by the decay it is carried back over: its noise adds to the candidate's own
+        col_var = noise_f[:, None] ** 2 + shot_noise_counts * np.maximum(carried, 0.0) * kernel_sq
+        thr_near = s.threshold_sigma * np.sqrt(local_var + col_var * 2.0 / width)
+        cand &= ~(near & column & (excess <= thr_near))
     has_b = cand.any(axis=1)
     pick = cand
     if s.bottom_pick == "last":

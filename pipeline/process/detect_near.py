@@ -24,7 +24,7 @@ MAX_DECAY_PER_SAMPLE = 0.5
 
 def column_excess(
     filt: np.ndarray, floor: np.ndarray, offset: int, width: int
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each sample's excess over the column carried back from the samples after it.
 
     The column after sample ``t`` is measured on two windows of ``width`` samples,
@@ -49,6 +49,8 @@ def column_excess(
     column : (n_pulses, n_samples) bool
         Where both windows lie within the waveform and most of their samples are above
         ``floor``: only there does a column follow, and is ``excess`` meaningful.
+    carried : (n_pulses, n_samples) float
+        The column carried back (its noise adds to the test's: the caller's business).
     """
     n, m = filt.shape
 
@@ -68,4 +70,4 @@ def column_excess(
     m2 = np.maximum(s2 / width, 1e-300)
     k = np.clip(np.log(m1 / m2) / width, 0.0, MAX_DECAY_PER_SAMPLE)
     carried = m1 * np.exp(k * (offset + 0.5 * (width - 1)))
-    return filt - carried, column
+    return filt - carried, column, carried
