@@ -67,7 +67,7 @@ class DetectSettings:
         0.1, gt=0.0, lt=0.9, doc="leading part of the window used for the noise floor"
     )
     min_separation_fwhm: float = setting(
-        2.5, gt=0.0, le=20.0, doc="surface-bottom separation below which returns merge"
+        2.5, ge=0.5, le=20.0, doc="surface-bottom separation below which returns merge"
     )
     fit_merged: bool = setting(True, doc="separate merged returns by a two-Gaussian fit")
     surface_step: bool = setting(

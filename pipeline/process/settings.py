@@ -61,7 +61,7 @@ class ProcessSettings:
         ),
         doc="a-priori uncertainties of the TPU",
     )
-    grid_resolution_m: float = setting(5.0, gt=0.0, le=1000.0, doc="bathymetry grid cell")
+    grid_resolution_m: float = setting(5.0, ge=0.01, le=1000.0, doc="bathymetry grid cell")
     no_bottom: NoBottomSettings = setting(
         NoBottomSettings(), doc="assumed bottom and water of the class-45 detection limit"
     )

@@ -61,7 +61,7 @@ class SurfaceFitSettings:
         1.000277, ge=1.0, le=1.01, doc="index of air for the air range (None: the atmosphere's)"
     )
     k_neighbours: int = setting(16, ge=3, le=256, doc="surface points per local plane fit")
-    radius_m: float = setting(5.0, gt=0.0, le=1000.0, doc="neighbour search radius")
+    radius_m: float = setting(5.0, ge=0.1, le=1000.0, doc="neighbour search radius")
     min_neighbours: int = setting(6, ge=3, le=256, doc="fewer: use the global plane")
     robust_iterations: int = setting(2, ge=0, le=10, doc="outlier-rejection passes")
     outlier_sigma: float = setting(3.0, gt=0.0, doc="rejection threshold in robust sigmas")
@@ -109,10 +109,10 @@ class SurfaceFitSettings:
         doc="water-level search: surface points with a bottom this far below (air range) first",
     )
     slope_prior_m: float = setting(
-        0.05, ge=0.0, doc="ridge towards the global slope, as an equivalent spread"
+        0.05, ge=0.0, le=100.0, doc="ridge towards the global slope, as an equivalent spread"
     )
     min_spread_m: float = setting(
-        0.25, ge=0.0, doc="smaller neighbour spread across: flag ill-conditioned"
+        0.25, ge=0.0, le=1000.0, doc="smaller neighbour spread across: flag ill-conditioned"
     )
     fallback_water_level_m: float = setting(
         0.0, doc="water level used when there are fewer than 3 surface returns"

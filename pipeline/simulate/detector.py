@@ -90,7 +90,7 @@ class DetectorSettings:
         1.0e9, gt=1e6, le=1e11, doc="digitiser rate (full waveform) or range-gate clock"
     )
     window_s: float = setting(
-        3.0e-7, gt=0.0, le=1e-4, doc="length of the recorded window (range gate) per pulse"
+        3.0e-7, ge=1e-8, le=1e-4, doc="length of the recorded window (range gate) per pulse"
     )
     pre_trigger_s: float = setting(
         2.0e-8, ge=0.0, le=1e-5, doc="window opens this long before the first surface/land echo"
@@ -98,7 +98,7 @@ class DetectorSettings:
     bit_depth: int = setting(12, ge=1, le=24, doc="digitiser resolution; top code 2^bits - 1")
     baseline_counts: float = setting(100.0, ge=0.0, doc="digitiser offset with no light (counts)")
     counts_per_photoelectron: float = setting(
-        1.0, gt=0.0, le=1e6, doc="mean digitiser counts per photoelectron (detector gain x ADC)"
+        1.0, ge=1e-3, le=1e6, doc="mean digitiser counts per photoelectron (detector gain x ADC)"
     )
     excess_noise_factor: float = setting(
         1.0, ge=1.0, le=100.0, doc="F = <g^2>/<g>^2 of the detector gain (PMT ~1.2, APD 2-5)"

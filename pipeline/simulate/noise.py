@@ -79,25 +79,34 @@ class NavigationNoiseSettings:
     """
 
     gnss_horizontal_sigma_m: float = setting(
-        0.03, ge=0.0, doc="GNSS position error per horizontal axis, standard deviation (m)"
+        0.03,
+        ge=0.0,
+        le=100.0,
+        doc="GNSS position error per horizontal axis, standard deviation (m)",
     )
     gnss_vertical_sigma_m: float = setting(
-        0.05, ge=0.0, doc="GNSS vertical position error, standard deviation (m)"
+        0.05, ge=0.0, le=100.0, doc="GNSS vertical position error, standard deviation (m)"
     )
     gnss_correlation_time_s: float = setting(
-        60.0, ge=0.0, doc="Gauss-Markov correlation time of GNSS errors; 0 = white per pulse (s)"
+        60.0,
+        ge=0.0,
+        le=1e6,
+        doc="Gauss-Markov correlation time of GNSS errors; 0 = white per pulse (s)",
     )
     ins_roll_sigma_deg: float = setting(
-        0.005, ge=0.0, doc="INS roll error, standard deviation (deg)"
+        0.005, ge=0.0, le=10.0, doc="INS roll error, standard deviation (deg)"
     )
     ins_pitch_sigma_deg: float = setting(
-        0.005, ge=0.0, doc="INS pitch error, standard deviation (deg)"
+        0.005, ge=0.0, le=10.0, doc="INS pitch error, standard deviation (deg)"
     )
     ins_heading_sigma_deg: float = setting(
-        0.008, ge=0.0, doc="INS heading (yaw) error, standard deviation (deg)"
+        0.008, ge=0.0, le=10.0, doc="INS heading (yaw) error, standard deviation (deg)"
     )
     ins_correlation_time_s: float = setting(
-        10.0, ge=0.0, doc="Gauss-Markov correlation time of INS errors; 0 = white per pulse (s)"
+        10.0,
+        ge=0.0,
+        le=1e6,
+        doc="Gauss-Markov correlation time of INS errors; 0 = white per pulse (s)",
     )
 
     def __post_init__(self) -> None:

@@ -73,7 +73,7 @@ class FlightSettings:
     n_lines: int | None = setting(
         None, ge=1, doc="number of lines centred on the area; default: enough to cover it"
     )
-    start_time_s: float = setting(0.0, ge=0.0, doc="firing time of the first pulse (s)")
+    start_time_s: float = setting(0.0, ge=0.0, le=1e9, doc="firing time of the first pulse (s)")
     turn_time_s: float = setting(0.0, ge=0.0, doc="time between lines, no pulses fired (s)")
 
     def __post_init__(self) -> None:

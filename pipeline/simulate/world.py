@@ -111,8 +111,8 @@ class FrameSettings:
     """The local frame: its origin in projected coordinates and the CRS."""
 
     crs: str = setting("EPSG:32631", doc="projected CRS (metres), e.g. a UTM zone")
-    origin_easting_m: float = setting(500_000.0, doc="easting of local (0, 0)")
-    origin_northing_m: float = setting(5_700_000.0, doc="northing of local (0, 0)")
+    origin_easting_m: float = setting(500_000.0, ge=-1e8, le=1e8, doc="easting of local (0, 0)")
+    origin_northing_m: float = setting(5_700_000.0, ge=-1e8, le=1e8, doc="northing of local (0, 0)")
 
 
 @dataclass(frozen=True)
