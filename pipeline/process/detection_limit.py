@@ -77,20 +77,20 @@ class NoBottomSettings:
     # depth-performance statements (e.g. 10-20 %)
     bottom_reflectance: float = setting(
         0.15,
-        gt=0.0,
+        ge=1e-3,
         le=1.0,
         doc="Lambertian reflectance of the bottom whose absence a class-45 point states",
     )
     # 2e-3: coastal water, Petzold (1972) coastal/harbour β(180°) ~ 1e-3 to 1e-2 m⁻¹ sr⁻¹
     backscatter_180_per_m_sr: float = setting(
         2.0e-3,
-        gt=0.0,
+        ge=1e-5,  # pure sea water is ~1e-4 at 532 nm
         le=10.0,
         doc="water volume backscatter β(180°) processing assumes: sets the ratio of a "
         "bottom echo to the column return at the same depth",
     )
     min_column_snr: float = setting(
-        3.0, gt=0.0, le=100.0, doc="column samples above this many noise σ enter the decay fit"
+        3.0, ge=0.5, le=100.0, doc="column samples above this many noise σ enter the decay fit"
     )
 
 

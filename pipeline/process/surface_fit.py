@@ -109,7 +109,7 @@ class SurfaceFitSettings:
         doc="water-level search: surface points with a bottom this far below (air range) first",
     )
     slope_prior_m: float = setting(
-        0.05, ge=0.0, le=100.0, doc="ridge towards the global slope, as an equivalent spread"
+        0.05, ge=1e-3, le=100.0, doc="ridge towards the global slope, as an equivalent spread"
     )
     min_spread_m: float = setting(
         0.25, ge=0.0, le=1000.0, doc="smaller neighbour spread across: flag ill-conditioned"

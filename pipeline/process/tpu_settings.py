@@ -62,10 +62,11 @@ class TpuSettings:
     position_sigma_h_m: float | None = setting(
         0.05,
         ge=0.0,
+        le=100.0,
         doc="navigation, per horizontal axis (None: navigation.gnss_horizontal_sigma_m)",
     )
     position_sigma_v_m: float | None = setting(
-        0.08, ge=0.0, doc="navigation, vertical (None: navigation.gnss_vertical_sigma_m)"
+        0.08, ge=0.0, le=100.0, doc="navigation, vertical (None: navigation.gnss_vertical_sigma_m)"
     )
     attitude_sigma_deg: float | None = setting(
         0.005,
