@@ -313,7 +313,10 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     # after the surface, and not in the last samples, where the trend is one-sided and an echo
     # would be cut by the end of the window
     cols = np.arange(m)[None, :]
-    after = (cols > (i_s + sep)[:, None]) & (cols < m - gap)
+    # a surface echo wider than the system response (a footprint over waves or a slope) needs
+    # the separation in proportion: its own tail is not a bottom
+    widen = np.maximum(width_s / (math.sqrt(2.0) * sigma_samples), 1.0)
+    after = (cols > (i_s + sep * widen)[:, None]) & (cols < m - gap)
     # local noise: electronic + shot noise of the trend the bottom sits on (filtered domain)
     trend = np.maximum(filt - resid, 0.0)
     local_var = noise_f[:, None] ** 2 + shot_noise_counts * trend * kernel_sq

@@ -49,15 +49,20 @@ def _detect(w):
 
 
 def test_bright_column_onset_is_not_a_bottom():
-    w, _ = _waveforms(3000, seed=21)
-    d = _detect(w)
-    assert d.has_surface.all()
-    near = d.has_bottom & (d.t_bottom_s - d.t_surface_s < 20e-9)
-    # before: 11.9 % (seeds 21, 31, 41 alike); after: 0.23 / 0.37 / 0.10 % (the window width
-    # was chosen on seed 22; 31 and 41 held out). The column carried back from 12 samples has
-    # its own noise, so a 5σ test on it lets a few per thousand through
-    assert near.mean() < 0.01
-    assert d.has_bottom.mean() < 0.01
+    near, total, n = 0, 0, 0
+    for seed in (21, 31, 41):
+        w, _ = _waveforms(3000, seed=seed)
+        d = _detect(w)
+        assert d.has_surface.all()
+        near += int(np.sum(d.has_bottom & (d.t_bottom_s - d.t_surface_s < 20e-9)))
+        total += int(d.has_bottom.sum())
+        n += len(w)
+    # near-surface false bottoms in 9 000 waveforms: 1 077 (12 %) with the flank trend alone;
+    # 12 with the column carried back from below (window width chosen on seed 22); 3 once the
+    # separation also widens with the measured surface echo (the hump is wider than the
+    # system response). A 5σ test lets through a few in ten thousand
+    assert near <= 0.001 * n
+    assert total <= 0.002 * n
 
 
 @pytest.mark.xfail(
@@ -74,3 +79,4 @@ def test_shallow_bottom_under_a_bright_column_is_still_found(depth_ns):
     err = d.t_bottom_s - (t_s + depth_ns * 1e-9)
     right = d.has_bottom & (np.abs(err) < 1e-9)
     assert right.mean() > 0.95
+
