@@ -79,4 +79,3 @@ def test_shallow_bottom_under_a_bright_column_is_still_found(depth_ns):
     err = d.t_bottom_s - (t_s + depth_ns * 1e-9)
     right = d.has_bottom & (np.abs(err) < 1e-9)
     assert right.mean() > 0.95
-
