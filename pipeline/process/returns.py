@@ -119,6 +119,14 @@ def _readonly(obj: Any) -> None:
             object.__setattr__(obj, f.name, v)
 
 
+def _rows(obj: Any, index: Any) -> dict[str, Any]:
+    """Every per-row field of the dataclass ``obj`` at ``index`` (None fields stay None)."""
+    return {
+        f.name: (None if getattr(obj, f.name) is None else getattr(obj, f.name)[index])
+        for f in dataclasses.fields(obj)
+    }
+
+
 def _in_unit_interval(name: str, a: np.ndarray) -> None:
     if a.size and (a.min() < 0.0 or a.max() > 1.0):
         raise ValueError(f"`{name}` must be in [0, 1]; got values in [{a.min()}, {a.max()}]")
@@ -288,11 +296,7 @@ class DetectedReturns:
 
     def select(self, index: Any) -> DetectedReturns:
         """The pulses picked by a boolean mask or an index array, as a new object."""
-        kw = {
-            f.name: (None if getattr(self, f.name) is None else getattr(self, f.name)[index])
-            for f in dataclasses.fields(self)
-        }
-        return DetectedReturns(**kw)
+        return DetectedReturns(**_rows(self, index))
 
 
 @dataclass(frozen=True)
@@ -369,11 +373,7 @@ class Points:
 
     def select(self, index: Any) -> Points:
         """The points picked by a boolean mask or an index array, as a new object."""
-        kw = {
-            f.name: (None if getattr(self, f.name) is None else getattr(self, f.name)[index])
-            for f in dataclasses.fields(self)
-        }
-        return Points(**kw)
+        return Points(**_rows(self, index))
 
     def replace(self, **changes: Any) -> Points:
         """A copy with some fields replaced (validated again)."""
