@@ -9,8 +9,9 @@ set -euo pipefail
 cd "$(dirname "$0")"
 VENV=${VENV:-.venv}
 PYTHON=${PYTHON:-python3}
-# open3d needs libusb at import time; libgomp for its threads.
-APT_PACKAGES="libusb-1.0-0 libgomp1"
+# open3d needs libusb at import time; libgomp for its threads; pyvista's off-screen 3D views
+# render through Mesa EGL (libegl1, libegl-mesa0, libgl1-mesa-dri), vtk links libGL and libXrender.
+APT_PACKAGES="libusb-1.0-0 libgomp1 libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri libxrender1"
 # the tests alone also need a headless browser: report.html is opened in it (not for the demo)
 APT_PACKAGES_TEST="chromium"
 
