@@ -2,8 +2,9 @@
 
 Per waveform, vectorised over the batch:
 
-1. **Noise floor from the waveform itself**: the baseline and noise σ are the median and the
-   scaled MAD of the samples before the first return (the range gate opens before the surface;
+1. **Noise floor from the waveform itself**: the baseline is the clipped mean of the samples
+   before the first return, the noise σ a clipped rms of the first differences
+   (:mod:`pipeline.process.detect_noise`) (the range gate opens before the surface;
    the first ``noise_fraction`` of the window is used).
 2. **Matched filter**: a Gaussian of the system pulse's σ (the known system response),
    which maximises the SNR of a Gaussian return in white noise.
@@ -43,9 +44,10 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.special import ndtr
 
 from pipeline.config import setting
-from pipeline.constants import FWHM_TO_SIGMA, MAD_TO_SIGMA
+from pipeline.constants import FWHM_TO_SIGMA
 from pipeline.process.detect_merged import column_decay, fit_merged, merged_bottoms
 from pipeline.process.detect_near import column_excess
+from pipeline.process.detect_noise import difference_noise_sigma, window_baseline
 from pipeline.process.returns import DetectorFlag
 
 __all__ = [
@@ -276,20 +278,23 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     sigma_samples = pulse_fwhm_s * FWHM_TO_SIGMA / dt_s
     k = int(s.noise_fraction * m) if noise_samples is None else int(noise_samples)
     k = min(max(k, 4), m - 1)
-    baseline = np.median(y[:, :k], axis=1)
+    # raw noise σ from first differences over the whole waveform (returns are a few samples
+    # wide and clipped out; a clipped second moment, not quantised on integer codes as the MAD
+    # is: :mod:`pipeline.process.detect_noise`), then through the filter's own discrete kernel
+    noise = difference_noise_sigma(y)
+    baseline, baseline_sigma = window_baseline(y, k, noise)
     filt = gaussian_filter1d(y - baseline[:, None], sigma_samples, axis=1, mode="nearest")
-    # raw noise σ from first differences over the whole waveform (robust: returns are a few
-    # samples wide, the MAD ignores them), then through the filter's own discrete kernel
-    diff = np.diff(y, axis=1)
-    noise = MAD_TO_SIGMA * np.median(np.abs(diff - np.median(diff, axis=1)[:, None]), axis=1)
     impulse = np.zeros(int(8 * sigma_samples) * 2 + 3)
     impulse[impulse.size // 2] = 1.0
     kernel = gaussian_filter1d(impulse, sigma_samples, mode="constant")
     kernel_sq = float(np.sum(kernel**2))
-    noise_f = noise / math.sqrt(2.0) * math.sqrt(kernel_sq)
+    noise_f = noise * math.sqrt(kernel_sq)
     # a noise-free waveform still needs a finite threshold: a tiny fraction of its peak
     noise_f = np.maximum(noise_f, 1e-9 * np.max(np.abs(filt), axis=1) + 1e-300)
-    thr = s.threshold_sigma * noise_f
+    # the surface stands on the baseline, whose own error shifts every filtered sample alike
+    # (~0.4 σ with a 15-sample pre-trigger): it adds to the threshold (bottoms are measured on
+    # the residual to a local trend and do not see it)
+    thr = s.threshold_sigma * np.sqrt(noise_f**2 + baseline_sigma**2)
     peak = np.zeros_like(filt, dtype=bool)
     peak[:, 1:-1] = (filt[:, 1:-1] >= filt[:, :-2]) & (filt[:, 1:-1] > filt[:, 2:])
     strong = peak & (filt > thr[:, None])
