@@ -230,6 +230,9 @@ def _returns(parts: list[dict[str, np.ndarray]]) -> DetectedReturns:
         bottom_amplitude=cat["bottom_amplitude"],
         # in-column returns (full waveform only; photon detections leave them empty)
         **{k: cat[k] for k in DetectedReturns.COLUMN_FIELDS if k in cat},
+        # the photon detector's no-bottom limits (full waveform: zeros, replaced by
+        # no_bottom_limits once the survey's bottoms are in)
+        t_no_bottom_s=cat["t_no_bottom_s"],
         t_emit_s=cat["t_emit_s"],
         line_id=cat["line_id"],
     )

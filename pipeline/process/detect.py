@@ -98,6 +98,9 @@ class WaveformDetections:
     Times are from the start of each waveform's time axis (``t0_s``): round-trip times.
     Absent returns have their mask False and 0 in the other fields (never NaN). The in-column
     return (``has_column`` ...) is optional: left out (None), it is filled with "none found".
+    ``t_no_bottom_s`` (a pulse without a bottom: the time down to which none is established, 0
+    where unknown) is the photon detector's; the full-waveform one comes from
+    :mod:`pipeline.process.no_bottom`.
     """
 
     has_surface: np.ndarray
@@ -114,6 +117,7 @@ class WaveformDetections:
     t_column_s: np.ndarray | None = None
     column_amplitude: np.ndarray | None = None
     column_confidence: np.ndarray | None = None
+    t_no_bottom_s: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         # detectors without column returns (photon counting) leave them out; concatenating
@@ -121,7 +125,7 @@ class WaveformDetections:
         n = np.shape(self.has_surface)[0]
         if self.has_column is None:
             object.__setattr__(self, "has_column", np.zeros(n, dtype=bool))
-        for name in ("t_column_s", "column_amplitude", "column_confidence"):
+        for name in ("t_column_s", "column_amplitude", "column_confidence", "t_no_bottom_s"):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, np.zeros(n))
 

@@ -244,6 +244,15 @@ def detect_photon_events(
         zc = (zsum - bg * nbins * centre) / excess
         return np.where(w > bg * nbins, zc, z0 + (i_peak + 0.5) * s.bin_m), np.maximum(excess, 0.0)
 
+    # No bottom: light is seen to come back down to the lowest bin of the run of significant
+    # boxes that starts at the surface peak (the water column); a bottom there, brighter than
+    # the column, would have been found. Past it nothing is established: the limit, and none
+    # where the run ends before a box clear of the surface's own (opaque water, land: the
+    # surface echo's tail alone makes the boxes overlapping it significant).
+    weak_below = (sig_box < s.threshold_sigma) & (col < i_s[:, None])
+    i_lim = np.where(weak_below, col, -1).max(axis=1) + 1
+    has_lim = has_s & ~has_b & (i_lim < s_lo - cb)
+    z_lim = z0 + (i_lim + 0.5) * s.bin_m
     z_s, amp_s = centroid(i_s, s_box)
     z_b, amp_b = centroid(i_b, b_box)
     # per shot: time at which its own measured beam reaches the window's detected heights
@@ -254,6 +263,8 @@ def detect_photon_events(
     t_b = (origin_m[:, 2] - z_b[window]) * scale
     hs = has_s[window] & (t_s > 0)
     hb = has_b[window] & hs & (t_b > t_s)
+    t_lim = (origin_m[:, 2] - z_lim[window]) * scale
+    t_lim = np.where(has_lim[window] & hs & ~hb & (t_lim > t_s), t_lim, 0.0)
     conf_s = 1.0 - np.exp(-0.5 * (np.maximum(sig_s, 0) / s.threshold_sigma) ** 4)
     conf_b = 1.0 - np.exp(-0.5 * (np.maximum(sig_b, 0) / s.threshold_sigma) ** 4)
     flags = np.zeros(n, dtype=np.uint16)
@@ -270,4 +281,5 @@ def detect_photon_events(
         bottom_confidence=np.where(hb, conf_b[window], zero),
         noise_sigma=np.sqrt(bg_safe)[window],
         flags=flags,
+        t_no_bottom_s=t_lim,
     )

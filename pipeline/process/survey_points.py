@@ -74,9 +74,12 @@ def no_bottom_points(
     a bottom of the assumed reflectance would have been detected, so the absence of a bottom is
     established there and no deeper. A full-waveform pulse whose column gave no limit (too weak
     or too short to measure its decay: over land, or a bottom merged with the surface in a metre
-    of water) establishes nothing and gets no point. Photon-counting detections carry no limit
-    (``t_no_bottom_s`` None): theirs stays the end of the recorded window, which the range gate
-    fixes ``window_s − pre_trigger_s`` after the surface echo (system knowledge).
+    of water) establishes nothing and gets no point. A photon-counting window's limit is the
+    lowest height its histogram still shows the water column at
+    (:func:`~pipeline.process.detect_photons.detect_photon_events`), not the end of the range
+    gate: opaque water establishes nothing below its surface. Detections without limits
+    (``t_no_bottom_s`` None) keep the end of the recorded window, ``window_s − pre_trigger_s``
+    after the surface echo.
     """
     ins = ctx.instrument
     none = returns.has_surface & ~returns.has_bottom

@@ -105,3 +105,39 @@ def test_sparse_background_photons_above_the_surface_are_not_a_surface():
     z_s = 300.0 - C * det.t_surface_s / (2 * N_AIR)
     assert det.has_surface.all()
     assert np.abs(z_s).max() < 0.03
+
+
+# --- no bottom: down to where the water column is seen, not the end of the range gate ------
+def _column_events(n_shots, column_m, lam_col=2.0, seed=0):
+    """Surface echo, a water column of uniform return over ``column_m`` of water, background."""
+    offsets, times, o, d, t_s, _ = _events(n_shots, 30.0, lam_b=0.0, seed=seed)
+    rng = np.random.default_rng(seed + 100)
+    t_end = t_s + 2.0 * column_m * N_G / C
+    k = rng.poisson(lam_col, n_shots)
+    shot = np.repeat(np.arange(n_shots), k)
+    extra = rng.uniform(t_s, t_end, k.sum()) if column_m > 0 else np.zeros(0)
+    old_shot = np.repeat(np.arange(n_shots), np.diff(offsets))
+    all_shot = np.concatenate([old_shot, shot[: extra.size]])
+    all_t = np.concatenate([times, extra])
+    order = np.lexsort((all_t, all_shot))
+    new_offsets = np.r_[0, np.cumsum(np.bincount(all_shot, minlength=n_shots))]
+    return new_offsets, all_t[order], o, d, t_s, t_end
+
+
+def test_no_bottom_limit_is_where_the_column_is_last_seen():
+    # 2 column photons a shot spread over 3 m of water (200 a window over ~60 bins of 0.1 m in
+    # air range: ~3.3 a bin against 1 background photon per shot over 80 m: ~0.25 a bin)
+    offsets, times, o, d, t_s, t_end = _column_events(2000, 3.0, seed=3)
+    det = detect_photon_events(offsets, times, o, d, N_AIR)
+    assert det.has_surface.all() and not det.has_bottom.any()
+    # the last box (±2 bins of 0.67 ns) still significant straddles the column's end
+    assert np.all(np.abs(det.t_no_bottom_s - t_end) < 1.5e-9)
+
+
+def test_opaque_water_establishes_no_bottom_depth():
+    # no column photons at all (the column dies inside the surface echo): no limit, where the
+    # range gate's end (~50 ns below the 30 m "seabed" here) would claim ~40 m of water
+    offsets, times, o, d, *_ = _column_events(2000, 0.0, lam_col=0.0, seed=4)
+    det = detect_photon_events(offsets, times, o, d, N_AIR)
+    assert det.has_surface.all() and not det.has_bottom.any()
+    assert np.all(det.t_no_bottom_s == 0.0)
