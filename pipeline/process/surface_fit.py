@@ -15,7 +15,11 @@ Method
    sigmas (measured from the surface heights) above the level, or to a region of candidates
    far wider than a crest region: a wave crest is water. A
    pulse without a surface return whose straight (air) bottom point is higher than the band
-   is land. Points below the band are not water surface (flagged outliers).
+   is land. Points below the band are not water surface (flagged outliers). With no water
+   level given, a survey whose detector measured the water column (no-bottom limits given)
+   and where fewer than ``min_wet_pulses`` pulses show light from under their surface return
+   (a bottom, an in-column return, a measured column decay) has no evidence of water: every
+   return is land.
 3. Local fit, batched: for each water pulse, the ``k_neighbours`` nearest water-surface points
    (horizontally, within ``radius_m``, from a ``scipy.spatial.cKDTree``) give the plane
    ``z = z_global(x, y) + a + b dx + c dy`` by weighted least squares on stacked 3x3 normal
@@ -45,7 +49,12 @@ from pipeline.config import setting
 from pipeline.constants import MAD_TO_SIGMA
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.returns import DetectedReturns, PointFlag
-from pipeline.process.surface_land import global_plane, land_surface_points, masked_median
+from pipeline.process.surface_land import (
+    global_plane,
+    land_surface_points,
+    masked_median,
+    no_water_seen,
+)
 
 __all__ = ["SurfaceFitSettings", "WaterSurface", "fit_water_surface", "surface_points_m"]
 
@@ -103,6 +112,13 @@ class SurfaceFitSettings:
         None, doc="known water level (local z) to start from instead of the histogram mode"
     )
     level_bin_m: float = setting(0.25, gt=0.0, doc="histogram bin of the water-level search")
+    min_wet_pulses: int = setting(
+        3,
+        ge=1,
+        doc="pulses showing light under their surface return (a bottom or in-column return "
+        "level_min_depth_m below it, or a measured water column) needed to conclude there is "
+        "water; fewer, and no water_level_hint_m: every return is land",
+    )
     level_min_depth_m: float = setting(
         1.0,
         ge=0.0,
@@ -309,8 +325,10 @@ def fit_water_surface(
     flags = np.zeros(n, dtype=np.uint16)
 
     pb = o + d * (c * returns.t_bottom_s / (2.0 * st.air_index))[:, None]
+    pc = o + d * (c * returns.t_column_s / (2.0 * st.air_index))[:, None]
+    wet = returns.has_bottom & (ps[:, 2] - pb[:, 2] > st.level_min_depth_m)
+    no_water = no_water_seen(returns, wet, ps[:, 2] - pc[:, 2], st)
     if has_s.sum() >= 3:
-        wet = returns.has_bottom & (ps[:, 2] - pb[:, 2] > st.level_min_depth_m)
         gplane, gsigma = global_plane(ps[has_s], st, wet[has_s])
     else:
         level = st.water_level_hint_m
@@ -325,7 +343,6 @@ def fit_water_surface(
     # it, neighbours that are land candidates too, and a height above the measured sea
     res_s = np.where(has_s, ps[:, 2] - zg(ps[:, 0], ps[:, 1]), 0.0)
     res_b = pb[:, 2] - zg(pb[:, 0], pb[:, 1])
-    pc = o + d * (c * returns.t_column_s / (2.0 * st.air_index))[:, None]
     water_below = (returns.has_bottom & (res_b < 0.0)) | (
         returns.has_column & (pc[:, 2] - zg(pc[:, 0], pc[:, 1]) < 0.0)
     )
@@ -335,6 +352,11 @@ def fit_water_surface(
     low_s = has_s & (res_s <= -st.below_margin_m)
     water_s = has_s & ~land_s & ~low_s
     land_b = ~has_s & returns.has_bottom & (res_b >= st.land_margin_m)
+    if no_water:
+        # no pulse saw under its first return: no evidence of water, whatever level the
+        # surface returns make (a flat field is as level as a calm sea)
+        land_s, water_s, low_s = has_s.copy(), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+        land_b = ~has_s & returns.has_bottom
     is_land = land_s | land_b
 
     # global plane: entry and normal for everyone to start with

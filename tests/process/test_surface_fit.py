@@ -1,5 +1,7 @@
 """Water-surface fit: a tilted plane, outliers, land, sparse pulses, a profiler line."""
 
+import dataclasses
+
 import numpy as np
 from scipy import constants
 
@@ -252,3 +254,17 @@ def test_wide_berm_below_the_wave_height_is_land():
     assert np.sum(~land & (sea > FIT.land_margin_m)) > 100  # crests above the margin
     assert not ws.is_land[~land].any()
     assert ws.is_land[land & (ground > FIT.land_margin_m + 0.1)].all()
+
+
+def test_level_land_with_no_light_under_it_is_land():
+    # a flat field 5 m up, seen by a detector that looked for a water column under every
+    # surface return (no-bottom limits given) and found none, nor any bottom: no water
+    o, d, r, *_ = tilted_returns(tilt_deg=0.0, z0=5.0)
+    dry = dataclasses.replace(make_returns(o, d, r), t_no_bottom_s=np.zeros(len(o)))
+    ws = fit_water_surface(dry, FIT)
+    assert ws.is_land.all() and not ws.is_water.any()
+    # control: the same returns, a column measured under each (2 m of water below them)
+    wet = dataclasses.replace(dry, t_no_bottom_s=dry.t_surface_s + 2 * 2.0 * 1.34 / C)
+    ws = fit_water_surface(wet, FIT)
+    assert ws.is_water.all()
+    assert abs(ws.global_plane[0] - 5.0) < 1e-6
