@@ -254,6 +254,8 @@ def _waveform_chunk(scene, plan, ctx, clock, paths, keep_fraction):
             ps.detect,
             noise_samples=ins.noise_samples,
             shot_noise_counts=ins.shot_noise_counts,
+            # the digitiser's top code, 2^bit_depth − 1 (its datasheet)
+            top_code=ins.amplitude_full_scale - 1.0,
         )
     nb = None
     if plan.runs("no_bottom_limit"):
@@ -291,6 +293,8 @@ def _photon_chunk(scene, ctx, clock, paths, pulses):
             ctx.instrument.air_index,
             scene.process.photon_detect,
             pulse_id=pulses.pulse_id,
+            # the detector's channels per beam (its datasheet): one event each per dead time
+            n_channels=scene.detector.n_channels,
         )
     return found, ev.flags
 

@@ -20,9 +20,11 @@ Rules (:func:`classify_points`), first match wins
 Bottom returns (``ReturnKind.BOTTOM``):
 
 1. ``GRAZING`` (no valid water entry) -> 1 unclassified.
-2. Any detector flag of ``unreliable_detector_flags`` (default MERGED, SATURATED:
-   the bottom time is not trustworthy), or the pulse's own surface return is an outlier of the
-   local fit (``surface_outlier_unreliable``: its timing reference is suspect) -> 1.
+2. Any detector flag of ``unreliable_detector_flags`` (default MERGED, CLIPPED_MERGED:
+   the bottom time is not trustworthy; a SATURATED pulse's clipped echoes are timed from their
+   plateau's edges, or given no bottom, by :mod:`pipeline.process.detect_clipped`), or the
+   pulse's own surface return is an outlier of the local fit (``surface_outlier_unreliable``:
+   its timing reference is suspect) -> 1.
 3. ``confidence < min_confidence`` -> 7 low noise.
 4. ``LAND`` (the pulse is above the water level + margin) -> 2 ground.
 5. ``ABOVE_SURFACE`` or ``depth_m < 0`` (a "bottom" above the fitted water surface over water)
@@ -32,9 +34,10 @@ Bottom returns (``ReturnKind.BOTTOM``):
 7. Otherwise -> 40 bathymetric point.
 
 Surface returns (``ReturnKind.SURFACE``); detector flags are ignored (a saturated specular
-surface return still times the surface):
+surface return still times the surface: :mod:`pipeline.process.detect_clipped`), but one:
 
-1. ``GRAZING`` -> 1 unclassified.
+1. ``GRAZING``, or the detector flag ``CLIPPED_MERGED`` (a clipped plateau running on into
+   the column: the surface time is only an early bound) -> 1 unclassified.
 2. ``LAND``: the only return of its pulse -> 2 ground; the first of several -> 1 (vegetation,
    structure or unknown).
 3. ``confidence < min_confidence`` -> 7 low noise.
@@ -124,8 +127,9 @@ class ClassifySettings:
         False, doc="a bottom whose pulse's own surface return is an outlier stays unclassified"
     )
     unreliable_detector_flags: tuple[str, ...] = setting(
-        ("MERGED", "SATURATED"),
-        doc="detector flags that leave a bottom point unclassified",
+        ("MERGED", "CLIPPED_MERGED"),
+        doc="detector flags that leave a bottom point unclassified (SATURATED alone does not: "
+        "the detectors time clipped echoes from their edges or report no bottom)",
     )
 
     def __post_init__(self) -> None:
@@ -188,13 +192,14 @@ def classify_points(points: Points, settings: ClassifySettings | None = None) ->
     surface = np.select(
         [
             grazing,
+            _has(df, DetectorFlag.CLIPPED_MERGED),
             land & (points.number_of_returns <= 1),
             land,
             low_conf,
             outlier & (depth < 0.0),
             outlier,
         ],
-        [UNCLASSIFIED, GROUND, UNCLASSIFIED, LOW_NOISE, HIGH_NOISE, LOW_NOISE],
+        [UNCLASSIFIED, UNCLASSIFIED, GROUND, UNCLASSIFIED, LOW_NOISE, HIGH_NOISE, LOW_NOISE],
         default=WATER_SURFACE,
     )
     # a column return is timed and refracted like a bottom: the same rules, another class

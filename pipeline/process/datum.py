@@ -35,7 +35,7 @@ import numpy as np
 from pipeline.config import setting
 from pipeline.constants import MAD_TO_SIGMA
 from pipeline.process.classify import GROUND
-from pipeline.process.returns import Points, ReturnKind
+from pipeline.process.returns import DetectorFlag, Points, ReturnKind
 
 __all__ = ["DatumSettings", "Datum", "survey_datum", "depth_below_datum_m"]
 
@@ -109,7 +109,9 @@ def survey_datum(points: Points, settings: DatumSettings | None = None) -> Datum
     s = settings or DatumSettings()
     if s.water_level_m is not None:
         return Datum(float(s.water_level_m), "user", 0)
-    water = (points.kind == ReturnKind.SURFACE) & (points.classification != GROUND)
+    # a clipped surface merged with the column is only an early bound of the level
+    bound = (points.detector_flags & np.uint16(DetectorFlag.CLIPPED_MERGED)) != 0
+    water = (points.kind == ReturnKind.SURFACE) & (points.classification != GROUND) & ~bound
     z = points.xyz_m[water, 2]
     if z.size == 0:
         # nothing measured the water level (zero photons, all ground): the fallback, recorded

@@ -41,13 +41,14 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
-from scipy.special import ndtr
 
 from pipeline.config import setting
 from pipeline.constants import FWHM_TO_SIGMA
+from pipeline.process.detect_clipped import clipped_bottom, clipped_echoes
 from pipeline.process.detect_merged import column_decay, fit_merged, merged_bottoms
 from pipeline.process.detect_near import column_excess
 from pipeline.process.detect_noise import difference_noise_sigma, window_baseline
+from pipeline.process.detect_timing import parabolic_peak, surface_step_fit
 from pipeline.process.returns import DetectorFlag
 
 __all__ = [
@@ -88,6 +89,13 @@ class DetectSettings:
         choices=("strongest", "last"),
         doc="bottom among the candidates: the strongest, or the last (a scattering layer "
         "stronger than the seabed then stays an in-column return)",
+    )
+    max_plateau_fwhm: float = setting(
+        6.0,
+        ge=1.0,
+        le=100.0,
+        doc="longest clipped plateau (system FWHMs) taken for one echo; longer, it runs on "
+        "into the column and the bottom: the surface is not timed, no bottom is reported",
     )
 
 
@@ -163,59 +171,6 @@ def flank_trend(
     return np.maximum(left, right)
 
 
-def _surface_step_fit(filt: np.ndarray, i_peak: np.ndarray, sg: float) -> np.ndarray:
-    """Surface time from ``A g(t − t_s) + B Φ((t − t_s)/σ)`` fitted near the surface peak.
-
-    The water-column return starts at the surface and, over a few samples, is a step smoothed
-    by the system response; it pulls the plain peak late. For each candidate ``t_s`` on a
-    0.02-sample grid around the peak, ``A`` and ``B`` follow by linear least squares; the
-    candidate with the smallest residual wins (batched: pulses × candidates × samples).
-    """
-    n, m = filt.shape
-    half_lo, half_hi = int(math.ceil(3.0 * sg)), int(math.ceil(2.0 * sg))
-    cols = np.clip(i_peak[:, None] + np.arange(-half_lo, half_hi + 1), 0, m - 1)
-    y = np.take_along_axis(filt, cols, axis=1)[:, None, :]  # (n, 1, w)
-    cand = i_peak[:, None] + np.arange(-1.5, 0.5001, 0.02)[None, :]  # (n, k)
-    z = (cols[:, None, :] - cand[:, :, None]) / sg  # (n, k, w)
-    g = np.exp(-0.5 * z * z)
-    h = ndtr(z)
-    gg, hh, gh = (g * g).sum(2), (h * h).sum(2), (g * h).sum(2)
-    gy, hy = (g * y).sum(2), (h * y).sum(2)
-    det = gg * hh - gh * gh
-    ok = det > 1e-12 * gg * hh
-    a = np.where(ok, (hh * gy - gh * hy) / np.where(ok, det, 1.0), gy / gg)
-    b = np.where(ok, (gg * hy - gh * gy) / np.where(ok, det, 1.0), 0.0)
-    # negative amplitudes are not physical: fall back to the Gaussian alone there
-    bad = (a <= 0) | (b < 0)
-    a, b = np.where(bad, gy / gg, a), np.where(bad, 0.0, b)
-    sse = (y * y).sum(2) - a * gy - b * hy
-    k = np.clip(np.argmin(sse, axis=1), 1, cand.shape[1] - 2)
-    rows = np.arange(n)
-    s0, s1, s2 = sse[rows, k - 1], sse[rows, k], sse[rows, k + 1]
-    # parabola through the three residuals around the minimum: sub-grid time
-    curv = s0 - 2.0 * s1 + s2
-    off = np.where(curv > 0, 0.5 * (s0 - s2) / np.where(curv > 0, curv, 1.0), 0.0)
-    return cand[rows, k] + 0.02 * np.clip(off, -1.0, 1.0)
-
-
-def _parabolic_peak(y: np.ndarray, idx: np.ndarray):
-    """Sub-sample peak position, height and σ (samples) from three samples (log-parabola)."""
-    n = y.shape[1]
-    rows = np.arange(y.shape[0])
-    i = np.clip(idx, 1, n - 2)
-    ym, y0, yp = y[rows, i - 1], y[rows, i], y[rows, i + 1]
-    floor = 1e-12 * np.maximum(np.abs(y0), 1e-30)
-    lm, l0, lp = (np.log(np.maximum(v, floor)) for v in (ym, y0, yp))
-    den = lm - 2.0 * l0 + lp
-    ok = (ym > 0) & (y0 > 0) & (yp > 0) & (den < 0)
-    off = np.where(ok, 0.5 * (lm - lp) / np.where(ok, den, -1.0), 0.0)
-    off = np.clip(off, -0.5, 0.5)
-    height = np.where(ok, np.exp(l0 - 0.25 * (lm - lp) * off), y0)
-    # a Gaussian's log has curvature -1/σ²
-    width = np.where(ok, np.sqrt(-1.0 / np.where(ok, den, -1.0)), 0.0)
-    return i + off, height, width
-
-
 #: Waveforms detected at once (bounds the float64 temporaries to a few tens of MB).
 BLOCK_PULSES = 8192
 #: Candidates up to this many FWHM past the minimum separation are tested against the column
@@ -231,6 +186,7 @@ def detect_full_waveform(
     settings: DetectSettings | None = None,
     noise_samples: int | None = None,
     shot_noise_counts: float = 0.0,
+    top_code: float | None = None,
 ) -> WaveformDetections:
     """Find the surface and bottom returns in a batch of waveforms.
 
@@ -251,6 +207,10 @@ def detect_full_waveform(
         holding ``y`` counts of signal is then ``σ² + F·G·y``, so the bottom threshold rises
         over the water-column return, whose shot noise would otherwise pass as echoes.
         0 (default): signal-independent noise.
+    top_code : float, optional
+        The digitiser's top code (``2^bits − 1``): a pulse with a sample there is flagged
+        SATURATED and its clipped echo timed from the plateau's edges
+        (:mod:`pipeline.process.detect_clipped`). None: samples are never clipped.
 
     Returns
     -------
@@ -260,10 +220,18 @@ def detect_full_waveform(
     s = settings or DetectSettings()
     samples = np.asarray(samples)
     if samples.shape[0] <= BLOCK_PULSES:
-        return _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_counts)
+        return _detect_block(
+            samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_counts, top_code
+        )
     blocks = [
         _detect_block(
-            samples[i : i + BLOCK_PULSES], dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_counts
+            samples[i : i + BLOCK_PULSES],
+            dt_s,
+            pulse_fwhm_s,
+            s,
+            noise_samples,
+            shot_noise_counts,
+            top_code,
         )
         for i in range(0, samples.shape[0], BLOCK_PULSES)
     ]
@@ -275,7 +243,7 @@ def detect_full_waveform(
     )
 
 
-def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_counts):
+def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_counts, top_code):
     """:func:`detect_full_waveform` on one block of waveforms."""
     y = np.asarray(samples, dtype=np.float64)
     n, m = y.shape
@@ -305,11 +273,26 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     strong[:, :k] = False  # the noise window holds no return by construction
     has_s = strong.any(axis=1)
     i_s = np.where(has_s, np.argmax(strong, axis=1), 0)
-    t_idx_s, amp_s, width_s = _parabolic_peak(filt, i_s)
+    t_idx_s, amp_s, width_s = parabolic_peak(filt, i_s)
     if s.surface_step:
         t_idx_s = np.where(
-            has_s, _surface_step_fit(filt, i_s, math.sqrt(2.0) * sigma_samples), t_idx_s
+            has_s, surface_step_fit(filt, i_s, math.sqrt(2.0) * sigma_samples), t_idx_s
         )
+    # a surface echo clipped at the top code: its filtered peak sits anywhere on the plateau;
+    # the plateau's edges time it (one echo), or bound it (run on into the column: "merged")
+    clip_s = clip_merged = np.zeros(n, dtype=bool)
+    saturated = clip_s
+    if top_code is not None:
+        clip = clipped_echoes(y, top_code, baseline, noise, sigma_samples, s.max_plateau_fwhm)
+        saturated = clip.saturated
+        clip_s = saturated & has_s & (i_s >= clip.first - 1)
+        clip_merged = clip_s & clip.merged
+        t_idx_s = np.where(clip_s, clip.t_idx, t_idx_s)
+        # the filtered peak of a Gaussian of σ through the matched filter: A / √2
+        amp_s = np.where(clip_s, clip.amplitude / math.sqrt(2.0), amp_s)
+        width_s = np.where(clip_s, math.sqrt(2.0) * sigma_samples, width_s)
+        # the bottom is searched for past the plateau
+        i_s = np.where(clip_s, clip.stop, i_s)
 
     sep = s.min_separation_fwhm * pulse_fwhm_s / dt_s
     fwhm_samples = pulse_fwhm_s / dt_s
@@ -348,6 +331,7 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
         col_var = noise_f[:, None] ** 2 + shot_noise_counts * np.maximum(carried, 0.0) * kernel_sq
         thr_near = s.threshold_sigma * np.sqrt(local_var + col_var * 2.0 / width)
         cand &= ~(near & column & (excess <= thr_near))
+    cand &= ~clip_merged[:, None]
     has_b = cand.any(axis=1)
     pick = cand
     if s.bottom_pick == "last":
@@ -356,18 +340,25 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
         last = m - 1 - np.argmax(cand[:, ::-1], axis=1)
         pick = cand & (cols >= (last - sep)[:, None])
     i_b = np.where(has_b, np.argmax(np.where(pick, resid, -np.inf), axis=1), 0)
-    t_idx_b, _, _ = _parabolic_peak(resid, i_b)
+    t_idx_b, _, _ = parabolic_peak(resid, i_b)
+    if top_code is not None and saturated.any():
+        # a bottom clipped on a plateau of its own: timed from its edges, or no bottom
+        on_top, t_clip = clipped_bottom(y, top_code, i_b, baseline, noise, sigma_samples, s)
+        t_idx_b = np.where(on_top & has_b & np.isfinite(t_clip), t_clip, t_idx_b)
+        has_b &= ~(on_top & ~np.isfinite(t_clip))
     amp_b = resid[np.arange(n), i_b]
     snr_b_local = amp_b / np.sqrt(local_var[np.arange(n), i_b])
 
     flags = np.zeros(n, dtype=np.uint16)
+    flags[saturated] |= np.uint16(DetectorFlag.SATURATED)
+    flags[clip_merged] |= np.uint16(DetectorFlag.CLIPPED_MERGED)
     # another significant return clearly after the reported bottom: a layer or object above
     # the seabed may have been taken for it (bottom_pick = "last" reports the later one)
     later = has_b & np.any(cand & (cols > (i_b + sep)[:, None]), axis=1)
     flags[later] |= np.uint16(DetectorFlag.MULTIPLE_BOTTOM_CANDIDATES)
     # a surface peak wider than the system response hides a bottom just below it
     # (the filtered system response has σ √2 samples; 15 % wider means a second return)
-    merged = has_s & ~has_b & (width_s > 1.15 * math.sqrt(2.0) * sigma_samples)
+    merged = has_s & ~has_b & ~clip_s & (width_s > 1.15 * math.sqrt(2.0) * sigma_samples)
     flags[merged] |= np.uint16(DetectorFlag.MERGED)
     if s.fit_merged and merged.any():
         idx = np.flatnonzero(merged)
@@ -400,7 +391,7 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
         # early; the column's slope under it moves the filtered peak far less
         near = np.clip(i_c[:, None] + np.arange(-2, 3), 0, m - 1)
         i_f = near[rows, np.argmax(np.take_along_axis(filt, near, axis=1), axis=1)]
-        t_idx_c, _, _ = _parabolic_peak(filt, i_f)
+        t_idx_c, _, _ = parabolic_peak(filt, i_f)
         # (with a separation under 2 samples that peak could pass a neighbour: keep the order)
         has_c &= (t_idx_c > t_idx_s) & (t_idx_c < t_idx_b)
         amp_c = resid[rows, i_c]

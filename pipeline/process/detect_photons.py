@@ -61,6 +61,14 @@ class PhotonDetectSettings:
     min_separation_m: float = setting(0.3, ge=0.0, le=100.0, doc="bottom below the surface by")
     centroid_bins: int = setting(2, ge=0, le=50, doc="bins each side used for the centroid")
     trend_bins: int = setting(20, ge=2, le=1000, doc="flank length of the column trend, bins")
+    saturation_pe: float = setting(
+        3.0,
+        gt=0.0,
+        le=100.0,
+        doc="surface photoelectrons per shot and channel, -ln(1 - share of shots with an "
+        "event in the surface box) / n_channels, from which the window is flagged SATURATED "
+        "(dead-time pile-up: the first photon of nearly every shot, early in the echo)",
+    )
 
 
 def _significance(k: np.ndarray, b: np.ndarray, n_bins: int) -> np.ndarray:
@@ -108,6 +116,24 @@ def _background(hist: np.ndarray) -> np.ndarray:
     return np.maximum(trimmed, np.where(empty > 0, rate, 0.0))
 
 
+def _surface_pileup(shot, window, b, ev_win, s_box, n, n_win, n_channels):
+    """Surface photoelectrons per shot and channel of each window, from its pile-up.
+
+    A channel records at most one event per dead time, so of an echo shorter than it each
+    shot-channel keeps only whether it fired: with ``λ`` photoelectrons per channel, a shot
+    (``N`` channels) has an event in the surface box with probability ``1 − exp(−N λ)``.
+    Inverted on the window's share ``p`` of such shots (capped at ``1 − 1/(2 S)`` of ``S``
+    shots, where ``λ`` stops being measurable): ``λ = −ln(1 − p) / N``. Background events in
+    the box count too (a few per cent at most: the box spans a few ns).
+    """
+    in_box = (b >= s_box[0][ev_win]) & (b <= s_box[1][ev_win])
+    hit = np.bincount(shot[in_box], minlength=n) > 0
+    shots = np.maximum(np.bincount(window, minlength=n_win), 1)
+    p = np.bincount(window[hit], minlength=n_win) / shots
+    p = np.minimum(p, 1.0 - 0.5 / shots)
+    return -np.log1p(-p) / max(int(n_channels), 1)
+
+
 def detect_photon_events(
     offsets: np.ndarray,
     times_s: np.ndarray,
@@ -116,6 +142,7 @@ def detect_photon_events(
     n_air: float,
     settings: PhotonDetectSettings | None = None,
     pulse_id: np.ndarray | None = None,
+    n_channels: int = 1,
 ) -> WaveformDetections:
     """Surface and bottom per shot from photon events accumulated along track.
 
@@ -133,6 +160,8 @@ def detect_photon_events(
     pulse_id : (n_shots,) int, optional
         Global shot numbers; windows are then ``pulse_id // shots_per_window``, so a survey
         split into chunks (of whole windows) gives the same windows as one piece.
+    n_channels : int
+        Detector channels per beam (the datasheet's): each records one event per dead time.
 
     Returns
     -------
@@ -254,6 +283,7 @@ def detect_photon_events(
     has_lim = has_s & ~has_b & (i_lim < s_lo - cb)
     z_lim = z0 + (i_lim + 0.5) * s.bin_m
     z_s, amp_s = centroid(i_s, s_box)
+    lam_s = _surface_pileup(shot, window, b, ev_win, s_box, n, n_win, n_channels)
     z_b, amp_b = centroid(i_b, b_box)
     # per shot: time at which its own measured beam reaches the window's detected heights
     dz = direction[:, 2]
@@ -269,6 +299,7 @@ def detect_photon_events(
     conf_b = 1.0 - np.exp(-0.5 * (np.maximum(sig_b, 0) / s.threshold_sigma) ** 4)
     flags = np.zeros(n, dtype=np.uint16)
     flags[hs & (sig_s[window] < 2 * s.threshold_sigma)] |= np.uint16(DetectorFlag.LOW_SNR)
+    flags[hs & (lam_s >= s.saturation_pe)[window]] |= np.uint16(DetectorFlag.SATURATED)
     zero = np.zeros(n)
     return WaveformDetections(
         has_surface=hs,

@@ -24,7 +24,7 @@ from pipeline.process.detection_limit import (
     excess_decay_per_s,
     limit_after_surface_s,
 )
-from pipeline.process.returns import DetectedReturns
+from pipeline.process.returns import DetectedReturns, DetectorFlag
 
 __all__ = ["detector_model", "chunk_inputs", "no_bottom_limits"]
 
@@ -64,14 +64,17 @@ def chunk_inputs(
     Returns
     -------
     dict
-        The column margins of the pulses with a surface and no bottom
+        The column margins of the pulses with a surface, no bottom and no saturation
         (:func:`~pipeline.process.detection_limit.column_margins`; zeros elsewhere) and the
         losses of the well-detected bottoms, SNR ≥ 2 × threshold
         (:func:`~pipeline.process.detection_limit.bottom_losses`).
     """
     det = detector_model(ctx, detect)
     n = found.has_surface.shape[0]
-    none = found.has_surface & ~found.has_bottom
+    # a saturated pulse's column is clipped or follows a clipped surface: its decay, and so
+    # the depth a bottom would have shown down to, is not measured
+    saturated = (found.flags & np.uint16(DetectorFlag.SATURATED)) != 0
+    none = found.has_surface & ~found.has_bottom & ~saturated
     margin, alpha, t_max = np.zeros(n), np.ones(n), np.zeros(n)
     ok = np.zeros(n, dtype=bool)
     if none.any():
@@ -86,8 +89,10 @@ def chunk_inputs(
         )
     # a bottom near the threshold is found only where it happened to be bright: its loss would
     # bias the extra decay low, so only clear detections are used
-    strong = found.has_bottom & (
-        found.bottom_amplitude >= 2.0 * detect.threshold_sigma * found.noise_sigma
+    strong = (
+        found.has_bottom
+        & ~saturated
+        & (found.bottom_amplitude >= 2.0 * detect.threshold_sigma * found.noise_sigma)
     )
     t_b, loss, ok_b = bottom_losses(
         samples[strong],

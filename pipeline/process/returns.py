@@ -49,6 +49,10 @@ class DetectorFlag(enum.IntFlag):
     MULTIPLE_BOTTOM_CANDIDATES = 1 << 3
     # bits 4 and 5 (TRUNCATED, SURFACE_ESTIMATED) were never set by any detector: removed,
     # their values kept free so files written before read the same
+    #: The surface echo is clipped (SATURATED) into a plateau that runs on into the water
+    #: column and the bottom: the surface time is the plateau's leading edge, an early bound
+    #: (not a timing reference), and the bottom is not measurable.
+    CLIPPED_MERGED = 1 << 6
 
 
 class PointFlag(enum.IntFlag):

@@ -48,7 +48,7 @@ from scipy.spatial import cKDTree
 from pipeline.config import setting
 from pipeline.constants import MAD_TO_SIGMA
 from pipeline.optics import SPEED_OF_LIGHT_M_S
-from pipeline.process.returns import DetectedReturns, PointFlag
+from pipeline.process.returns import DetectedReturns, DetectorFlag, PointFlag
 from pipeline.process.surface_land import (
     global_plane,
     land_surface_points,
@@ -321,7 +321,9 @@ def fit_water_surface(
     o, d = returns.origin_meas_m, returns.direction_meas
     c = SPEED_OF_LIGHT_M_S
     ps = surface_points_m(returns, st.air_index)
-    has_s = returns.has_surface
+    # a surface return clipped into the column's plateau is only an early bound of the
+    # surface (pipeline.process.detect_clipped): not a timing reference of the fit
+    has_s = returns.has_surface & ((returns.flags & np.uint16(DetectorFlag.CLIPPED_MERGED)) == 0)
     flags = np.zeros(n, dtype=np.uint16)
 
     pb = o + d * (c * returns.t_bottom_s / (2.0 * st.air_index))[:, None]

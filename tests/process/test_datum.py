@@ -115,3 +115,19 @@ def test_a_survey_without_surface_returns_still_gets_a_datum():
     # no point at all: the same level, and an empty grid
     empty = survey_datum(bottoms.select(np.zeros(len(bottoms), bool)), DatumSettings())
     assert empty.water_level_m == 0.0 and empty.source == "fallback"
+
+
+def test_clipped_surfaces_merged_with_the_column_do_not_move_the_datum():
+    # a third of the surface returns clipped into the column's plateau: timed at its leading
+    # edge, 0.45 m above the true level (as at 1 m altitude); flagged CLIPPED_MERGED, class 1
+    from pipeline.process.returns import DetectorFlag
+
+    pts = _points(60)
+    z, cls, df = pts.xyz_m.copy(), pts.classification.copy(), pts.detector_flags.copy()
+    surf = np.flatnonzero(pts.kind == 1)[::3]
+    z[surf, 2] += 0.45
+    cls[surf] = 1
+    df[surf] |= np.uint16(DetectorFlag.CLIPPED_MERGED | DetectorFlag.SATURATED)
+    clean = survey_datum(pts.select(np.setdiff1d(np.arange(len(cls)), surf)))
+    datum = survey_datum(pts.replace(xyz_m=z, classification=cls, detector_flags=df))
+    assert datum.water_level_m == pytest.approx(clean.water_level_m, abs=1e-9)

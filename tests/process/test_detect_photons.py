@@ -141,3 +141,19 @@ def test_opaque_water_establishes_no_bottom_depth():
     det = detect_photon_events(offsets, times, o, d, N_AIR)
     assert det.has_surface.all() and not det.has_bottom.any()
     assert np.all(det.t_no_bottom_s == 0.0)
+
+
+# --- dead-time pile-up: a surface echo that fires (nearly) every shot is flagged -------------
+@pytest.mark.parametrize("lam_s, saturated", [(0.5, False), (1.5, False), (20.0, True)])
+def test_surface_pileup_is_flagged_saturated(lam_s, saturated):
+    # λ surface photoelectrons a shot on one channel: a shot has a surface event with
+    # probability 1 − exp(−λ) (0.39, 0.78, ~1); the flag is set from λ = 3 (95 %) up, where the
+    # first photon of nearly every shot comes early in the echo (test_known_failures: at 3,
+    # 0.31 ns early)
+    from pipeline.process.returns import DetectorFlag
+
+    offsets, times, o, d, *_ = _events(2000, 10.0, lam_s=lam_s, seed=11)
+    det = detect_photon_events(offsets, times, o, d, N_AIR)
+    assert det.has_surface.all()
+    flagged = (det.flags & np.uint16(DetectorFlag.SATURATED)) != 0
+    assert flagged.all() if saturated else not flagged.any()

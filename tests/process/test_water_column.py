@@ -116,7 +116,7 @@ def test_column_points_follow_the_bottom_rules():
     ret = pulses(n_side=4)
     conf = np.array([0.9, 0.3] + [0.9] * 14)
     flags = np.zeros(16, np.uint16)
-    flags[2] = 2  # SATURATED: the time is not trustworthy
+    flags[2] = 1  # MERGED: the time is not trustworthy
     ret = dataclasses.replace(ret, column_confidence=conf, flags=flags)
     done = georeference(ret, surface_settings=FIT, refraction_settings=REFR)
     col = water_column_points(ret, done.surface, REFR, ClassifySettings(min_confidence=0.5))
