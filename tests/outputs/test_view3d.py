@@ -23,7 +23,6 @@ from pipeline.outputs.view_scene import ViewScene, surface_grid
 from pipeline.run import existing_outputs, run_scene
 from pipeline.scene import parse_scene
 
-
 ROOT = Path(__file__).resolve().parents[2]
 DEPTH_AT_0_M, SLOPE_DEG = 2.0, 5.33
 
