@@ -58,6 +58,8 @@ AIR_RAY_DEPTHS = 1.5
 #: The pictures of a run's report: colour of the points, alt text.
 REPORT_VIEWS = (("error", "3D view: points by depth error"), ("tpu", "3D view: points by TPU"))
 WINDOW_SIZE = (1000, 700)
+#: Zoom of the oblique view beyond the fit of every mesh (which leaves wide white margins).
+OBLIQUE_ZOOM = 1.25
 #: Vertical exaggeration at most (a picture of a wide, shallow survey gets up to this).
 MAX_EXAGGERATION = 4.0
 
@@ -262,7 +264,8 @@ def render(
                         "title": bar,
                         "color": "black",
                         "vertical": True,
-                        "position_x": 0.82,
+                        "position_x": 0.87,
+                        "width": 0.05,
                         "position_y": 0.15,
                         "height": 0.7,
                     },
@@ -283,6 +286,7 @@ def render(
             pl.view_xy()
         else:
             pl.view_isometric()
+            pl.camera.zoom(OBLIQUE_ZOOM)
         if not off_screen:
             pl.show()
             return None
