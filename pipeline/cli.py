@@ -1,4 +1,4 @@
-"""The ``bathy`` command line: ``run``, ``validate``, ``plan``, ``keys``, ``stress``."""
+"""The ``bathy`` command line: ``run``, ``validate``, ``plan``, ``keys``, ``stress``, ``view``."""
 
 from __future__ import annotations
 
@@ -33,6 +33,20 @@ def _parser() -> argparse.ArgumentParser:
     pl = sub.add_parser("plan", help="the stages a scene runs, and why the others are left out")
     pl.add_argument("scene", nargs="?", help="scene TOML file (default: built-in scene)")
     sub.add_parser("keys", help="list every scene key with its default, unit and bounds")
+    vw = sub.add_parser("view", help="a finished run's 3D scene (view/*.vtp) in a window")
+    vw.add_argument("out", help="the run's output folder")
+    vw.add_argument(
+        "--color",
+        default="error",
+        choices=["error", "tpu", "depth", "class"],
+        help="colour the points by depth error (default), TPU, depth or class",
+    )
+    vw.add_argument(
+        "--screenshot",
+        default=None,
+        metavar="FILE",
+        help="render off-screen to this PNG instead of a window (the default without a display)",
+    )
     st = sub.add_parser("stress", help="run the extreme-case suite; exit 1 if a case fails")
     st.add_argument("--out", default="out/stress", help="output folder, one subfolder per case")
     st.add_argument("--only", nargs="+", default=[], metavar="NAME", help="run these cases")
@@ -56,6 +70,19 @@ def _stress(args) -> int:
     return 1 if counts["FAIL"] else 0
 
 
+def _view(args) -> int:
+    """``bathy view OUT``: reads the run's written files only (view/*.vtp)."""
+    from pipeline.outputs.view3d import view_folder
+
+    try:
+        shot = view_folder(Path(args.out), args.color, args.screenshot and Path(args.screenshot))
+    except FileNotFoundError as exc:
+        raise BathyError(str(exc)) from exc
+    if shot is not None:
+        print(f"bathy view: wrote {shot}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``bathy`` console script; returns the exit status."""
     parser = _parser()
@@ -67,7 +94,10 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.command is None:
         parser.print_usage(sys.stderr)
-        print("bathy: a command is required (run, validate, plan, keys, stress)", file=sys.stderr)
+        print(
+            "bathy: a command is required (run, validate, plan, keys, stress, view)",
+            file=sys.stderr,
+        )
         return EXIT_BAD_SCENE
     # imported late so `bathy --help` stays fast
     from pipeline.scene import DEFAULT_SCENE_PATH, Scene, load_scene
@@ -80,6 +110,8 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if args.command == "stress":
             return _stress(args)
+        if args.command == "view":
+            return _view(args)
         path = Path(args.scene) if getattr(args, "scene", None) else DEFAULT_SCENE_PATH
         scene = load_scene(path)
         if args.command == "validate":

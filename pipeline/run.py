@@ -24,15 +24,17 @@ OUTPUT_PATTERNS = (
     "photon_budget.json",
     "fig*.png",
     "report.html",
+    "view/*.vtp",
+    "view/screenshot.png",
 )
 
 
 def existing_outputs(out_dir: str | Path) -> list[str]:
-    """Names of earlier outputs in ``out_dir`` (empty when it is missing or holds none)."""
+    """Earlier outputs in ``out_dir``, relative to it (empty when it is missing or holds none)."""
     out = Path(out_dir)
     if not out.is_dir():
         return []
-    return sorted({p.name for pat in OUTPUT_PATTERNS for p in out.glob(pat)})
+    return sorted({p.relative_to(out).as_posix() for pat in OUTPUT_PATTERNS for p in out.glob(pat)})
 
 
 def clear_outputs(out_dir: str | Path) -> None:
@@ -99,7 +101,7 @@ def run_scene(
             {"stage": s.name, "runs": s.runs, "reason": s.reason, **stages.get(s.name, {})}
             for s in the_plan
         ],
-        "files": {k: str(v.name) for k, v in files.items()},
+        "files": {k: Path(v).relative_to(out).as_posix() for k, v in files.items()},
         "timings_s": {"total_wall_s": time.perf_counter() - t0},
         "evaluation": evaluation,
         "provenance": provenance(scene),

@@ -382,6 +382,13 @@ def run_survey(scene, plan: Plan, out: Path, clock: StageClock, log=print, progr
             "grid": write_grid_tif(out / "grid.tif", grid, unc.cells),
             "grid_nc": write_grid_nc(out / "grid.nc", grid, unc.cells),
         }
+    with clock.stage("views"):
+        # the evaluation side (the truth's seabed and water, the points' errors); a failure
+        # costs only the views (one warning line)
+        from pipeline.outputs.view3d import write_views
+
+        vtp, pictures = write_views(out / "view", processed.points, sim, origin, fr.crs, log)
+        files.update({f"view_{k}": p for k, p in vtp.items()})
     with clock.stage("evaluate"):
         from pipeline.survey_report import evaluate_survey
 
@@ -414,5 +421,6 @@ def run_survey(scene, plan: Plan, out: Path, clock: StageClock, log=print, progr
             post,
             evaluation,
             clock,
+            views=pictures,
         )
     return files, evaluation

@@ -106,6 +106,7 @@ STAGES: tuple[Stage, ...] = (
     Stage("tpu", "propagated uncertainty, per cell, IHO orders", _survey),
     Stage("posterior", "emcee depth posteriors of a bounded sample", _survey_and(_posterior)),
     Stage("outputs", "points.laz, grid.tif (COG), grid.nc (CF)", _survey),
+    Stage("views", "3D scene: view/*.vtp for ParaView, pictures for the report", _survey),
     Stage("evaluate", "points and grid against the truth; report.html", _survey),
 )
 

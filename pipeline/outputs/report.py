@@ -24,6 +24,7 @@ from pipeline.iho import tvu_allowance_m
 from pipeline.outputs import report_figures as F
 from pipeline.outputs.atomic import atomic_path
 from pipeline.outputs.report_html import img, page, para, table
+from pipeline.outputs.report_view3d import view3d_section
 from pipeline.process.classify import BATHYMETRIC_POINT
 
 __all__ = ["write_survey_report", "depth_bands", "cube_detection", "CUBE_TOP_TOLERANCE_M"]
@@ -162,12 +163,13 @@ def _stage_rows(plan, clock) -> list[list[Any]]:
 
 
 def write_survey_report(
-    path: Path, scene, plan, sim, processed, ctx, grid, unc, post, evaluation, clock
+    path: Path, scene, plan, sim, processed, ctx, grid, unc, post, evaluation, clock, views=None
 ) -> Path:
     """Write ``report.html`` at ``path`` (atomically) and return the path.
 
     Parameters are those of :func:`pipeline.survey_report.evaluate_survey` (plus the ``plan``
-    and the ``evaluation`` it returned); ``sim.truth`` is read for the errors only.
+    and the ``evaluation`` it returned); ``sim.truth`` is read for the errors only. ``views``:
+    the 3D pictures, ``(png, alt)`` each (:func:`pipeline.outputs.view3d.write_views`).
     """
     truth, pts = sim.truth, processed.points
     level_m = scene.water_surface.level_m
@@ -242,6 +244,7 @@ def write_survey_report(
     s.append(_calibration_section(unc, ctx, truth, evaluation))
     s.append(_limits_section(pts, evaluation))
     s.append(_features_section(scene, pts, truth))
+    s.append(view3d_section(views))
     with atomic_path(path) as tmp:
         tmp.write_text(page(f"bathy report: {scene.scene.name}", s), encoding="utf-8")
     return Path(path)

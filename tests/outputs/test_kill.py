@@ -31,7 +31,10 @@ OUTPUTS = {
     "evaluation.json",
     "report.html",
     "manifest.json",
+    "view",
 }
+#: The 3D scene's files in ``view/`` (pipeline.outputs.view3d.MESH_FILES).
+VIEW_FILES = {"points.vtp", "seabed_truth.vtp", "water_surface.vtp", "beams.vtp"}
 TIMEOUT_S = 300.0
 
 
@@ -116,6 +119,16 @@ def _assert_complete_or_nothing(work):
 
         with xr.open_dataset(out / "grid.nc") as ds:
             assert ds["depth"].shape == (ds.sizes["y"], ds.sizes["x"])
+    if "view" in names:  # the folder comes with its first file, each file whole
+        views = {p.name for p in (out / "view").iterdir()}
+        assert views and views <= VIEW_FILES, views
+        from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
+
+        for name in views:
+            reader = vtkXMLPolyDataReader()
+            reader.SetFileName(str(out / "view" / name))
+            reader.Update()
+            assert reader.GetOutput().GetNumberOfPoints() > 0, name
     if "report.html" in names:
         assert (out / "report.html").read_text().rstrip().endswith("</html>")
     for name in names & {"evaluation.json", "manifest.json"}:
@@ -141,9 +154,10 @@ def test_killed_before_any_output_leaves_no_folder(tmp_path, scene_file):
         assert list(work.iterdir()) == [], trigger  # the folder comes with its first file
 
 
-@pytest.mark.parametrize("nth_write", [1, 2, 3, 4, 5, 6])
+@pytest.mark.parametrize("nth_write", [1, 2, 3, 4, 5, 6, 7, 8, 9, 10])
 def test_killed_while_writing_leaves_only_complete_files(tmp_path, scene_file, nth_write):
-    """SIGKILL as the ``nth_write`` output (points, grid, evaluation, manifest) is written."""
+    """SIGKILL as the ``nth_write`` output (points, grids, the four view/*.vtp, evaluation,
+    report, manifest) is written."""
     work = tmp_path / "run"
     work.mkdir()
     proc, log = _start(scene_file, work)

@@ -38,6 +38,7 @@ SECTIONS = (
     "calibration",
     "limits",
     "features",
+    "view3d",
 )
 
 
@@ -76,8 +77,9 @@ def test_report_is_self_contained_and_every_image_is_a_png(report):
     # nothing fetched from elsewhere: no link, no external src, no url()
     assert not re.search(r"<link|href=|url\(|@import", text)
     srcs = re.findall(r'<img[^>]*src="([^"]*)"', text)
-    # coverage, depth, TVU, orders, error, calibration, limits (no waveform kept)
-    assert len(srcs) == text.count("<img") == 7
+    # coverage, depth, TVU, orders, error, calibration, limits (no waveform kept), and the
+    # two 3D views (points by depth error, by TPU)
+    assert len(srcs) == text.count("<img") == 9
     for src in srcs:
         prefix = "data:image/png;base64,"
         assert src.startswith(prefix)
