@@ -1,4 +1,4 @@
-"""The ``bathy`` command line: ``run``, ``validate``, ``plan``, ``keys``, ``stress``."""
+"""The ``bathy`` command line: ``run``, ``validate``, ``plan``, ``keys``, ``stress``, ``sweep``."""
 
 from __future__ import annotations
 
@@ -37,7 +37,47 @@ def _parser() -> argparse.ArgumentParser:
     st.add_argument("--out", default="out/stress", help="output folder, one subfolder per case")
     st.add_argument("--only", nargs="+", default=[], metavar="NAME", help="run these cases")
     st.add_argument("--fast", action="store_true", help="only the fast subset")
+    sw = sub.add_parser(
+        "sweep", help="error against CPU time over the scene's fidelity knobs, one at a time"
+    )
+    sw.add_argument("scene", nargs="?", help="scene TOML file (default: built-in scene)")
+    sw.add_argument("--out", default=None, help="output folder (default: out/<scene name>/sweep)")
+    sw.add_argument(
+        "--knobs",
+        nargs="+",
+        default=None,
+        metavar="KEY",
+        help="scene keys to vary (default: the built-in knobs; with --levels only: its keys)",
+    )
+    sw.add_argument(
+        "--levels",
+        nargs="+",
+        default=[],
+        metavar="KEY=V1,V2",
+        help="levels of a knob, replacing its default multiples of the scene's value",
+    )
+    sw.add_argument("--quiet", action="store_true", help="no progress, only errors")
     return p
+
+
+def _sweep(args, path: Path) -> int:
+    """``bathy sweep``: validate the whole design first (exit 2 on a bad knob or level)."""
+    from pipeline.sweep import DEFAULT_KNOBS, parse_levels, read_scene_data, run_sweep
+
+    def log(line: str) -> None:
+        if not args.quiet:
+            print(line, flush=True)
+
+    try:
+        levels = parse_levels(args.levels)
+        knobs = args.knobs if args.knobs is not None else ([] if levels else list(DEFAULT_KNOBS))
+        name = (read_scene_data(path).get("scene") or {}).get("name", "scene")
+        out = Path(args.out) if args.out else Path("out") / str(name) / "sweep"
+        run_sweep(path, out, knobs, levels, log=log)
+    except SceneError as exc:
+        print(f"bathy sweep: {exc}", file=sys.stderr)
+        return EXIT_BAD_SCENE
+    return 0
 
 
 def _stress(args) -> int:
@@ -67,7 +107,10 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.command is None:
         parser.print_usage(sys.stderr)
-        print("bathy: a command is required (run, validate, plan, keys, stress)", file=sys.stderr)
+        print(
+            "bathy: a command is required (run, validate, plan, keys, stress, sweep)",
+            file=sys.stderr,
+        )
         return EXIT_BAD_SCENE
     # imported late so `bathy --help` stays fast
     from pipeline.scene import DEFAULT_SCENE_PATH, Scene, load_scene
@@ -81,6 +124,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "stress":
             return _stress(args)
         path = Path(args.scene) if getattr(args, "scene", None) else DEFAULT_SCENE_PATH
+        if args.command == "sweep":
+            return _sweep(args, path)
         scene = load_scene(path)
         if args.command == "validate":
             print(f"{path}: valid scene '{scene.scene.name}'")
