@@ -56,6 +56,9 @@ def _parser() -> argparse.ArgumentParser:
         metavar="KEY=V1,V2",
         help="levels of a knob, replacing its default multiples of the scene's value",
     )
+    sw.add_argument(
+        "--overwrite", action="store_true", help="replace a sweep already in the folder"
+    )
     sw.add_argument("--quiet", action="store_true", help="no progress, only errors")
     return p
 
@@ -73,6 +76,11 @@ def _sweep(args, path: Path) -> int:
         knobs = args.knobs if args.knobs is not None else ([] if levels else list(DEFAULT_KNOBS))
         name = (read_scene_data(path).get("scene") or {}).get("name", "scene")
         out = Path(args.out) if args.out else Path("out") / str(name) / "sweep"
+        if (out / "sweep.csv").exists() and not args.overwrite:
+            raise SceneError(
+                f"output folder {out} already holds a sweep (sweep.csv); give --overwrite to"
+                " replace it, or another --out"
+            )
         run_sweep(path, out, knobs, levels, log=log)
     except SceneError as exc:
         print(f"bathy sweep: {exc}", file=sys.stderr)

@@ -101,6 +101,13 @@ def test_bad_sweep_input_is_one_line_and_exit_2(tmp_path, capsys, args, says):
     assert not out.exists()  # checked before any run
 
 
+def test_an_existing_sweep_is_kept_without_overwrite(tmp_path, capsys):
+    (tmp_path / "sweep.csv").write_text("run\n")
+    assert main(["sweep", "--out", str(tmp_path), "--knobs", "trace.subrays"]) == 2
+    assert "--overwrite" in capsys.readouterr().err
+    assert (tmp_path / "sweep.csv").read_text() == "run\n"
+
+
 TINY = """
 [scene]
 name = "tiny"
