@@ -167,3 +167,23 @@ def test_sweep_of_a_tiny_scene_writes_a_row_per_run(tmp_path):
     report = (out / "runs" / "01_scanner.prf_hz=750.0" / "report.html").read_text()
     assert "Error against run time" in report and "scanner.prf_hz = 750.0" in report
     assert str(Path("sweep.html")) in report
+
+
+def test_run_report_section_only_when_a_sweep_was_run(tmp_path):
+    from pipeline.outputs.sweep_report import run_report_section
+
+    assert run_report_section(tmp_path) == ""  # a plain run, no sweep
+    run = tmp_path / "sw" / "runs" / "01_scanner.prf_hz=6000.0"
+    run.mkdir(parents=True)
+    marker = {"knob": "scanner.prf_hz", "value": 6000.0, "sweep_html": "../../sweep.html"}
+    (run / "sweep_point.json").write_text(json.dumps(marker))
+    sec = run_report_section(run)
+    assert "Error against run time" in sec and "scanner.prf_hz = 6000.0" in sec
+    assert str(tmp_path / "sw" / "sweep.html") in sec and "href='../../sweep.html'" in sec
+    # a plain run whose folder holds a finished sweep: its cheapest runs
+    (tmp_path / "sweep").mkdir()
+    best = {"run": "02_x", "knob": "x", "value": 1, "cpu_s_per_km2": 12.5, "rmse_m": 0.1}
+    cheapest = {"exclusive": None, "special": best, "1a": best, "2": best}
+    (tmp_path / "sweep" / "sweep.json").write_text(json.dumps({"cheapest_per_order": cheapest}))
+    sec = run_report_section(tmp_path)
+    assert "02_x" in sec and "12.5" in sec and "href='sweep/sweep.html'" in sec

@@ -9,6 +9,7 @@ gets a section in its ``report.html`` pointing at ``sweep.html`` (:func:`run_rep
 
 from __future__ import annotations
 
+import html
 import json
 from pathlib import Path
 from typing import Any
@@ -168,10 +169,15 @@ def _sweep_dir(out_dir: Path) -> tuple[Path, dict[str, Any] | None] | None:
     marker = out_dir / "sweep_point.json"
     if marker.is_file():
         point = json.loads(marker.read_text(encoding="utf-8"))
-        return (out_dir / point["sweep_html"]).parent, point
+        return (out_dir / point["sweep_html"]).resolve().parent, point
     if (out_dir / "sweep" / "sweep.json").is_file():
         return out_dir / "sweep", None
     return None
+
+
+def _link(href: str) -> str:
+    """A relative link to ``sweep.html`` (the page stays valid when the folder moves)."""
+    return f"<p><a href='{html.escape(href, quote=True)}'>open sweep.html</a></p>"
 
 
 def run_report_section(out_dir: str | Path) -> str:
@@ -193,10 +199,14 @@ def run_report_section(out_dir: str | Path) -> str:
             if point["knob"] == "scene"
             else f"the sweep's run with {point['knob']} = {point['value']}"
         )
-        return head + para(
-            f"This run is {what}. The depth error against CPU time of every run of the sweep, "
-            f"its Pareto front and the cheapest run meeting each IHO S-44 order are in "
-            f"{html_path} (written when the sweep ends)."
+        return (
+            head
+            + para(
+                f"This run is {what}. The depth error against CPU time of every run of the sweep, "
+                f"its Pareto front and the cheapest run meeting each IHO S-44 order are in "
+                f"{html_path} (written when the sweep ends)."
+            )
+            + _link(point["sweep_html"])
         )
     summary = json.loads((where / "sweep.json").read_text(encoding="utf-8"))
     rows = [
@@ -207,5 +217,6 @@ def run_report_section(out_dir: str | Path) -> str:
     return (
         head
         + para(f"A sweep of this scene's fidelity knobs is in {html_path}; its cheapest runs:")
+        + _link("sweep/sweep.html")
         + table(["IHO S-44 order", "cheapest run meeting it", "CPU s/km²"], rows)
     )
