@@ -57,6 +57,13 @@ def _parser() -> argparse.ArgumentParser:
         help="levels of a knob, replacing its default multiples of the scene's value",
     )
     sw.add_argument(
+        "--repeats",
+        type=int,
+        default=1,
+        metavar="N",
+        help="run each point N times and keep its least CPU time (a shared machine's clock)",
+    )
+    sw.add_argument(
         "--overwrite", action="store_true", help="replace a sweep already in the folder"
     )
     sw.add_argument("--quiet", action="store_true", help="no progress, only errors")
@@ -76,12 +83,14 @@ def _sweep(args, path: Path) -> int:
         knobs = args.knobs if args.knobs is not None else ([] if levels else list(DEFAULT_KNOBS))
         name = (read_scene_data(path).get("scene") or {}).get("name", "scene")
         out = Path(args.out) if args.out else Path("out") / str(name) / "sweep"
+        if args.repeats < 1:
+            raise SceneError(f"--repeats must be >= 1; got {args.repeats}")
         if (out / "sweep.csv").exists() and not args.overwrite:
             raise SceneError(
                 f"output folder {out} already holds a sweep (sweep.csv); give --overwrite to"
                 " replace it, or another --out"
             )
-        run_sweep(path, out, knobs, levels, log=log)
+        run_sweep(path, out, knobs, levels, log=log, repeats=args.repeats)
     except SceneError as exc:
         print(f"bathy sweep: {exc}", file=sys.stderr)
         return EXIT_BAD_SCENE

@@ -91,6 +91,7 @@ def test_default_design_is_the_centre_and_multiples_of_the_scene_values():
         (["--levels", "scanner.prf_hz=-5"], "scanner.prf_hz=-5"),
         (["--levels", "scanner.prf_hz"], "bad --levels"),
         (["--levels", "trace.subrays=1,0"], "trace.subrays=0"),
+        (["--repeats", "0"], "--repeats must be >= 1"),
     ],
 )
 def test_bad_sweep_input_is_one_line_and_exit_2(tmp_path, capsys, args, says):
