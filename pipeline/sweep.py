@@ -82,6 +82,8 @@ COLUMNS = (
     "n_points",
     "rmse_m",
     "bias_m",
+    "p95_abs_m",
+    "max_abs_m",
     "grid_rmse_m",
     "tpu_coverage_95",
     "posterior_coverage_95",
@@ -267,6 +269,10 @@ def row_of_run(point: SweepPoint, manifest: dict[str, Any], run: str) -> dict[st
         "n_points": _get(ev, "error", "points", "n"),
         "rmse_m": _get(ev, "error", "points", "rmse_m"),
         "bias_m": _get(ev, "error", "points", "bias_m"),
+        # the RMSE of a few thousand points moves with a handful of gross errors (metres):
+        # the 95th percentile of |error| and the largest say whether it did
+        "p95_abs_m": _get(ev, "error", "points", "p95_abs_m"),
+        "max_abs_m": _get(ev, "error", "points", "max_abs_m"),
         "grid_rmse_m": _get(ev, "error", "grid", "rmse_m"),
         "tpu_coverage_95": _get(ev, "tpu_coverage_against_truth", "fraction_within"),
         "posterior_coverage_95": _get(ev, "posterior_against_truth", "coverage_95"),

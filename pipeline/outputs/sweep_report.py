@@ -119,6 +119,8 @@ _SHOWN = (
     ("n_pulses", "pulses"),
     ("rmse_m", "RMSE (m)"),
     ("bias_m", "bias (m)"),
+    ("p95_abs_m", "|error| 95 % (m)"),
+    ("max_abs_m", "max |error| (m)"),
     ("grid_rmse_m", "grid RMSE (m)"),
     ("tpu_coverage_95", "TPU 95 % coverage"),
     ("posterior_coverage_95", "posterior 95 % coverage"),
