@@ -1,4 +1,4 @@
-"""The ``bathy`` command line: ``run``, ``validate``, ``plan``, ``keys``, ``stress``, ``view``."""
+"""The ``bathy`` command line: run, validate, plan, keys, stress, view, sweep."""
 
 from __future__ import annotations
 
@@ -51,7 +51,64 @@ def _parser() -> argparse.ArgumentParser:
     st.add_argument("--out", default="out/stress", help="output folder, one subfolder per case")
     st.add_argument("--only", nargs="+", default=[], metavar="NAME", help="run these cases")
     st.add_argument("--fast", action="store_true", help="only the fast subset")
+    sw = sub.add_parser(
+        "sweep", help="error against CPU time over the scene's fidelity knobs, one at a time"
+    )
+    sw.add_argument("scene", nargs="?", help="scene TOML file (default: built-in scene)")
+    sw.add_argument("--out", default=None, help="output folder (default: out/<scene name>/sweep)")
+    sw.add_argument(
+        "--knobs",
+        nargs="+",
+        default=None,
+        metavar="KEY",
+        help="scene keys to vary (default: the built-in knobs; with --levels only: its keys)",
+    )
+    sw.add_argument(
+        "--levels",
+        nargs="+",
+        default=[],
+        metavar="KEY=V1,V2",
+        help="levels of a knob, replacing its default multiples of the scene's value",
+    )
+    sw.add_argument(
+        "--repeats",
+        type=int,
+        default=1,
+        metavar="N",
+        help="run each point N times and keep its least CPU time (a shared machine's clock)",
+    )
+    sw.add_argument(
+        "--overwrite", action="store_true", help="replace a sweep already in the folder"
+    )
+    sw.add_argument("--quiet", action="store_true", help="no progress, only errors")
     return p
+
+
+def _sweep(args, path: Path) -> int:
+    """``bathy sweep``: validate the whole design first (exit 2 on a bad knob or level)."""
+    from pipeline.sweep import DEFAULT_KNOBS, parse_levels, read_scene_data, run_sweep
+
+    def log(line: str) -> None:
+        if not args.quiet:
+            print(line, flush=True)
+
+    try:
+        levels = parse_levels(args.levels)
+        knobs = args.knobs if args.knobs is not None else ([] if levels else list(DEFAULT_KNOBS))
+        name = (read_scene_data(path).get("scene") or {}).get("name", "scene")
+        out = Path(args.out) if args.out else Path("out") / str(name) / "sweep"
+        if args.repeats < 1:
+            raise SceneError(f"--repeats must be >= 1; got {args.repeats}")
+        if (out / "sweep.csv").exists() and not args.overwrite:
+            raise SceneError(
+                f"output folder {out} already holds a sweep (sweep.csv); give --overwrite to"
+                " replace it, or another --out"
+            )
+        run_sweep(path, out, knobs, levels, log=log, repeats=args.repeats)
+    except SceneError as exc:
+        print(f"bathy sweep: {exc}", file=sys.stderr)
+        return EXIT_BAD_SCENE
+    return 0
 
 
 def _stress(args) -> int:
@@ -95,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_usage(sys.stderr)
         print(
-            "bathy: a command is required (run, validate, plan, keys, stress, view)",
+            "bathy: a command is required (run, validate, plan, keys, stress, view, sweep)",
             file=sys.stderr,
         )
         return EXIT_BAD_SCENE
@@ -113,6 +170,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "view":
             return _view(args)
         path = Path(args.scene) if getattr(args, "scene", None) else DEFAULT_SCENE_PATH
+        if args.command == "sweep":
+            return _sweep(args, path)
         scene = load_scene(path)
         if args.command == "validate":
             print(f"{path}: valid scene '{scene.scene.name}'")

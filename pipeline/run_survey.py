@@ -361,7 +361,9 @@ def run_survey(scene, plan: Plan, out: Path, clock: StageClock, log=print, progr
             from pipeline.process.survey_posterior import survey_posteriors
             from pipeline.process.survey_uncertainty import with_posteriors
 
-            post = survey_posteriors(scene, sim.returns, sim.kept, processed, ctx, unc, grid)
+            post = survey_posteriors(
+                scene, sim.returns, sim.kept, processed, ctx, unc, grid, progress=progress
+            )
             if post is not None and post.posteriors is not None:
                 p = post.posteriors
                 unc = with_posteriors(unc, grid, post.point_index, p.converged, p.depth_m["std"])

@@ -25,7 +25,9 @@ from pipeline.outputs import report_figures as F
 from pipeline.outputs.atomic import atomic_path
 from pipeline.outputs.report_html import img, page, para, table
 from pipeline.outputs.report_view3d import view3d_section
-from pipeline.process.classify import BATHYMETRIC_POINT
+from pipeline.outputs.report_waveforms import posterior_system, waveform_section
+from pipeline.outputs.sweep_report import run_report_section
+from pipeline.process.classify import BATHYMETRIC_POINT, NO_BOTTOM_FOUND_AT
 
 __all__ = ["write_survey_report", "depth_bands", "cube_detection", "CUBE_TOP_TOLERANCE_M"]
 
@@ -33,11 +35,9 @@ __all__ = ["write_survey_report", "depth_bands", "cube_detection", "CUBE_TOP_TOL
 #: true depth of its top (the brief's rule; IHO S-44 states no tolerance of its own).
 CUBE_TOP_TOLERANCE_M = 0.3
 #: Class of the no-bottom-found-at points (pipeline.process.classify).
-NO_BOTTOM_CLASS = 45
+NO_BOTTOM_CLASS = NO_BOTTOM_FOUND_AT
 #: Coverage factors of the TPU calibration plot.
 CALIBRATION_KS = (0.5, 1.0, 1.5, 1.96, 2.5, 3.0)
-#: Waveforms shown at most.
-N_WAVEFORMS = 3
 
 
 def depth_bands(true_depth_m: np.ndarray, err_m: np.ndarray, n_target: int = 6) -> list[dict]:
@@ -99,54 +99,6 @@ def cube_detection(features, points, truth_depth_m) -> list[dict]:
     return out
 
 
-def _waveform_section(sim, ctx, pts) -> str:
-    kept, r = sim.kept, sim.returns
-    if kept is None or not kept.pulse_id.size:
-        return para(
-            "No waveform was kept in this run: the chunk loop keeps waveforms only for the "
-            "depth posteriors (process.posterior_*), which did not run."
-        )
-    order = np.argsort(r.pulse_id)
-    idx = order[np.searchsorted(r.pulse_id, kept.pulse_id, sorter=order)]
-    # what the pulses became: a class-40 bottom (its depth) or a class-45 no-bottom limit
-    depth40 = np.full(kept.pulse_id.size, np.nan)
-    is40 = pts.classification == BATHYMETRIC_POINT
-    hit = np.isin(kept.pulse_id, pts.pulse_id[is40])
-    o40 = np.argsort(pts.pulse_id[is40])
-    at = o40[np.searchsorted(pts.pulse_id[is40], kept.pulse_id[hit], sorter=o40)]
-    depth40[hit] = pts.depth_m[is40][at]
-    pick = []
-    if hit.any():  # the shallowest, median and deepest class-40 bottom kept
-        ranked = np.flatnonzero(hit)[np.argsort(depth40[hit])]
-        pick = sorted({int(ranked[0]), int(ranked[len(ranked) // 2]), int(ranked[-1])})
-    limit = np.flatnonzero(
-        np.isin(kept.pulse_id, pts.pulse_id[pts.classification == NO_BOTTOM_CLASS])
-    )
-    if limit.size:  # one no-bottom pulse in place of the median bottom
-        pick = (pick[:1] + pick[-1:] if len(pick) == 3 else pick) + [int(limit[0])]
-    # shallow to deep, the no-bottom pulse last
-    pick = sorted(pick[:N_WAVEFORMS] or [0], key=lambda i: np.nan_to_num(depth40[i], nan=np.inf))
-    t_ns = np.arange(kept.samples.shape[1]) * ctx.instrument.sample_interval_s * 1e9
-    marks = []
-    for i in pick:
-        j = idx[i]
-        m = {"title": f"pulse {int(kept.pulse_id[i])}"}
-        if r.has_surface[j]:
-            m["surface"] = (r.t_surface_s[j] - kept.t0_s[i]) * 1e9
-        if np.isfinite(depth40[i]):
-            m["bottom"] = (r.t_bottom_s[j] - kept.t0_s[i]) * 1e9
-            m["title"] += f": class-40 bottom at {depth40[i]:.2f} m depth"
-        elif r.t_no_bottom_s is not None and r.t_no_bottom_s[j] > 0:
-            m["no-bottom limit"] = (r.t_no_bottom_s[j] - kept.t0_s[i]) * 1e9
-            m["title"] += ": no bottom found down to its limit (class 45)"
-        marks.append(m)
-    fig = F.waveforms(t_ns, kept.samples[pick].astype(float), marks)
-    return img(fig, "example waveforms") + para(
-        f"{len(pick)} of the {kept.pulse_id.size} waveforms kept for the posteriors (the "
-        "shallowest and deepest class-40 bottoms, a class-45 pulse), with the detector's times."
-    )
-
-
 def _stage_rows(plan, clock) -> list[list[Any]]:
     times = clock.to_dict()
     rows = []
@@ -198,7 +150,10 @@ def write_survey_report(
             "coverage",
         )
     )
-    s.append("<h2 id='waveforms'>3. Example waveforms</h2>" + _waveform_section(sim, ctx, pts))
+    s.append(
+        "<h2 id='waveforms'>3. Example waveforms</h2>"
+        + waveform_section(sim, ctx, pts, post, posterior_system(scene, ctx, post))
+    )
     depth = np.where(grid.count > 0, grid.depth_m, np.nan)
     for sec, values, label, title, cmap in (
         (
@@ -245,6 +200,7 @@ def write_survey_report(
     s.append(_limits_section(pts, evaluation))
     s.append(_features_section(scene, pts, truth))
     s.append(view3d_section(views))
+    s.append(run_report_section(Path(path).parent))
     with atomic_path(path) as tmp:
         tmp.write_text(page(f"bathy report: {scene.scene.name}", s), encoding="utf-8")
     return Path(path)

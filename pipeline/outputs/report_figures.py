@@ -85,21 +85,26 @@ def coverage_map(x_m, y_m, res_m, count, area_m, covered: float | None) -> bytes
     return png(fig)
 
 
-def waveforms(t_ns: np.ndarray, samples: np.ndarray, marks: list[dict[str, float]]) -> bytes:
+def waveforms(
+    t_ns: np.ndarray,
+    samples: np.ndarray,
+    marks: list[dict[str, float]],
+    fits: list[np.ndarray | None] | None = None,
+) -> bytes:
     """A few recorded waveforms with their surface and bottom detections.
 
     ``t_ns`` (n_samples,) time since sample 0; ``samples`` (k, n_samples); ``marks[i]`` the
     detection times (ns since sample 0) of waveform ``i``, keys ``surface`` / ``bottom`` /
-    ``no-bottom limit``, and its ``title``.
+    ``no-bottom limit``, and its ``title``; ``fits[i]`` (n_samples,) the depth posterior's
+    fitted waveform of waveform ``i``, drawn over it, or None (no posterior).
     """
     fig = _figure(7.0, 1.6 + 1.4 * len(samples))
     axes = fig.subplots(len(samples), 1, sharex=True, squeeze=False)[:, 0]
-    for (
-        ax,
-        s,
-        m,
-    ) in zip(axes, samples, marks, strict=True):
+    fits = [None] * len(samples) if fits is None else fits
+    for ax, s, m, fit in zip(axes, samples, marks, fits, strict=True):
         ax.plot(t_ns, s, lw=0.8, color="0.2", label="waveform")
+        if fit is not None:
+            ax.plot(t_ns, fit, lw=1.0, color="tab:green", alpha=0.8, label="posterior fit")
         for key, colour in (
             ("surface", "tab:blue"),
             ("bottom", "tab:red"),

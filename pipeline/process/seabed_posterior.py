@@ -12,10 +12,12 @@ Cost: see ``benchmarks/RESULTS_posterior.md`` (a few tenths of a second per puls
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
 from pipeline.process.detect import DetectSettings
 from pipeline.process.posterior import interval_summary, sample_batch
@@ -23,7 +25,7 @@ from pipeline.process.posterior_settings import PosteriorFlag, PosteriorSettings
 from pipeline.process.refraction import RefractionSettings, seabed_points
 from pipeline.process.returns import DetectedReturns
 from pipeline.process.surface_fit import WaterSurface
-from pipeline.process.waveform_model import WaveformSystem, in_water_delay_s
+from pipeline.process.waveform_model import N_PARAMS, WaveformSystem, in_water_delay_s
 
 __all__ = [
     "SeabedPosteriors",
@@ -96,6 +98,12 @@ class SeabedPosteriors:
     n_steps : (n,) int64
     flags : (n,) uint16
         :class:`PosteriorFlag` bits.
+    theta_median : (n, 9) ndarray or None
+        Per-parameter posterior median of the waveform model's parameters (zeros where
+        NO_START): with ``cos_water`` it gives the posterior's fitted waveform
+        (:func:`~pipeline.process.waveform_model.expected_waveform`), e.g. for the report.
+    cos_water : (n,) ndarray or None
+        Cosine of each pulse's in-water angle the model used.
     """
 
     pulse_id: np.ndarray
@@ -108,6 +116,8 @@ class SeabedPosteriors:
     tau_max_steps: np.ndarray
     n_steps: np.ndarray
     flags: np.ndarray
+    theta_median: np.ndarray | None = None
+    cos_water: np.ndarray | None = None
 
     @property
     def converged(self) -> np.ndarray:
@@ -160,6 +170,7 @@ def seabed_posteriors(
     seed: int = 0,
     detect_settings: DetectSettings | None = None,
     detect_noise: tuple[int | None, float] | None = None,
+    progress: bool = False,
 ) -> SeabedPosteriors:
     """Sample the depth posterior of pulses and carry it to the refracted seabed point.
 
@@ -184,6 +195,8 @@ def seabed_posteriors(
         Batch ``b`` (``settings.batch_size`` pulses side by side) is seeded ``seed + b0``.
     detect_settings, detect_noise : optional
         The survey detector's, for the starts (see :func:`sample_batch`).
+    progress : bool
+        A progress bar over the batches (stderr): the stage takes minutes on a large budget.
 
     Returns
     -------
@@ -207,6 +220,8 @@ def seabed_posteriors(
     xyz_med, xyz_std, sig_h = np.zeros((m, 3)), np.zeros((m, 3)), np.zeros(m)
     acc, tau_max = np.zeros(m), np.zeros(m)
     n_steps, flags = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.uint16)
+    theta_med = np.zeros((m, N_PARAMS))
+    bar = tqdm(total=m, unit="pulse", desc="posteriors", disable=not progress, file=sys.stderr)
     for b0 in range(0, m, st.batch_size):
         part = rows[b0 : b0 + st.batch_size]
         chains = sample_batch(
@@ -222,6 +237,7 @@ def seabed_posteriors(
             j = b0 + k
             acc[j], tau_max[j] = chains.acceptance[k], float(np.max(chains.tau_steps[k]))
             n_steps[j], flags[j] = chains.n_steps[k], chains.flags[k]
+            theta_med[j] = np.median(chains.draws[k], axis=0)
             if not surface.is_water[r]:
                 flags[j] |= np.uint16(PosteriorFlag.NO_START)
             if flags[j] & PosteriorFlag.NO_START:
@@ -235,6 +251,8 @@ def seabed_posteriors(
             xyz_med[j] = np.median(pts.xyz_m, axis=0)
             xyz_std[j] = np.std(pts.xyz_m, axis=0, ddof=1)
             sig_h[j] = math.sqrt(0.5 * (xyz_std[j, 0] ** 2 + xyz_std[j, 1] ** 2))
+        bar.update(len(part))
+    bar.close()
     return SeabedPosteriors(
         pulse_id=returns.pulse_id[rows],
         row=rows,
@@ -246,4 +264,6 @@ def seabed_posteriors(
         tau_max_steps=tau_max,
         n_steps=n_steps,
         flags=flags,
+        theta_median=theta_med,
+        cos_water=cosw[rows],
     )

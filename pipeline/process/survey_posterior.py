@@ -77,6 +77,7 @@ def survey_posteriors(
     ctx: ProcessingContext,
     unc: SurveyUncertainty,
     grid: Grid,
+    progress: bool = False,
 ) -> SurveyPosteriors | None:
     """Sample the depth posteriors of up to :func:`posterior_budget` bathymetric points.
 
@@ -95,6 +96,8 @@ def survey_posteriors(
     unc : SurveyUncertainty
         ``points40``, ``tpu40`` and ``cells`` of the uncertainty stage.
     grid : Grid
+    progress : bool
+        A progress bar over the posterior batches (stderr).
 
     Returns
     -------
@@ -140,5 +143,6 @@ def survey_posteriors(
         seed=scene.scene.seed,
         detect_settings=ps.detect,
         detect_noise=(ctx.instrument.noise_samples, ctx.instrument.shot_noise_counts),
+        progress=progress,
     )
     return SurveyPosteriors(post, sel, time.perf_counter() - t0, n_column)
