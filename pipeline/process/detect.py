@@ -40,13 +40,13 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
-from scipy.special import ndtr
 
 from pipeline.config import setting
 from pipeline.constants import FWHM_TO_SIGMA, MAD_TO_SIGMA
 from pipeline.process.detect_merged import column_decay, fit_merged, merged_bottoms
 from pipeline.process.detect_near import column_excess
 from pipeline.process.returns import DetectorFlag
+from pipeline.process.surface_step import surface_step_fit
 
 __all__ = [
     "DetectSettings",
@@ -157,41 +157,6 @@ def flank_trend(
     return np.maximum(left, right)
 
 
-def _surface_step_fit(filt: np.ndarray, i_peak: np.ndarray, sg: float) -> np.ndarray:
-    """Surface time from ``A g(t − t_s) + B Φ((t − t_s)/σ)`` fitted near the surface peak.
-
-    The water-column return starts at the surface and, over a few samples, is a step smoothed
-    by the system response; it pulls the plain peak late. For each candidate ``t_s`` on a
-    0.02-sample grid around the peak, ``A`` and ``B`` follow by linear least squares; the
-    candidate with the smallest residual wins (batched: pulses × candidates × samples).
-    """
-    n, m = filt.shape
-    half_lo, half_hi = int(math.ceil(3.0 * sg)), int(math.ceil(2.0 * sg))
-    cols = np.clip(i_peak[:, None] + np.arange(-half_lo, half_hi + 1), 0, m - 1)
-    y = np.take_along_axis(filt, cols, axis=1)[:, None, :]  # (n, 1, w)
-    cand = i_peak[:, None] + np.arange(-1.5, 0.5001, 0.02)[None, :]  # (n, k)
-    z = (cols[:, None, :] - cand[:, :, None]) / sg  # (n, k, w)
-    g = np.exp(-0.5 * z * z)
-    h = ndtr(z)
-    gg, hh, gh = (g * g).sum(2), (h * h).sum(2), (g * h).sum(2)
-    gy, hy = (g * y).sum(2), (h * y).sum(2)
-    det = gg * hh - gh * gh
-    ok = det > 1e-12 * gg * hh
-    a = np.where(ok, (hh * gy - gh * hy) / np.where(ok, det, 1.0), gy / gg)
-    b = np.where(ok, (gg * hy - gh * gy) / np.where(ok, det, 1.0), 0.0)
-    # negative amplitudes are not physical: fall back to the Gaussian alone there
-    bad = (a <= 0) | (b < 0)
-    a, b = np.where(bad, gy / gg, a), np.where(bad, 0.0, b)
-    sse = (y * y).sum(2) - a * gy - b * hy
-    k = np.clip(np.argmin(sse, axis=1), 1, cand.shape[1] - 2)
-    rows = np.arange(n)
-    s0, s1, s2 = sse[rows, k - 1], sse[rows, k], sse[rows, k + 1]
-    # parabola through the three residuals around the minimum: sub-grid time
-    curv = s0 - 2.0 * s1 + s2
-    off = np.where(curv > 0, 0.5 * (s0 - s2) / np.where(curv > 0, curv, 1.0), 0.0)
-    return cand[rows, k] + 0.02 * np.clip(off, -1.0, 1.0)
-
-
 def _parabolic_peak(y: np.ndarray, idx: np.ndarray):
     """Sub-sample peak position, height and σ (samples) from three samples (log-parabola)."""
     n = y.shape[1]
@@ -299,7 +264,7 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     t_idx_s, amp_s, width_s = _parabolic_peak(filt, i_s)
     if s.surface_step:
         t_idx_s = np.where(
-            has_s, _surface_step_fit(filt, i_s, math.sqrt(2.0) * sigma_samples), t_idx_s
+            has_s, surface_step_fit(filt, i_s, math.sqrt(2.0) * sigma_samples), t_idx_s
         )
 
     sep = s.min_separation_fwhm * pulse_fwhm_s / dt_s
