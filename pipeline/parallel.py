@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import time
 from collections import deque
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
@@ -85,11 +86,21 @@ class Executor:
                 workers = max(1, sum(self._client.nthreads().values()))
         self.workers = default_workers() if workers is None else int(workers)
         self.ahead = ahead if ahead is not None else 2 * self.workers
+        self.map_wall_s = 0.0  # wall seconds inside map(), the consumer's work included
 
     def describe(self) -> dict[str, Any]:
-        """``{"workers", "scheduler", "engine"}``, JSON-ready (the manifest's ``execution``)."""
+        """Where the tasks ran, JSON-ready (the manifest's ``execution``).
+
+        ``{"workers", "scheduler", "engine", "map_wall_s"}``; ``map_wall_s``: wall seconds
+        spent in :meth:`map` (the chunk loop's, its consumer's work included).
+        """
         engine = "dask" if self._client else ("process_pool" if self.workers > 1 else "serial")
-        return {"workers": self.workers, "scheduler": self.scheduler, "engine": engine}
+        return {
+            "workers": self.workers,
+            "scheduler": self.scheduler,
+            "engine": engine,
+            "map_wall_s": self.map_wall_s,
+        }
 
     def __enter__(self) -> Executor:
         return self
@@ -109,13 +120,17 @@ class Executor:
         ``fn`` must be a module-level function (it is pickled by reference). Leaving the loop
         early (or an exception in a task) cancels the tasks not yet started.
         """
-        if self._client is not None:
-            yield from self._map_dask(fn, shared, n_tasks)
-        elif self.workers == 1 or n_tasks <= 1:
-            for i in range(n_tasks):
-                yield fn(shared, i)
-        else:
-            yield from self._map_pool(fn, shared, n_tasks)
+        t0 = time.perf_counter()
+        try:
+            if self._client is not None:
+                yield from self._map_dask(fn, shared, n_tasks)
+            elif self.workers == 1 or n_tasks <= 1:
+                for i in range(n_tasks):
+                    yield fn(shared, i)
+            else:
+                yield from self._map_pool(fn, shared, n_tasks)
+        finally:
+            self.map_wall_s += time.perf_counter() - t0
 
     def _map_pool(self, fn, shared, n_tasks: int) -> Iterator[Any]:
         ctx = multiprocessing.get_context("spawn")

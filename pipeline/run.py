@@ -98,16 +98,16 @@ def run_scene(
             f"floor at {scene.seabed.depth_m:g} m: {b.floor_photons:.4g} photoelectrons/shot"
         )
     evaluation = None
-    execution = {"workers": 1, "scheduler": None, "engine": "serial"}
+    execution = {"workers": 1, "scheduler": None, "engine": "serial", "map_wall_s": 0.0}
     if the_plan.runs("terrain"):
         from pipeline.parallel import Executor
         from pipeline.run_survey import run_survey
 
         with Executor(workers, scheduler) as executor:
-            execution = executor.describe()
             survey_files, evaluation = run_survey(
                 scene, the_plan, out, clock, log, progress, executor=executor
             )
+            execution = executor.describe()
         files.update(survey_files)
     stages = clock.to_dict()
     manifest = {

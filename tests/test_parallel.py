@@ -49,7 +49,7 @@ def test_results_come_in_task_order_with_at_most_ahead_pending():
 def test_serial_executor_maps_in_order():
     with Executor(workers=1) as ex:
         assert list(ex.map(operator.getitem, [5, 6, 7], 3)) == [5, 6, 7]
-        assert ex.describe() == {"workers": 1, "scheduler": None, "engine": "serial"}
+        assert ex.describe()["engine"] == "serial"
     with pytest.raises(ValueError):
         Executor(workers=0)
 
@@ -110,11 +110,8 @@ def test_outputs_identical_for_workers_chunk_sizes_and_dask(tmp_path):
         out = tmp_path / "dask"
         address = cluster.scheduler_address
         man = run_scene(_scene(900), out, log=log, workers=None, scheduler=address)
-        assert man["execution"] == {
-            "workers": 2,
-            "scheduler": address,
-            "engine": "dask",
-        }
+        ex = man["execution"]
+        assert (ex["workers"], ex["scheduler"], ex["engine"]) == (2, address, "dask")
         runs["dask"] = _outputs(out)
     ref = runs.pop("w1_big")
     assert len(ref[0]["X"]) > 1000  # a survey's worth of points, not an empty comparison
