@@ -155,7 +155,7 @@ def machine() -> list[str]:
         dask_v = "absent"
     commit = subprocess.run(
         ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
-    ).stdout.strip()
+    ).stdout.strip() or os.environ.get("BENCH_COMMIT", "unknown")  # a `git archive` copy
     mem = psutil.virtual_memory().total / 2**30
     return [
         f"- CPU: {model}, {os.cpu_count()} cores ({len(os.sched_getaffinity(0))} usable), "
