@@ -12,6 +12,13 @@ from pipeline.errors import BathyError, SceneError
 EXIT_BAD_SCENE = 2
 
 
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1; got {value}")
+    return value
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="bathy", description="Open survey pipeline for airborne bathymetric lidar."
@@ -27,6 +34,19 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--quiet", action="store_true", help="no progress, only errors")
     run.add_argument(
         "--json", action="store_true", help="a machine-readable summary on stdout (log on stderr)"
+    )
+    run.add_argument(
+        "--workers",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="processes for the simulate + detect chunks (default: every core; 1: no pool)",
+    )
+    run.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="run the chunks on this Dask distributed scheduler (e.g. tcp://host:8786)",
     )
     val = sub.add_parser("validate", help="check a scene file; exit 2 if it is invalid")
     val.add_argument("scene", help="scene TOML file")
@@ -199,7 +219,14 @@ def main(argv: list[str] | None = None) -> int:
                 print(line, file=stream, flush=True)
 
         log(f"bathy run {path} -> {out}")
-        manifest = run_scene(scene, out, log=log, progress=not args.quiet)
+        manifest = run_scene(
+            scene,
+            out,
+            log=log,
+            progress=not args.quiet,
+            workers=args.workers,
+            scheduler=args.scheduler,
+        )
         if args.json:
             print(json.dumps(_summary(out, manifest), indent=2))
         return 0

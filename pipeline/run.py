@@ -44,7 +44,13 @@ def clear_outputs(out_dir: str | Path) -> None:
 
 
 def run_scene(
-    scene: Scene, out_dir: str | Path, log=print, *, progress: bool = False
+    scene: Scene,
+    out_dir: str | Path,
+    log=print,
+    *,
+    progress: bool = False,
+    workers: int | None = 1,
+    scheduler: str | None = None,
 ) -> dict[str, Any]:
     """Run exactly the stages the scene's plan selects and write its outputs into ``out_dir``.
 
@@ -58,6 +64,11 @@ def run_scene(
         Receives one line of progress at a time (``print`` by default).
     progress : bool
         Show progress bars with ETA (on stderr) for the long stages.
+    workers : int or None
+        Processes for the survey's chunk loop: 1 runs it here, ``None`` uses every core (or,
+        with ``scheduler``, the cluster's threads). The outputs do not depend on it.
+    scheduler : str or None
+        Address of a Dask distributed scheduler to run the chunk loop on.
 
     Returns
     -------
@@ -89,10 +100,16 @@ def run_scene(
             f"floor at {scene.seabed.depth_m:g} m: {b.floor_photons:.4g} photoelectrons/shot"
         )
     evaluation = None
+    execution = {"workers": 1, "scheduler": None, "engine": "serial", "map_wall_s": 0.0}
     if the_plan.runs("terrain"):
+        from pipeline.parallel import Executor
         from pipeline.run_survey import run_survey
 
-        survey_files, evaluation = run_survey(scene, the_plan, out, clock, log, progress)
+        with Executor(workers, scheduler) as executor:
+            survey_files, evaluation = run_survey(
+                scene, the_plan, out, clock, log, progress, executor=executor
+            )
+            execution = executor.describe()
         files.update(survey_files)
     stages = clock.to_dict()
     manifest = {
@@ -103,6 +120,8 @@ def run_scene(
         ],
         "files": {k: Path(v).relative_to(out).as_posix() for k, v in files.items()},
         "timings_s": {"total_wall_s": time.perf_counter() - t0},
+        # where the chunk loop ran (stage CPU seconds add up every worker's)
+        "execution": execution,
         "evaluation": evaluation,
         "provenance": provenance(scene),
     }

@@ -1,8 +1,9 @@
 """Orchestration of a survey scene: the plan's survey stages, wired and timed, nothing else.
 
-Simulation (terrain → survey → trace → receiver) runs in chunks of ``run.chunk_pulses`` pulses;
-of each chunk only what a real system records is kept: the measured navigation and the
-detections of the receiver's data. Processing (:mod:`pipeline.process`) then sees only those and
+Simulation (terrain → survey → trace → receiver) runs in chunks of ``run.chunk_pulses`` pulses
+(:mod:`pipeline.survey_chunks`), here or on workers (:mod:`pipeline.parallel`); of each chunk
+only what a real system records is kept: the measured navigation and the detections of the
+receiver's data. Processing (:mod:`pipeline.process`) then sees only those and
 the :class:`~pipeline.process.context.ProcessingContext`; the evaluate stage alone meets the
 truth (:mod:`pipeline.survey_report`). Every stage runs only where the plan
 (:func:`pipeline.stages.plan`) says so, under the :class:`~pipeline.stages.StageClock`.
@@ -19,14 +20,12 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from pipeline.parallel import Executor
 from pipeline.process.context import ProcessingContext, processing_context
-from pipeline.process.posterior_selection import (
-    KeptWaveforms,
-    kept_for_posterior,
-    posterior_budget,
-)
+from pipeline.process.posterior_selection import KeptWaveforms, posterior_budget
 from pipeline.process.returns import DetectedReturns
 from pipeline.stages import Plan, StageClock
+from pipeline.survey_chunks import ChunkJob, run_chunk
 
 __all__ = ["SimulatedSurvey", "survey_extent_m", "simulate_detections", "run_survey"]
 
@@ -80,16 +79,21 @@ def _count(into: dict[str, int], counts: dict[str, int]) -> None:
 
 
 def simulate_detections(
-    scene, plan: Plan, ctx: ProcessingContext, clock: StageClock, log=print, progress=False
+    scene,
+    plan: Plan,
+    ctx: ProcessingContext,
+    clock: StageClock,
+    log=print,
+    progress=False,
+    executor: Executor | None = None,
 ) -> SimulatedSurvey:
     """Simulate the survey chunk by chunk; keep the measured navigation and the detections.
 
-    ``progress``: a progress bar with ETA over the pulses (stderr).
+    ``progress``: a progress bar with ETA over the pulses (stderr). ``executor``: where the
+    chunks run (:class:`~pipeline.parallel.Executor`; default: one by one in this process);
+    the result is the same wherever they run.
     """
-    from pipeline.simulate import paths as P
     from pipeline.simulate import survey
-    from pipeline.simulate.detector import describe_pulse_flags
-    from pipeline.simulate.trace import trace
     from pipeline.simulate.world import build_truth, build_world, wave_surface
 
     with clock.stage("terrain"):
@@ -126,7 +130,6 @@ def simulate_detections(
     chunk = scene.run.chunk_pulses
     if ins.photon_counting:  # whole accumulation windows per chunk, so chunking cannot change them
         chunk = max(ins.shots_per_window, chunk // ins.shots_per_window * ins.shots_per_window)
-    div_rad = scene.scanner.beam_divergence_mrad * 1e-3
     # waveforms of a bounded share of the pulses are kept for posteriors (a few times the
     # pulses sampled, so the cells that matter can be chosen among them)
     keep_fraction = 0.0
@@ -134,12 +137,24 @@ def simulate_detections(
         xmin, xmax, ymin, ymax = extent
         n_post = posterior_budget(ps, False, (xmax - xmin) * (ymax - ymin) / 1e6)
         keep_fraction = min(1.0, 4.0 * n_post / max(lines.n_pulses_total, 1))
+    job = ChunkJob(
+        scene=scene,
+        ctx=ctx,
+        world=world,
+        lines=lines,
+        chunk_pulses=chunk,
+        keep_fraction=keep_fraction,
+        waveform=plan.runs("receiver_waveform"),
+        no_bottom=plan.runs("no_bottom_limit"),
+    )
     sub_flags: dict[str, int] = {}
     pulse_flags: dict[str, int] = {}
     parts: list[dict[str, np.ndarray]] = []
     kept: list[KeptWaveforms] = []
     nb_inputs: list[dict[str, np.ndarray]] = []
     n_chunk = survey.n_chunks(lines, chunk)
+    executor = executor or Executor(workers=1)
+    log(f"  chunks of {chunk} pulses on {executor.workers} worker(s)")
     bar = tqdm(
         total=lines.n_pulses_total,
         unit="pulse",
@@ -148,41 +163,20 @@ def simulate_detections(
         disable=not progress,
         file=sys.stderr,
     )
-    for c in range(n_chunk):
-        with clock.stage("survey"):
-            pulses = survey.generate_pulses(
-                scene.flight,
-                scene.attitude,
-                scene.navigation,
-                scene.scanner,
-                lines,
-                c,
-                chunk,
-                scene.scene.seed,
-            )
-        with clock.stage("trace"):
-            paths = trace(pulses, world, scene.trace, div_rad, scene.scanner.polarisation)
-        _count(sub_flags, P.describe_flags(paths.flags))
-        if plan.runs("receiver_waveform"):
-            found, k, nb = _waveform_chunk(scene, plan, ctx, clock, paths, keep_fraction)
-            if k is not None:
-                kept.append(k)
-            if nb is not None:
-                nb_inputs.append(nb)
-        else:
-            found, flags = _photon_chunk(scene, ctx, clock, paths, pulses)
-            _count(pulse_flags, describe_pulse_flags(flags))
-        parts.append(
-            {
-                "pulse_id": pulses.pulse_id,
-                "origin_meas_m": pulses.origin_meas_m,
-                "direction_meas": pulses.direction_meas,
-                "t_emit_s": pulses.t_s,  # the shot's timestamp and flight line, as recorded
-                "line_id": pulses.line_id,
-                **{f.name: getattr(found, f.name) for f in dataclasses.fields(found)},
-            }
-        )
-        bar.update(len(pulses.pulse_id))
+    # in chunk order, as they arrive; each chunk's stage seconds (in the process that ran it)
+    # add to the clock, so CPU seconds count every worker
+    for c, res in enumerate(executor.map(run_chunk, job, n_chunk)):
+        for name in res.wall_s:
+            clock.wall_s[name] = clock.wall_s.get(name, 0.0) + res.wall_s[name]
+            clock.cpu_s[name] = clock.cpu_s.get(name, 0.0) + res.cpu_s[name]
+        _count(sub_flags, res.subray_flags)
+        _count(pulse_flags, res.pulse_flags)
+        if res.kept is not None:
+            kept.append(res.kept)
+        if res.nb is not None:
+            nb_inputs.append(res.nb)
+        parts.append(res.part)
+        bar.update(res.n_pulses)
         if not progress and ((c + 1) % 5 == 0 or c + 1 == n_chunk):
             done = min((c + 1) * chunk, lines.n_pulses_total)
             log(f"  chunk {c + 1}/{n_chunk}: {done} pulses simulated and detected")
@@ -238,69 +232,18 @@ def _returns(parts: list[dict[str, np.ndarray]]) -> DetectedReturns:
     )
 
 
-def _waveform_chunk(scene, plan, ctx, clock, paths, keep_fraction):
-    """Digitise one chunk, detect its returns, keep what the later stages need of it."""
-    from pipeline.process.detect import detect_full_waveform
-    from pipeline.simulate.waveform import simulate_waveforms
-
-    ins, ps = ctx.instrument, scene.process
-    with clock.stage("receiver_waveform"):
-        wf = simulate_waveforms(paths, scene, scene.detector, scene.returns)
-    with clock.stage("detect_waveform"):
-        found = detect_full_waveform(
-            wf.samples,
-            wf.sample_interval_s,
-            ins.system_fwhm_s,
-            ps.detect,
-            noise_samples=ins.noise_samples,
-            shot_noise_counts=ins.shot_noise_counts,
-            # the digitiser's top code, 2^bit_depth − 1 (its datasheet)
-            top_code=ins.amplitude_full_scale - 1.0,
-        )
-    nb = None
-    if plan.runs("no_bottom_limit"):
-        from pipeline.process.no_bottom import chunk_inputs
-
-        with clock.stage("no_bottom_limit"):  # times from sample 0, as the waveforms have them
-            nb = chunk_inputs(wf.samples, found, ctx, ps.detect, ps.no_bottom)
-    kept = None
-    keep = kept_for_posterior(wf.pulse_id, keep_fraction, scene.scene.seed)
-    if keep.any():
-        kept = KeptWaveforms(wf.pulse_id[keep], wf.t0_s[keep], wf.samples[keep])
-    # detection times are from sample 0; sample 0 is t0_s after emission
-    found = dataclasses.replace(
-        found,
-        t_surface_s=found.t_surface_s + np.where(found.has_surface, wf.t0_s, 0.0),
-        t_bottom_s=found.t_bottom_s + np.where(found.has_bottom, wf.t0_s, 0.0),
-        t_column_s=found.t_column_s + np.where(found.has_column, wf.t0_s, 0.0),
-    )
-    return found, kept, nb
-
-
-def _photon_chunk(scene, ctx, clock, paths, pulses):
-    """Photon events of one chunk and their window detections; the receiver's flags."""
-    from pipeline.process.detect_photons import detect_photon_events
-    from pipeline.simulate.waveform import simulate_photon_events
-
-    with clock.stage("receiver_photon"):
-        ev = simulate_photon_events(paths, scene, scene.detector, scene.returns)
-    with clock.stage("detect_photon"):
-        found = detect_photon_events(
-            ev.offsets,
-            ev.times_s,
-            pulses.origin_meas_m,
-            pulses.direction_meas,
-            ctx.instrument.air_index,
-            scene.process.photon_detect,
-            pulse_id=pulses.pulse_id,
-            # the detector's channels per beam (its datasheet): one event each per dead time
-            n_channels=scene.detector.n_channels,
-        )
-    return found, ev.flags
-
-
-def run_survey(scene, plan: Plan, out: Path, clock: StageClock, log=print, progress: bool = False):
+def run_survey(
+    scene,
+    plan: Plan,
+    out: Path,
+    clock: StageClock,
+    log=print,
+    progress: bool = False,
+    executor: Executor | None = None,
+):
     """Run the plan's survey stages and write the survey's outputs into ``out``.
+
+    ``executor``: where the chunk loop runs (default: in this process).
 
     Returns
     -------
@@ -315,7 +258,7 @@ def run_survey(scene, plan: Plan, out: Path, clock: StageClock, log=print, progr
     from pipeline.process.survey_uncertainty import survey_uncertainty, with_tpu
 
     ctx = processing_context(scene)
-    sim = simulate_detections(scene, plan, ctx, clock, log, progress)
+    sim = simulate_detections(scene, plan, ctx, clock, log, progress, executor)
     ps, fr = scene.process, scene.frame
     with clock.stage("process"):
         processed = process_detections(sim.returns, ctx, ps.classify, water_column=False)

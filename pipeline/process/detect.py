@@ -39,6 +39,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
@@ -48,8 +49,9 @@ from pipeline.process.detect_clipped import clipped_bottom, clipped_echoes
 from pipeline.process.detect_merged import column_decay, fit_merged, merged_bottoms
 from pipeline.process.detect_near import column_excess
 from pipeline.process.detect_noise import difference_noise_sigma, window_baseline
-from pipeline.process.detect_timing import parabolic_peak, surface_step_fit
+from pipeline.process.detect_timing import parabolic_peak
 from pipeline.process.returns import DetectorFlag
+from pipeline.process.surface_step import surface_step_fit
 
 __all__ = [
     "DetectSettings",
@@ -156,19 +158,36 @@ def flank_trend(
     ``valid`` (same shape as ``y``, bool), if given, leaves the other samples out of the flank
     means (a flank with no valid sample takes the other side's mean).
     """
+    y = np.ascontiguousarray(y, dtype=np.float64)
+    w = np.ones_like(y) if valid is None else np.ascontiguousarray(valid, dtype=np.float64)
+    return _flank_trend_kernel(y, w, int(gap), int(length))
+
+
+@numba.njit(cache=True, nogil=True)
+def _flank_trend_kernel(y, w, gap, length):
+    # one pass per waveform over its running sums (the same sequential sums as np.cumsum, so
+    # the same values as the array form, without its (n, m) temporaries)
     n, m = y.shape
-    w = np.ones_like(y, dtype=float) if valid is None else valid.astype(float)
-    c = np.concatenate([np.zeros((n, 1)), np.cumsum(y * w, axis=1)], axis=1)
-    cw = np.concatenate([np.zeros((n, 1)), np.cumsum(w, axis=1)], axis=1)
-    t = np.arange(m)
-    l0, l1 = np.clip(t - gap - length, 0, m), np.clip(t - gap, 0, m)
-    r0, r1 = np.clip(t + gap + 1, 0, m), np.clip(t + gap + 1 + length, 0, m)
-    n_left, n_right = cw[:, l1] - cw[:, l0], cw[:, r1] - cw[:, r0]
-    left = (c[:, l1] - c[:, l0]) / np.maximum(n_left, 1)
-    right = (c[:, r1] - c[:, r0]) / np.maximum(n_right, 1)
-    left = np.where(n_left > 0, left, right)
-    right = np.where(n_right > 0, right, left)
-    return np.maximum(left, right)
+    out = np.empty((n, m))
+    c = np.empty(m + 1)
+    cw = np.empty(m + 1)
+    for p in range(n):
+        c[0] = cw[0] = 0.0
+        for t in range(m):
+            c[t + 1] = c[t] + y[p, t] * w[p, t]
+            cw[t + 1] = cw[t] + w[p, t]
+        for t in range(m):
+            l0, l1 = min(max(t - gap - length, 0), m), min(max(t - gap, 0), m)
+            r0, r1 = min(max(t + gap + 1, 0), m), min(max(t + gap + 1 + length, 0), m)
+            n_left, n_right = cw[l1] - cw[l0], cw[r1] - cw[r0]
+            left = (c[l1] - c[l0]) / max(n_left, 1.0)
+            right = (c[r1] - c[r0]) / max(n_right, 1.0)
+            if not n_left > 0:
+                left = right
+            if not n_right > 0:
+                right = left
+            out[p, t] = max(left, right)
+    return out
 
 
 #: Waveforms detected at once (bounds the float64 temporaries to a few tens of MB).

@@ -20,6 +20,8 @@ import math
 import numpy as np
 from scipy.special import ndtr
 
+from pipeline.process.merged_lm import lm_fit
+
 __all__ = ["column_decay", "fit_merged", "merged_bottoms"]
 
 
@@ -141,7 +143,6 @@ def fit_merged(
         a2 = np.maximum(excess[np.arange(n), j] - b0, 0.1 * peak_h)
     p = np.column_stack([t1, t2, peak_h, a2, b0, np.full(n, sg)])
     act = [0, 1, 2, 3, 4, 5] if use_col else [0, 1, 2, 3]
-    lam = np.full(n, 1e-2)
 
     def model(p):
         s1 = p[:, 5:6]
@@ -168,31 +169,19 @@ def fit_merged(
         )[:, :, act]
         return f, jac * window[:, :, None]
 
-    def cost(p):
-        f = model(p)[0]
-        return np.sum(np.where(window, (f - filt) ** 2, 0.0), axis=1)
-
     npar = len(act)
-    c = cost(p)
-    for _ in range(iterations):
-        f, jac = model(p)
-        r = np.where(window, f - filt, 0.0)
-        jtj = np.einsum("nmi,nmj->nij", jac, jac)
-        jtr = np.einsum("nmi,nm->ni", jac, r)
-        damp = jtj + lam[:, None, None] * np.eye(npar)[None] * (
-            np.diagonal(jtj, axis1=1, axis2=2)[:, None, :] + 1e-12
-        )
-        step = np.zeros_like(p)
-        step[:, act] = np.linalg.solve(damp, -jtr[:, :, None])[:, :, 0]
-        trial = p + step
-        # a negative column is not physical, nor a surface echo narrower than the system's
-        trial[:, 4] = np.maximum(trial[:, 4], 0.0)
-        trial[:, 5] = np.clip(trial[:, 5], sg, 3.0 * sg)
-        c_new = cost(trial)
-        better = c_new < c
-        p = np.where(better[:, None], trial, p)
-        c = np.where(better, c_new, c)
-        lam = np.where(better, lam * 0.3, lam * 10.0)
+    # the iterations, compiled per pulse (:mod:`pipeline.process.merged_lm`); the model above
+    # serves the covariance below
+    p, c = lm_fit(
+        np.ascontiguousarray(x),
+        np.ascontiguousarray(filt, dtype=np.float64),
+        np.ascontiguousarray(window),
+        np.ascontiguousarray(p, dtype=np.float64),
+        np.ascontiguousarray(kk[:, 0]),
+        float(sg),
+        npar,
+        int(iterations),
+    )
     lo = np.minimum(p[:, 0], p[:, 1])
     hi = np.maximum(p[:, 0], p[:, 1])
     first_is_0 = p[:, 0] <= p[:, 1]

@@ -14,6 +14,7 @@ it, or the column is too faint to matter), the flank-trend test stays as it was.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 __all__ = ["column_excess"]
@@ -52,22 +53,37 @@ def column_excess(
     carried : (n_pulses, n_samples) float
         The column carried back (its noise adds to the test's: the caller's business).
     """
+    filt = np.ascontiguousarray(filt, dtype=np.float64)
+    floor = np.ascontiguousarray(floor, dtype=np.float64)
+    return _column_excess_kernel(filt, floor, int(offset), int(width))
+
+
+@numba.njit(cache=True, nogil=True)
+def _column_excess_kernel(filt, floor, offset, width):
+    # one pass per waveform over its running sums (sequential, as np.cumsum's), without the
+    # (n, m) temporaries of the array form; the same arithmetic in the same order
     n, m = filt.shape
-
-    def window(v, start):
-        c = np.concatenate([np.zeros((n, 1)), np.cumsum(v, axis=1)], axis=1)
-        lo = np.clip(np.arange(m) + start, 0, m)
-        hi = np.clip(np.arange(m) + start + width, 0, m)
-        return (c[:, hi] - c[:, lo]), (hi - lo)[None, :]
-
-    s1, n1 = window(filt, offset)
-    s2, n2 = window(filt, offset + width)
-    a1, _ = window((filt > floor[:, None]).astype(np.float64), offset)
-    a2, _ = window((filt > floor[:, None]).astype(np.float64), offset + width)
-    inside = (n1 == width) & (n2 == width)
-    column = inside & (a1 > 0.5 * width) & (a2 > 0.5 * width)
-    m1 = np.maximum(s1 / width, 1e-300)
-    m2 = np.maximum(s2 / width, 1e-300)
-    k = np.clip(np.log(m1 / m2) / width, 0.0, MAX_DECAY_PER_SAMPLE)
-    carried = m1 * np.exp(k * (offset + 0.5 * (width - 1)))
-    return filt - carried, column, carried
+    excess = np.empty((n, m))
+    column = np.empty((n, m), dtype=np.bool_)
+    carried = np.empty((n, m))
+    c = np.empty(m + 1)
+    ca = np.empty(m + 1)
+    back = offset + 0.5 * (width - 1)
+    for p in range(n):
+        c[0] = ca[0] = 0.0
+        for t in range(m):
+            c[t + 1] = c[t] + filt[p, t]
+            ca[t + 1] = ca[t] + (1.0 if filt[p, t] > floor[p] else 0.0)
+        for t in range(m):
+            lo1, hi1 = min(max(t + offset, 0), m), min(max(t + offset + width, 0), m)
+            lo2, hi2 = min(max(t + offset + width, 0), m), min(max(t + offset + 2 * width, 0), m)
+            s1, s2 = c[hi1] - c[lo1], c[hi2] - c[lo2]
+            a1, a2 = ca[hi1] - ca[lo1], ca[hi2] - ca[lo2]
+            inside = (hi1 - lo1 == width) and (hi2 - lo2 == width)
+            column[p, t] = inside and a1 > 0.5 * width and a2 > 0.5 * width
+            m1 = max(s1 / width, 1e-300)
+            m2 = max(s2 / width, 1e-300)
+            k = min(max(np.log(m1 / m2) / width, 0.0), MAX_DECAY_PER_SAMPLE)
+            carried[p, t] = m1 * np.exp(k * back)
+            excess[p, t] = filt[p, t] - carried[p, t]
+    return excess, column, carried

@@ -71,14 +71,27 @@ class PhotonDetectSettings:
     )
 
 
-def _significance(k: np.ndarray, b: np.ndarray, n_bins: int) -> np.ndarray:
-    """Normal-σ equivalent of ``k`` Poisson counts over background ``b`` among ``n_bins`` bins."""
+def _significance(k: np.ndarray, b: np.ndarray, n_bins) -> np.ndarray:
+    """Normal-σ equivalent of ``k`` Poisson counts over background ``b`` among ``n_bins`` bins.
+
+    ``n_bins``: int, or per window ``(n_windows, 1)`` (the bins of each window's range gate).
+    """
     # log P(X >= k) underflows to -inf for strong returns (all would tie at infinite σ):
     # log P(X = k), its dominant term, keeps it finite and ordered
     log_p = np.maximum(stats.poisson.logsf(k - 1, b), stats.poisson.logpmf(k, b))
-    log_p = log_p + math.log(n_bins)
+    log_p = log_p + np.log(n_bins)
     # ndtri_exp works on log p, so p-values far below float range keep a finite σ
     return np.where(log_p < 0, -special.ndtri_exp(np.minimum(log_p, -1e-300)), 0.0)
+
+
+def _span(hist: np.ndarray) -> np.ndarray:
+    """(n_windows, n_bins) bool: the bins between each window's lowest and highest event."""
+    nb = hist.shape[1]
+    nz = hist > 0
+    first = np.argmax(nz, axis=1)
+    last = nb - 1 - np.argmax(nz[:, ::-1], axis=1)
+    col = np.arange(nb)[None, :]
+    return (col >= first[:, None]) & (col <= last[:, None])
 
 
 def _background(hist: np.ndarray) -> np.ndarray:
@@ -100,15 +113,15 @@ def _background(hist: np.ndarray) -> np.ndarray:
         would pass as a return); the second, unaffected by the few bins returns fill, is
         reliable exactly then, and saturates (no empty bins) only when the first is reliable.
     """
-    nb = hist.shape[1]
-    col = np.arange(nb)[None, :]
     nz = hist > 0
-    first = np.argmax(nz, axis=1)
-    last = nb - 1 - np.argmax(nz[:, ::-1], axis=1)
-    span = (col >= first[:, None]) & (col <= last[:, None])
+    span = _span(hist)
     n_span = np.maximum(span.sum(axis=1), 1)
-    q90 = np.quantile(np.where(span, hist, np.nan), 0.9, axis=1, method="lower")
-    q90 = np.nan_to_num(q90)  # windows without events
+    # the 90th percentile ("lower") of the span's bins alone: np.quantile over the NaN-padded
+    # rows gave NaN (then 0) for every window narrower than the chunk's histogram, so the
+    # estimate depended on the other windows of the chunk
+    ordered = np.sort(np.where(span, hist, np.inf), axis=1)
+    q90 = ordered[np.arange(hist.shape[0]), np.floor(0.9 * (n_span - 1)).astype(np.int64)]
+    q90 = np.where(np.isfinite(q90), q90, 0.0)  # windows without events
     low = span & (hist <= q90[:, None])
     trimmed = np.sum(np.where(low, hist, 0.0), axis=1) / np.maximum(low.sum(axis=1), 1)
     empty = np.sum(span & ~nz, axis=1)
@@ -187,15 +200,25 @@ def detect_photon_events(
     )
     if z.size == 0:
         return empty
-    z0 = math.floor(z.min() / s.bin_m) * s.bin_m
-    nb = int((z.max() - z0) / s.bin_m) + 1
-    b = np.minimum(((z - z0) / s.bin_m).astype(np.int64), nb - 1)
+    cb = s.centroid_bins
+    # bins on the absolute grid z = bin_m * k, so an event's bin never depends on the other
+    # events of the chunk; the histogram starts ``pad`` bins below the chunk's lowest event and
+    # ends ``pad`` above its highest, so every box holding a window's event exists whatever
+    # the chunk's extent (its results then do not depend on the chunk either)
+    pad = 2 * cb + 2
+    k_abs = np.floor(z / s.bin_m).astype(np.int64)
+    k0 = int(k_abs.min()) - pad
+    nb = int(k_abs.max()) + pad - k0 + 1
+    b = k_abs - k0
     hist = np.bincount(ev_win * nb + b, minlength=n_win * nb).reshape(n_win, nb).astype(float)
     bg = _background(hist)
+    # the look-elsewhere count of each window: the bins of its own range gate (its events'
+    # span, as the background's), not the chunk's histogram
+    span = _span(hist)
+    n_searched = np.maximum(span.sum(axis=1), 1)[:, None]
     bg_safe = np.maximum(bg, 1e-3)  # an empty background still has a finite p-value scale
     rows = np.arange(n_win)
     col = np.arange(nb)[None, :]
-    cb = s.centroid_bins
     # counts of a return spread over neighbouring bins: test the sum over the centroid window
     csum = np.concatenate([np.zeros((n_win, 1)), np.cumsum(hist, axis=1)], axis=1)
 
@@ -208,7 +231,7 @@ def detect_photon_events(
 
     full = np.broadcast_to(col, (n_win, nb))
     box = box_sum(full - cb, full + cb)
-    sig_box = _significance(box, bg_safe[:, None] * (2 * cb + 1), nb)
+    sig_box = _significance(box, bg_safe[:, None] * (2 * cb + 1), n_searched)
     # Surface: the FIRST significant return from above (the highest bin), not the strongest:
     # at 532 nm a shallow seabed can return more photons than the water surface.
     top = np.where(sig_box >= s.threshold_sigma, col, -1).max(axis=1)
@@ -236,7 +259,7 @@ def detect_photon_events(
     # its local level (the larger mean of the flanking bins, the surface box left out), not
     # only of the background
     local = np.maximum(
-        flank_trend(hist, gap=cb + 1, length=s.trend_bins, valid=col < s_lo[:, None]),
+        flank_trend(hist, gap=cb + 1, length=s.trend_bins, valid=span & (col < s_lo[:, None])),
         bg_safe[:, None],
     )
     # the candidate's box stops short of the surface box, so the surface tail is not counted
@@ -250,7 +273,7 @@ def detect_photon_events(
     suffix_min = np.concatenate([suffix_min, np.full((n_win, 1), np.inf)], axis=1)
     valley_min = np.take_along_axis(suffix_min, np.clip(hi_b + 1, 0, nb), axis=1)
     local = np.maximum(local, np.where(np.isfinite(valley_min), valley_min, 0.0))
-    sig_all = _significance(box_b, local * n_b, nb)
+    sig_all = _significance(box_b, local * n_b, n_searched)
     i_b = np.argmax(np.where(below, sig_all, -np.inf), axis=1)
     sig_s = np.where(has_s, sig_box[rows, i_s], 0.0)
     sig_b = np.where(has_s & below[rows, i_b], sig_all[rows, i_b], 0.0)
@@ -268,10 +291,12 @@ def detect_photon_events(
         w = np.bincount(ev_win[near], minlength=n_win).astype(float)
         zsum = np.bincount(ev_win[near], weights=z[near], minlength=n_win)
         nbins = np.maximum(box[1] - box[0] + 1, 1)
-        centre = z0 + (box[0] + box[1] + 1) * 0.5 * s.bin_m
+        # heights from absolute bin numbers (integers: exact, whatever the chunk's k0)
+        centre = (2 * k0 + box[0] + box[1] + 1) * (0.5 * s.bin_m)
         excess = np.maximum(w - bg * nbins, 1e-9)
         zc = (zsum - bg * nbins * centre) / excess
-        return np.where(w > bg * nbins, zc, z0 + (i_peak + 0.5) * s.bin_m), np.maximum(excess, 0.0)
+        peak_z = (k0 + i_peak + 0.5) * s.bin_m
+        return np.where(w > bg * nbins, zc, peak_z), np.maximum(excess, 0.0)
 
     # No bottom: light is seen to come back down to the lowest bin of the run of significant
     # boxes that starts at the surface peak (the water column); a bottom there, brighter than
@@ -281,7 +306,7 @@ def detect_photon_events(
     weak_below = (sig_box < s.threshold_sigma) & (col < i_s[:, None])
     i_lim = np.where(weak_below, col, -1).max(axis=1) + 1
     has_lim = has_s & ~has_b & (i_lim < s_lo - cb)
-    z_lim = z0 + (i_lim + 0.5) * s.bin_m
+    z_lim = (k0 + i_lim + 0.5) * s.bin_m
     z_s, amp_s = centroid(i_s, s_box)
     lam_s = _surface_pileup(shot, window, b, ev_win, s_box, n, n_win, n_channels)
     z_b, amp_b = centroid(i_b, b_box)

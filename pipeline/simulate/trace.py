@@ -60,11 +60,24 @@ class MeshCaster:
             raise ValueError("mesh has degenerate (zero-area) triangles")
         self.face_normal = normal / length
         self.face_point = v0
-        self._scene = o3d.t.geometry.RaycastingScene()
-        self._scene.add_triangles(
+        self._scene = self._raycasting_scene()
+
+    def _raycasting_scene(self):
+        scene = o3d.t.geometry.RaycastingScene()
+        scene.add_triangles(
             o3d.core.Tensor(self.vertices.astype(np.float32)),
             o3d.core.Tensor(self.faces.astype(np.uint32)),
         )
+        return scene
+
+    def __getstate__(self) -> dict:
+        # open3d's scene cannot be pickled: the arrays travel (to a worker process) and the
+        # scene is rebuilt from the same float32 triangles, so every cast gives the same hits
+        return {k: v for k, v in self.__dict__.items() if k != "_scene"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._scene = self._raycasting_scene()
 
     @classmethod
     def from_trimesh(cls, mesh) -> MeshCaster:

@@ -1,3 +1,5 @@
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -157,3 +159,31 @@ def test_surface_pileup_is_flagged_saturated(lam_s, saturated):
     assert det.has_surface.all()
     flagged = (det.flags & np.uint16(DetectorFlag.SATURATED)) != 0
     assert flagged.all() if saturated else not flagged.any()
+
+
+def _join(parts):
+    """Concatenate per-shot event lists given as (offsets, times, origin, direction)."""
+    offs, times, origins, dirs, base = [np.zeros(1, np.int64)], [], [], [], 0
+    for o, t, og, d in parts:
+        offs.append(o[1:] + base)
+        base += int(o[-1])
+        times.append(t)
+        origins.append(og)
+        dirs.append(d)
+    return np.concatenate(offs), np.concatenate(times), np.vstack(origins), np.vstack(dirs)
+
+
+def test_a_window_detects_the_same_in_any_chunk_of_whole_windows():
+    """Windows over shallow water, then over deep water (a longer range gate): the shallow
+    windows alone, or chunked with the deep ones, must give the same detections; their
+    photons do not change, only the other windows of the chunk do."""
+    # faint echoes: their significance (so their confidence) is not saturated
+    shallow = _events(600, 3.0, lam_s=0.3, lam_b=0.1, seed=11)[:4]
+    deep = _events(400, 30.0, lam_bg=3.0, seed=12)[:4]
+    offsets, times, origin, direction = _join([shallow, deep])
+    ids = np.arange(1000)
+    whole = detect_photon_events(offsets, times, origin, direction, N_AIR, pulse_id=ids)
+    alone = detect_photon_events(*shallow, N_AIR, pulse_id=ids[:600])
+    assert alone.has_surface.all() and alone.has_bottom.any()
+    for f in dataclasses.fields(alone):
+        np.testing.assert_array_equal(getattr(whole, f.name)[:600], getattr(alone, f.name), f.name)

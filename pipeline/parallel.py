@@ -1,0 +1,175 @@
+"""Where a run's independent tasks execute: in this process, a process pool, or a Dask cluster.
+
+:class:`Executor` maps a function over task indices ``0 .. n-1`` and yields the results **in
+task order as they arrive**, with at most ``ahead`` tasks submitted and not yet consumed (by
+default twice the workers), so memory stays bounded whatever the number of tasks: the consumer
+works on result ``i`` while later tasks run. The function receives a ``shared`` object (e.g. the
+scene and its meshes) that is sent once per worker, not once per task.
+
+* ``workers == 1`` and no scheduler: plain calls in this process (no pickling, no pool).
+* ``workers > 1``: a :class:`concurrent.futures.ProcessPoolExecutor` whose processes start with
+  ``spawn`` (a clean interpreter: forking a process whose open3d/numba thread pools are running
+  can deadlock) and receive ``shared`` once, through the pool's initializer.
+* ``scheduler`` given: a :class:`distributed.Client` on that address; ``shared`` is scattered to
+  every worker once (``broadcast=True``).
+
+Results do not depend on where a task ran: every task is a pure function of ``(shared, index)``
+(the simulation's random streams are functions of the pulse id, see
+:mod:`pipeline.simulate.noise`), so 1 worker, N workers and a cluster give identical outputs.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import time
+from collections import deque
+from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor
+from typing import Any
+
+__all__ = ["Executor", "default_workers"]
+
+#: What each pool process received through the initializer (``None`` in the parent).
+_SHARED: Any = None
+
+
+def default_workers() -> int:
+    """Cores this process may run on (``os.sched_getaffinity``; ``os.cpu_count`` elsewhere)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _install(shared: Any) -> None:
+    global _SHARED
+    _SHARED = shared
+
+
+def _pool_call(fn: Callable[[Any, int], Any], index: int) -> Any:
+    return fn(_SHARED, index)
+
+
+def _dask_call(fn: Callable[[Any, int], Any], shared: Any, index: int) -> Any:
+    return fn(shared, index)
+
+
+class Executor:
+    """Runs tasks here, on a process pool or on a Dask cluster; a context manager.
+
+    Parameters
+    ----------
+    workers : int or None
+        Processes of the pool; ``None``: every core (:func:`default_workers`), or with a
+        ``scheduler`` the cluster's threads. 1 without a scheduler: in this process.
+    scheduler : str or None
+        Address of a Dask distributed scheduler (e.g. ``tcp://10.0.0.5:8786``).
+    ahead : int or None
+        Tasks submitted and not yet consumed, at most; default ``2 * workers``.
+    """
+
+    def __init__(
+        self, workers: int | None = None, scheduler: str | None = None, ahead: int | None = None
+    ) -> None:
+        if workers is not None and workers < 1:
+            raise ValueError(f"workers must be >= 1; got {workers}.")
+        if ahead is not None and ahead < 1:
+            raise ValueError(f"ahead must be >= 1; got {ahead}.")
+        self.scheduler = scheduler
+        self._client = None
+        if scheduler is not None:
+            from distributed import Client
+
+            self._client = Client(scheduler, set_as_default=False)
+            if workers is None:
+                workers = max(1, sum(self._client.nthreads().values()))
+        self.workers = default_workers() if workers is None else int(workers)
+        self.ahead = ahead if ahead is not None else 2 * self.workers
+        self.map_wall_s = 0.0  # wall seconds inside map(), the consumer's work included
+
+    def describe(self) -> dict[str, Any]:
+        """Where the tasks ran, JSON-ready (the manifest's ``execution``).
+
+        ``{"workers", "scheduler", "engine", "map_wall_s"}``; ``map_wall_s``: wall seconds
+        spent in :meth:`map` (the chunk loop's, its consumer's work included).
+        """
+        engine = "dask" if self._client else ("process_pool" if self.workers > 1 else "serial")
+        return {
+            "workers": self.workers,
+            "scheduler": self.scheduler,
+            "engine": engine,
+            "map_wall_s": self.map_wall_s,
+        }
+
+    def __enter__(self) -> Executor:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Disconnect from the cluster (pools live only while a :meth:`map` runs)."""
+        if self._client is not None:
+            self._client.close()
+            self._client = None
+
+    def map(self, fn: Callable[[Any, int], Any], shared: Any, n_tasks: int) -> Iterator[Any]:
+        """Yield ``fn(shared, i)`` for ``i = 0 .. n_tasks - 1``, in order, as they arrive.
+
+        ``fn`` must be a module-level function (it is pickled by reference). Leaving the loop
+        early (or an exception in a task) cancels the tasks not yet started.
+        """
+        t0 = time.perf_counter()
+        try:
+            if self._client is not None:
+                yield from self._map_dask(fn, shared, n_tasks)
+            elif self.workers == 1 or n_tasks <= 1:
+                for i in range(n_tasks):
+                    yield fn(shared, i)
+            else:
+                yield from self._map_pool(fn, shared, n_tasks)
+        finally:
+            self.map_wall_s += time.perf_counter() - t0
+
+    def _map_pool(self, fn, shared, n_tasks: int) -> Iterator[Any]:
+        ctx = multiprocessing.get_context("spawn")
+        pool = ProcessPoolExecutor(
+            max_workers=min(self.workers, n_tasks),
+            mp_context=ctx,
+            initializer=_install,
+            initargs=(shared,),
+        )
+        try:
+            yield from _ordered(lambda i: pool.submit(_pool_call, fn, i), n_tasks, self.ahead)
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+    def _map_dask(self, fn, shared, n_tasks: int) -> Iterator[Any]:
+        client = self._client
+        shared_f = client.scatter(shared, broadcast=True, hash=False)
+        try:
+            yield from _ordered(
+                lambda i: client.submit(_dask_call, fn, shared_f, i, pure=False),
+                n_tasks,
+                self.ahead,
+            )
+        finally:
+            client.cancel([shared_f])
+
+
+def _ordered(submit: Callable[[int], Any], n_tasks: int, ahead: int) -> Iterator[Any]:
+    """Results of ``submit(i).result()`` in order, never more than ``ahead`` pending."""
+    pending: deque = deque()
+    nxt = 0
+    try:
+        while nxt < n_tasks or pending:
+            while nxt < n_tasks and len(pending) < ahead:
+                pending.append(submit(nxt))
+                nxt += 1
+            fut = pending.popleft()
+            yield fut.result()
+            del fut  # the consumer holds the result; the future need not
+    finally:
+        for fut in pending:
+            fut.cancel()

@@ -1,0 +1,195 @@
+"""One chunk of the survey: its pulses simulated (survey, trace, receiver) and detected.
+
+:func:`run_chunk` is a pure function of ``(ChunkJob, chunk index)``: the pulses of chunk ``c``
+and every random draw are functions of the global pulse ids and the scene seed (see
+:mod:`pipeline.simulate.noise`), so the chunks can run in any order, in any process (see
+:mod:`pipeline.parallel`), and their concatenation does not depend on the chunk size. Of each
+chunk only what a real system records leaves the function: the measured navigation and the
+detections (plus the few waveforms kept for posteriors and the no-bottom inputs).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from pipeline.process.context import ProcessingContext
+from pipeline.process.posterior_selection import KeptWaveforms, kept_for_posterior
+from pipeline.stages import StageClock
+
+__all__ = ["ChunkJob", "ChunkResult", "run_chunk"]
+
+
+@dataclass(frozen=True)
+class ChunkJob:
+    """What every chunk shares (sent once to each worker).
+
+    Attributes
+    ----------
+    scene : Scene
+    ctx : ProcessingContext
+    world : pipeline.simulate.trace.World
+        Water-surface and seabed meshes.
+    lines : FlightLines
+    chunk_pulses : int
+        Pulses per chunk (the last one may be shorter).
+    keep_fraction : float
+        Share of pulses whose waveforms are kept for posteriors.
+    waveform : bool
+        Full-waveform receiver (else photon counting).
+    no_bottom : bool
+        Whether the no-bottom-limit stage runs (its per-chunk inputs are collected).
+    """
+
+    scene: Any
+    ctx: ProcessingContext
+    world: Any
+    lines: Any
+    chunk_pulses: int
+    keep_fraction: float
+    waveform: bool
+    no_bottom: bool
+
+
+@dataclass(frozen=True)
+class ChunkResult:
+    """What one chunk leaves.
+
+    Attributes
+    ----------
+    part : dict of str to ndarray
+        Measured navigation and detections, ``(n,)`` or ``(n, 3)`` per field.
+    kept : KeptWaveforms or None
+    nb : dict or None
+        No-bottom-limit inputs of the chunk.
+    subray_flags, pulse_flags : dict of str to int
+    wall_s, cpu_s : dict of str to float
+        Seconds per stage spent on this chunk (in the process that ran it).
+    """
+
+    part: dict[str, np.ndarray]
+    kept: KeptWaveforms | None
+    nb: dict[str, np.ndarray] | None
+    subray_flags: dict[str, int]
+    pulse_flags: dict[str, int]
+    wall_s: dict[str, float]
+    cpu_s: dict[str, float]
+
+    @property
+    def n_pulses(self) -> int:
+        """Pulses of the chunk."""
+        return len(self.part["pulse_id"])
+
+
+def run_chunk(job: ChunkJob, c: int) -> ChunkResult:
+    """Simulate and detect chunk ``c`` of the survey (a pure function of ``job`` and ``c``)."""
+    from pipeline.simulate import paths as P
+    from pipeline.simulate import survey
+    from pipeline.simulate.detector import describe_pulse_flags
+    from pipeline.simulate.trace import trace
+
+    scene, clock = job.scene, StageClock()
+    with clock.stage("survey"):
+        pulses = survey.generate_pulses(
+            scene.flight,
+            scene.attitude,
+            scene.navigation,
+            scene.scanner,
+            job.lines,
+            c,
+            job.chunk_pulses,
+            scene.scene.seed,
+        )
+    with clock.stage("trace"):
+        div_rad = scene.scanner.beam_divergence_mrad * 1e-3
+        paths = trace(pulses, job.world, scene.trace, div_rad, scene.scanner.polarisation)
+    kept = nb = None
+    pulse_flags: dict[str, int] = {}
+    if job.waveform:
+        found, kept, nb = _waveform_chunk(job, clock, paths)
+    else:
+        found, flags = _photon_chunk(job, clock, paths, pulses)
+        pulse_flags = describe_pulse_flags(flags)
+    part = {
+        "pulse_id": pulses.pulse_id,
+        "origin_meas_m": pulses.origin_meas_m,
+        "direction_meas": pulses.direction_meas,
+        "t_emit_s": pulses.t_s,  # the shot's timestamp and flight line, as recorded
+        "line_id": pulses.line_id,
+        **{f.name: getattr(found, f.name) for f in dataclasses.fields(found)},
+    }
+    return ChunkResult(
+        part=part,
+        kept=kept,
+        nb=nb,
+        subray_flags=P.describe_flags(paths.flags),
+        pulse_flags=pulse_flags,
+        wall_s=dict(clock.wall_s),
+        cpu_s=dict(clock.cpu_s),
+    )
+
+
+def _waveform_chunk(job: ChunkJob, clock: StageClock, paths):
+    """Digitise one chunk, detect its returns, keep what the later stages need of it."""
+    from pipeline.process.detect import detect_full_waveform
+    from pipeline.simulate.waveform import simulate_waveforms
+
+    scene, ctx = job.scene, job.ctx
+    ins, ps = ctx.instrument, scene.process
+    with clock.stage("receiver_waveform"):
+        wf = simulate_waveforms(paths, scene, scene.detector, scene.returns)
+    with clock.stage("detect_waveform"):
+        found = detect_full_waveform(
+            wf.samples,
+            wf.sample_interval_s,
+            ins.system_fwhm_s,
+            ps.detect,
+            noise_samples=ins.noise_samples,
+            shot_noise_counts=ins.shot_noise_counts,
+            # the digitiser's top code, 2^bit_depth − 1 (its datasheet)
+            top_code=ins.amplitude_full_scale - 1.0,
+        )
+    nb = None
+    if job.no_bottom:
+        from pipeline.process.no_bottom import chunk_inputs
+
+        with clock.stage("no_bottom_limit"):  # times from sample 0, as the waveforms have them
+            nb = chunk_inputs(wf.samples, found, ctx, ps.detect, ps.no_bottom)
+    kept = None
+    keep = kept_for_posterior(wf.pulse_id, job.keep_fraction, scene.scene.seed)
+    if keep.any():
+        kept = KeptWaveforms(wf.pulse_id[keep], wf.t0_s[keep], wf.samples[keep])
+    # detection times are from sample 0; sample 0 is t0_s after emission
+    found = dataclasses.replace(
+        found,
+        t_surface_s=found.t_surface_s + np.where(found.has_surface, wf.t0_s, 0.0),
+        t_bottom_s=found.t_bottom_s + np.where(found.has_bottom, wf.t0_s, 0.0),
+        t_column_s=found.t_column_s + np.where(found.has_column, wf.t0_s, 0.0),
+    )
+    return found, kept, nb
+
+
+def _photon_chunk(job: ChunkJob, clock: StageClock, paths, pulses):
+    """Photon events of one chunk and their window detections; the receiver's flags."""
+    from pipeline.process.detect_photons import detect_photon_events
+    from pipeline.simulate.waveform import simulate_photon_events
+
+    scene = job.scene
+    with clock.stage("receiver_photon"):
+        ev = simulate_photon_events(paths, scene, scene.detector, scene.returns)
+    with clock.stage("detect_photon"):
+        found = detect_photon_events(
+            ev.offsets,
+            ev.times_s,
+            pulses.origin_meas_m,
+            pulses.direction_meas,
+            job.ctx.instrument.air_index,
+            scene.process.photon_detect,
+            pulse_id=pulses.pulse_id,
+            # the detector's channels per beam (its datasheet): one event each per dead time
+            n_channels=scene.detector.n_channels,
+        )
+    return found, ev.flags
