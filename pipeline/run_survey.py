@@ -393,6 +393,7 @@ def run_survey(scene, plan: Plan, out: Path, clock: StageClock, log=print, progr
             log,
             area_covered=covered,
         )
+        files["evaluation_points"] = out / "evaluation_points.npz"
         from pipeline.outputs.report import write_survey_report
 
         files["report"] = write_survey_report(
