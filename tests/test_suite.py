@@ -241,3 +241,91 @@ def test_shallowest_unbiased_depth():
     res = shallowest_unbiased_m(pool, "full_waveform", (0.0, 2.0), "tuning")
     assert res["depth_m"] == 1.0
     assert res["scenes"] == 1
+
+
+# --- the CI subset end to end ------------------------------------------------------------------
+#
+# Eight small scenes (pipeline.suite.generate.CI_SCENES), ~65 s of CPU in all, run once for the
+# tests below. Their figures are deterministic for a given simulator and processing (seeded);
+# the asserted bounds hold on the code of this commit with margins chosen to survive honest
+# changes of the simulated physics (the realism work runs in parallel) while still catching a
+# datum or refraction error of decimetres. Floors that fail today are strict xfails carrying
+# the measured figure: when a fix makes one pass, the xfail fails and must become an assert.
+# Measured on this commit (window [1 m, 0.8 D_ext)): tuning 22919 class-40 points, bias
+# +0.009 m, RMSE 0.055 m, max |error| 0.98 m, TPU 42.8 % / 73.5 %; held-out 4756 points, bias
+# +0.011 m, RMSE 0.108 m, max 1.56 m, TPU 64.0 % / 77.1 %; 2 and 14 posteriors (n/a: < 60).
+
+
+@pytest.fixture(scope="module")
+def ci_suite(tmp_path_factory):
+    from pipeline.suite.main import suite
+
+    out = tmp_path_factory.mktemp("ci_suite")
+    status = suite(subset="ci", out=out, workers=2, log=lambda line: None)
+    from pipeline.suite.run import RunResult, collect
+
+    results = [RunResult(d, out / "runs" / f"suite_{d.seed:05d}", 0, 0.0) for d in ci_draws()]
+    rows = collect(results)
+    strata = {(r["dimension"], r["label"]): r for r in all_strata(pool_rows(rows))}
+    return {"status": status, "out": out, "rows": rows, "strata": strata}
+
+
+@pytest.mark.slow
+def test_ci_subset_runs_every_scene(ci_suite):
+    out = ci_suite["out"]
+    assert ci_suite["status"] == 0
+    assert len(ci_suite["rows"]) == len(CI_SCENES)
+    for d in ci_draws():  # the files run are the generator's, byte for byte
+        assert (out / "scenes" / f"suite_{d.seed:05d}.toml").read_text() == scene_toml(d)
+    assert (out / "suite.csv").is_file() and (out / "RESULTS_suite.md").is_file()
+    text = (out / "RESULTS_suite.md").read_text()
+    for head in ("## Floors", "## Class-40 points", "## TPU and posterior", "## Cube", "## Sc"):
+        assert head in text
+
+
+@pytest.mark.slow
+def test_ci_points_file_matches_the_run_level_evaluation(ci_suite):
+    # evaluation_points.npz holds the same points as evaluation.json's run-level figures:
+    # its class-40 errors give the same count and bias, its TPU z-scores the same coverage
+    for row in ci_suite["rows"]:
+        ev, a = row["evaluation"], row["arrays"]
+        p = ev["error"]["points"]
+        assert a["pt_error_m"].size == p["n"] > 0
+        assert a["pt_error_m"].mean() == pytest.approx(p["bias_m"], abs=1e-12)
+        z = np.abs(a["tpu_error_m"]) / a["tpu_sigma_depth_m"]
+        cov = ev["tpu_coverage_against_truth"]["intervals"]
+        assert np.mean(z <= 1.0) == pytest.approx(cov[0]["fraction_within"], abs=1e-12)
+        assert a["cell_error_m"].size == ev["error"]["grid"]["n"]
+        assert np.all(np.isfinite(a["tpu_sigma_depth_m"])) and np.all(a["tpu_sigma_depth_m"] > 0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("half_name", ["tuning", "heldout"])
+def test_ci_figures_that_hold_today(ci_suite, half_name):
+    fig = ci_suite["strata"][("all", "all")][half_name]
+    # measured +0.009 / +0.011 m; the scenes had -0.13 m: 0.03 m is the floor itself
+    assert abs(fig["points"]["bias_m"]) <= 0.03
+    # measured 0.055 / 0.108 m; 0.15 m is the floor for winds above 5 m/s
+    assert fig["points"]["rmse_m"] <= 0.15
+    # measured 73.5 / 77.1 %: the TPU is too small, but not by an order of magnitude
+    assert fig["tpu"]["cov95"] >= 0.6
+    assert fig["points"]["n"] >= 2000
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="measured: held-out max |error| 1.56 m (> 1 m floor)")
+def test_ci_no_gross_error_held_out(ci_suite):
+    assert ci_suite["strata"][("all", "all")]["heldout"]["n_over_1m"] == 0
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="measured: TPU 95 % coverage 73.5 % tuning, 77.1 % held-out")
+def test_ci_tpu_95_coverage_floor(ci_suite):
+    for h in ("tuning", "heldout"):
+        assert 0.93 <= ci_suite["strata"][("all", "all")][h]["tpu"]["cov95"] <= 0.97
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="measured: TPU 68 % coverage 42.8 % tuning")
+def test_ci_tpu_68_coverage_floor_tuning(ci_suite):
+    assert 0.64 <= ci_suite["strata"][("all", "all")]["tuning"]["tpu"]["cov68"] <= 0.72

@@ -42,11 +42,12 @@ def suite(
     subset : {None, "ci"}
         ``ci``: the fixed CI subset (:data:`pipeline.suite.generate.CI_SCENES`).
     out : path
-        Folder of the scenes, the runs, ``suite.csv`` and (default) ``RESULTS_suite.md``.
+        Folder of the scenes and the runs (and by default of the results).
     workers : int
         Scenes run side by side.
     results : path, optional
-        Where to write the Markdown (default ``out/RESULTS_suite.md``).
+        Where to write the Markdown (default ``out/RESULTS_suite.md``); ``suite.csv`` goes
+        beside it.
     reuse : bool
         Keep earlier successful runs of identical scenes in ``out``.
     start : int
@@ -73,14 +74,15 @@ def suite(
         return 1
     pool = pool_rows(rows)
     strata = all_strata(pool)
-    csv_path = write_csv(out / "suite.csv", strata)
+    md_path = Path(results) if results else out / "RESULTS_suite.md"
+    csv_path = write_csv(md_path.with_name("suite.csv"), strata)
     command = "bathy " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     md = write_markdown(
-        results or out / "RESULTS_suite.md",
+        md_path,
         command,
         pool,
         strata,
-        [r["wall_s"] for r in rows],
+        [(r["wall_s"], r["cpu_s"]) for r in rows],
         failed,
         preface=_PREFACE,
     )

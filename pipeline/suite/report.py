@@ -220,11 +220,11 @@ def _shallow_table(pool: Pool) -> list[str]:
     return lines
 
 
-def _scene_table(pool: Pool, walls: list[float]) -> list[str]:
+def _scene_table(pool: Pool, times: list[tuple[float, float]]) -> list[str]:
     lines = _head(
         ["seed", "half", "receiver", "scanner", "surface", "wind m/s", "c 1/m", "slope °"]
         + ["rough m", "altitude m", "depth at centre m", "D_ext m (source)", "class-40 points"]
-        + ["wall s"]
+        + ["wall / CPU s"]
     )
     n_pts = np.bincount(pool.scene["pt"], minlength=len(pool.meta))
     for i, m in enumerate(pool.meta):
@@ -232,7 +232,8 @@ def _scene_table(pool: Pool, walls: list[float]) -> list[str]:
             f"| {m['seed']} | {m['half']} | {m['receiver']} | {m['scanner']} | {m['surface']} | "
             f"{m['wind_m_s']:.1f} | {m['attenuation_per_m']:.3f} | {m['slope_deg']:.1f} | "
             f"{m['roughness_rms_m']:.2f} | {m['altitude_m']:.0f} | {m['depth_centre_m']:.1f} | "
-            f"{m['d_ext_m']:.1f} ({m['d_ext_source']}) | {n_pts[i]} | {walls[i]:.0f} |"
+            f"{m['d_ext_m']:.1f} ({m['d_ext_source']}) | {n_pts[i]} | "
+            f"{times[i][0]:.0f} / {times[i][1]:.0f} |"
         )
     return lines
 
@@ -242,11 +243,14 @@ def write_markdown(
     command: str,
     pool: Pool,
     strata: list[dict[str, Any]],
-    walls: list[float],
+    times: list[tuple[float, float]],
     failed: list[int],
     preface: str = "",
 ) -> Path:
-    """``RESULTS_suite.md``: command, tables per stratum (halves side by side), floors."""
+    """``RESULTS_suite.md``: command, tables per stratum (halves side by side), floors.
+
+    ``times``: per run, wall and CPU seconds.
+    """
     floor_lines, fails = _floor_table(strata)
     n_half = {h: sum(m["half"] == h for m in pool.meta) for h in ("tuning", "heldout")}
     lines = [
@@ -258,7 +262,8 @@ def write_markdown(
         "",
         f"    {command}",
         "",
-        f"{len(pool.meta)} scenes ran ({n_half['tuning']} tuning, {n_half['heldout']} held-out);"
+        f"{len(pool.meta)} scenes ran in {sum(t[1] for t in times):.0f} s of CPU"
+        f" ({n_half['tuning']} tuning, {n_half['heldout']} held-out);"
         f" failed runs: {failed or 'none'}. Generator, split, strata and floors:"
         " `pipeline/suite/` (module docstrings). T = tuning half, H = held-out half.",
         "Errors are measured minus true depth (positive: too deep), in metres, over class-40"
@@ -291,7 +296,7 @@ def write_markdown(
         "",
         "## Scenes",
         "",
-        *_scene_table(pool, walls),
+        *_scene_table(pool, times),
         "",
     ]
     path = Path(path)

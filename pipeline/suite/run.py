@@ -16,6 +16,7 @@ import json
 import os
 import subprocess
 import sys
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -31,12 +32,13 @@ __all__ = ["RunResult", "run_one", "run_suite", "collect"]
 
 @dataclass(frozen=True)
 class RunResult:
-    """One scene's run: its draw, where its outputs are, exit status and wall time."""
+    """One scene's run: its draw, where its outputs are, exit status, wall and CPU seconds."""
 
     draw: Draw
     out: Path
     returncode: int
     wall_s: float
+    cpu_s: float = float("nan")
 
     @property
     def ok(self) -> bool:
@@ -58,7 +60,7 @@ def _earlier(d: Draw, out: Path) -> RunResult | None:
         return None
     if status.get("draw") != d.to_dict() or status.get("returncode") != 0:
         return None
-    r = RunResult(d, out, 0, float(status["wall_s"]))
+    r = RunResult(d, out, 0, float(status["wall_s"]), float(status.get("cpu_s", "nan")))
     return r if r.ok else None
 
 
@@ -79,23 +81,29 @@ def run_one(
     project = str(Path(__file__).resolve().parents[2])
     env["PYTHONPATH"] = os.pathsep.join(p for p in (project, env.get("PYTHONPATH")) if p)
     t0 = time.perf_counter()
-    try:
-        proc = subprocess.run(
-            _command(scene, out, nice),
-            capture_output=True,
-            text=True,
-            env=env,
-            timeout=timeout_s,
-            check=False,
-        )
-        code, err = proc.returncode, proc.stderr
-    except subprocess.TimeoutExpired as exc:
-        code, err = -9, f"timeout after {timeout_s:g} s\n{exc.stderr or ''}"
+    code, cpu = _run_child(_command(scene, out, nice), env, out / "stderr.txt", timeout_s)
     wall = time.perf_counter() - t0
-    (out / "stderr.txt").write_text(err if isinstance(err, str) else err.decode())
-    status = {"returncode": code, "wall_s": wall, "draw": d.to_dict()}
+    status = {"returncode": code, "wall_s": wall, "cpu_s": cpu, "draw": d.to_dict()}
     (out / "status.json").write_text(json.dumps(status, indent=2))
-    return RunResult(d, out, code, wall)
+    return RunResult(d, out, code, wall, cpu)
+
+
+def _run_child(cmd: list[str], env: dict, stderr_path: Path, timeout_s: float):
+    """Run ``cmd`` (stdout dropped, stderr to a file); its exit code and CPU seconds.
+
+    ``os.wait4`` gives the child's own rusage (user + system), which other workers' children
+    do not blur; a child still running after ``timeout_s`` is killed (exit code -9).
+    """
+    with stderr_path.open("w") as err:
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err, env=env)
+        timer = threading.Timer(timeout_s, proc.kill)
+        timer.start()
+        try:
+            _, status, usage = os.wait4(proc.pid, 0)
+        finally:
+            timer.cancel()
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    return proc.returncode, usage.ru_utime + usage.ru_stime
 
 
 def run_suite(
@@ -124,7 +132,7 @@ def run_suite(
         state = "ok" if r.ok else f"FAILED (exit {r.returncode}, see {r.out / 'stderr.txt'})"
         log(
             f"  seed {d.seed:>5} {d.half:<8} {d.receiver:<15} {d.scanner:<11}"
-            f" {r.wall_s:6.1f} s {state}"
+            f" {r.wall_s:6.1f} s wall {r.cpu_s:6.1f} s CPU {state}"
         )
         return r
 
@@ -139,7 +147,7 @@ def collect(results: list[RunResult]) -> list[dict[str, Any]]:
     -------
     list of dict
         ``draw`` (:class:`Draw`), ``evaluation`` (dict of ``evaluation.json``), ``arrays``
-        (dict of the ``evaluation_points.npz`` arrays) and ``wall_s``.
+        (dict of the ``evaluation_points.npz`` arrays), ``wall_s`` and ``cpu_s``.
     """
     rows = []
     for r in results:
@@ -148,5 +156,17 @@ def collect(results: list[RunResult]) -> list[dict[str, Any]]:
         ev = json.loads((r.out / "evaluation.json").read_text())
         with np.load(r.out / "evaluation_points.npz") as z:
             arrays = {k: z[k] for k in z.files}
-        rows.append({"draw": r.draw, "evaluation": ev, "arrays": arrays, "wall_s": r.wall_s})
+        cpu = r.cpu_s
+        if not np.isfinite(cpu):  # a run from before CPU was recorded: its stages' CPU
+            plan = json.loads((r.out / "manifest.json").read_text())["plan"]
+            cpu = float(sum(s.get("cpu_s") or 0.0 for s in plan))
+        rows.append(
+            {
+                "draw": r.draw,
+                "evaluation": ev,
+                "arrays": arrays,
+                "wall_s": r.wall_s,
+                "cpu_s": cpu,
+            }
+        )
     return rows
