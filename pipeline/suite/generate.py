@@ -229,8 +229,8 @@ def draw(seed: int, size: str = "suite", force: dict[str, str] | None = None) ->
         a lower pulse rate (a few seconds).
     force : dict, optional
         Values to impose (``receiver``, ``scanner``, ``surface``, ``depth_centre_m``,
-        ``attenuation_per_m``, ``wind_m_s``); every value is still drawn first, in the same order, so the
-        rest of the scene does not change.
+        ``attenuation_per_m``, ``wind_m_s``); every value is still drawn first, in the same
+        order, so the rest of the scene does not change.
 
     Returns
     -------

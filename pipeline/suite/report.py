@@ -158,7 +158,7 @@ def _error_table(strata) -> list[str]:
             cells.append(
                 "-" if not c else f"{_f(c['rmse_m'], '{:.3f}')} / {_f(c['p95_m'], '{:.3f}')}"
             )
-        lines.append("| " + " | ".join(cells) + " |")
+        lines.append(_row(cells))
     return lines
 
 
@@ -166,6 +166,7 @@ def _coverage_table(strata) -> list[str]:
     lines = _head(
         ["stratum", "TPU T 68/95 % (n)", "TPU H 68/95 % (n)"]
         + ["post T 68/95 % (n, conv)", "post H 68/95 % (n, conv)"]
+        + ["cubes T detected/n (0.5, 1, 2 m)", "cubes H detected/n (0.5, 1, 2 m)"]
     )
     for s in strata:
         if "tpu" not in s["tuning"]:
@@ -179,7 +180,13 @@ def _coverage_table(strata) -> list[str]:
             cells.append(
                 f"{_pct(p['cov68'])} / {_pct(p['cov95'])} ({p['n']}, {_pct(p['converged'])})"
             )
-        lines.append("| " + " | ".join(cells) + " |")
+        for h in ("tuning", "heldout"):
+            c = s[h]["cubes"]
+            sizes = ("0.5", "1", "2")
+            cells.append(
+                ", ".join(f"{c[k]['detected']}/{c[k]['n']}" if k in c else "-" for k in sizes)
+            )
+        lines.append(_row(cells))
     return lines
 
 
