@@ -54,90 +54,23 @@ __all__ = [
 #: eight cover both receivers, the three scanners, both surfaces, clear and turbid water and
 #: depths a few metres to past extinction (and the shoreline); every other value is the
 #: seed's own draw. Seeds from both halves (see :func:`half`).
-CI_SCENES: tuple[tuple[int, dict[str, Any]], ...] = (
-    (
-        9001,
-        {
-            "receiver": "full_waveform",
-            "scanner": "palmer",
-            "surface": "flat",
-            "depth_centre_m": 6.0,
-            "attenuation_per_m": 0.15,
-        },
-    ),
-    (
-        9002,
-        {
-            "receiver": "full_waveform",
-            "scanner": "oscillating",
-            "surface": "waves",
-            "depth_centre_m": 8.0,
-            "attenuation_per_m": 0.1,
-        },
-    ),
-    (
-        9003,
-        {
-            "receiver": "full_waveform",
-            "scanner": "profiler",
-            "surface": "flat",
-            "depth_centre_m": 4.0,
-            "attenuation_per_m": 0.3,
-        },
-    ),
-    (
-        9004,
-        {
-            "receiver": "photon_counting",
-            "scanner": "profiler",
-            "surface": "flat",
-            "depth_centre_m": 5.0,
-            "attenuation_per_m": 0.1,
-        },
-    ),
-    (
-        9005,
-        {
-            "receiver": "full_waveform",
-            "scanner": "palmer",
-            "surface": "waves",
-            "depth_centre_m": 3.0,
-            "attenuation_per_m": 0.6,
-        },
-    ),
-    (
-        9006,
-        {
-            "receiver": "full_waveform",
-            "scanner": "oscillating",
-            "surface": "flat",
-            "depth_centre_m": 0.5,
-            "attenuation_per_m": 0.2,
-        },
-    ),
-    (
-        9007,
-        {
-            "receiver": "photon_counting",
-            "scanner": "profiler",
-            "surface": "waves",
-            "depth_centre_m": 3.0,
-            "attenuation_per_m": 0.15,
-            # its own draw, 1 m/s, makes the wave synthesis fail (terrain.WaveField: "mss
-            # calibration failed"; the suite reports such runs as failed)
-            "wind_m_s": 3.0,
-        },
-    ),
-    (
-        9008,
-        {
-            "receiver": "full_waveform",
-            "scanner": "profiler",
-            "surface": "waves",
-            "depth_centre_m": 25.0,
-            "attenuation_per_m": 0.08,
-        },
-    ),
+_CI_KEYS = ("receiver", "scanner", "surface", "depth_centre_m", "attenuation_per_m", "wind_m_s")
+_FW, _PC = "full_waveform", "photon_counting"
+# seed, then the forced values in the order of _CI_KEYS (None: the seed's own draw). 9007's own
+# wind, 1 m/s, makes the wave synthesis fail (terrain.WaveField: "mss calibration failed").
+_CI_TABLE = (
+    (9001, _FW, "palmer", "flat", 6.0, 0.15, None),
+    (9002, _FW, "oscillating", "waves", 8.0, 0.1, None),
+    (9003, _FW, "profiler", "flat", 4.0, 0.3, None),
+    (9004, _PC, "profiler", "flat", 5.0, 0.1, None),
+    (9005, _FW, "palmer", "waves", 3.0, 0.6, None),
+    (9006, _FW, "oscillating", "flat", 0.5, 0.2, None),
+    (9007, _PC, "profiler", "waves", 3.0, 0.15, 3.0),
+    (9008, _FW, "profiler", "waves", 25.0, 0.08, None),
+)
+CI_SCENES: tuple[tuple[int, dict[str, Any]], ...] = tuple(
+    (row[0], {k: v for k, v in zip(_CI_KEYS, row[1:], strict=True) if v is not None})
+    for row in _CI_TABLE
 )
 
 _GROUP_INDEX = 1.3638  # sea water at 532 nm (the presets' value): sizes the range gate only
