@@ -19,7 +19,8 @@ deeper than that are the ``past 0.8 D_ext`` stratum.
 
 **Cube detection** (IHO S-44 features): a cube of side ``s`` is *detected* when at least one
 class-40 point lies on its footprint with a depth error below ``s / 2`` (nearer its top than
-the seabed around it); its *density* is the class-40 points per m² within 5 m of its centre.
+the seabed around it); its *density* is the class-40 points per m² within 5 m of its centre
+(for a profiler, whose points lie on one line, this overstates the areal density).
 """
 
 from __future__ import annotations
