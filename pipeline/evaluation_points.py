@@ -106,9 +106,9 @@ def _posterior_arrays(post, truth_depth_m) -> dict[str, np.ndarray]:
 
 
 def write_evaluation_points(path: Path, arrays: dict[str, np.ndarray]) -> Path:
-    """Write ``arrays`` to ``path`` (an uncompressed ``.npz``) and return the path."""
+    """Write ``arrays`` to ``path`` (a compressed ``.npz``) and return the path."""
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, **arrays)
+    np.savez_compressed(tmp, **arrays)
     tmp.replace(path)
     return path
