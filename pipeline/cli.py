@@ -1,4 +1,4 @@
-"""The ``bathy`` command line: run, validate, plan, keys, stress, view, sweep."""
+"""The ``bathy`` command line: run, validate, plan, keys, stress, view, sweep, suite."""
 
 from __future__ import annotations
 
@@ -101,6 +101,17 @@ def _parser() -> argparse.ArgumentParser:
         "--overwrite", action="store_true", help="replace a sweep already in the folder"
     )
     sw.add_argument("--quiet", action="store_true", help="no progress, only errors")
+    su = sub.add_parser(
+        "suite", help="random scenes (tuning and held-out halves), strata and floors"
+    )
+    su.add_argument("--n", type=int, default=40, help="number of scenes (default 40)")
+    su.add_argument("--half", choices=("tuning", "heldout", "both"), default="both")
+    su.add_argument("--subset", choices=("ci",), default=None, help="the fixed CI subset")
+    su.add_argument("--out", default="out/suite", help="folder of scenes, runs and tables")
+    su.add_argument("--workers", type=int, default=1, help="scenes run side by side")
+    su.add_argument("--results", default=None, help="Markdown path (default OUT/RESULTS_suite.md)")
+    su.add_argument("--reuse", action="store_true", help="keep earlier runs of identical scenes")
+    su.add_argument("--start", type=int, default=0, help="first seed looked at")
     return p
 
 
@@ -172,7 +183,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_usage(sys.stderr)
         print(
-            "bathy: a command is required (run, validate, plan, keys, stress, view, sweep)",
+            "bathy: a command is required (run, validate, plan, keys, stress, view, sweep, suite)",
             file=sys.stderr,
         )
         return EXIT_BAD_SCENE
@@ -189,6 +200,19 @@ def main(argv: list[str] | None = None) -> int:
             return _stress(args)
         if args.command == "view":
             return _view(args)
+        if args.command == "suite":
+            from pipeline.suite.main import suite
+
+            return suite(
+                args.n,
+                args.half,
+                args.subset,
+                args.out,
+                args.workers,
+                args.results,
+                args.reuse,
+                args.start,
+            )
         path = Path(args.scene) if getattr(args, "scene", None) else DEFAULT_SCENE_PATH
         if args.command == "sweep":
             return _sweep(args, path)

@@ -18,6 +18,7 @@ __all__ = ["run_scene", "existing_outputs", "clear_outputs"]
 OUTPUT_PATTERNS = (
     "manifest.json",
     "evaluation.json",
+    "evaluation_points.npz",
     "points.laz",
     "grid.tif",
     "grid.nc",

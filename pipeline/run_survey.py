@@ -352,6 +352,7 @@ def run_survey(
             log,
             area_covered=covered,
         )
+        files["evaluation_points"] = out / "evaluation_points.npz"
         from pipeline.outputs.report import write_survey_report
 
         files["report"] = write_survey_report(

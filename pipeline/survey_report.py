@@ -60,6 +60,10 @@ def evaluate_survey(
     truth = sim.truth
     # the true mean water level: the scene's level, about which the wave field has zero mean
     true_level_m = scene.water_surface.level_m
+
+    def grid_truth(x, y):
+        return true_level_m - truth.seabed.height_m(x, y)
+
     report = evaluate(
         processed.points,
         uncorrected=processed.uncorrected,
@@ -68,7 +72,7 @@ def evaluate_survey(
         # height errors common to the surface and the seabed returns cancel in it
         truth_depth_m=truth.depth_m,
         # grid: depth below the mean water level, as the grid's datum
-        grid_truth_depth_m=lambda x, y: true_level_m - truth.seabed.height_m(x, y),
+        grid_truth_depth_m=grid_truth,
     ).to_dict()
     # the depth's sigma (below the measured surface, at the measured position) against the
     # true depth there; a photon-counting window's shots share one detection (one draw)
@@ -77,6 +81,21 @@ def evaluate_survey(
         group = unc.points40.pulse_id // ctx.instrument.shots_per_window
     coverage = tpu_coverage(
         unc.points40, unc.tpu40.sigma_depth_m, truth_depth_m=truth.depth_m, group=group
+    )
+    from pipeline.evaluation_points import point_arrays, write_evaluation_points
+
+    # per-point residuals and sigmas, so a scene suite can pool strata across runs
+    write_evaluation_points(
+        path.with_name("evaluation_points.npz"),
+        point_arrays(
+            processed,
+            grid,
+            unc,
+            post,
+            truth.depth_m,
+            grid_truth,
+            group=group,
+        ),
     )
     post_eval = None
     if post is not None:

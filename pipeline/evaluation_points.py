@@ -1,0 +1,114 @@
+"""Per-point residuals and sigmas of a survey run: ``evaluation_points.npz``.
+
+``evaluation.json`` gives run-level figures; a scene suite (:mod:`pipeline.suite`) pools points
+of many runs into strata (wind, attenuation, slope, depth band, receiver), which needs the
+points themselves. The evaluate stage (:mod:`pipeline.survey_report`) writes, next to
+``evaluation.json``, one ``.npz`` of plain float/bool arrays. Like that stage it meets the
+truth; processing never reads the file.
+
+Arrays (``n`` rows per group; a group is empty when the run has none):
+
+* ``pt_*`` - every class-40 point: ``pt_x_m``, ``pt_y_m``, measured ``pt_depth_m`` (below the
+  fitted local surface), ``pt_true_depth_m`` and ``pt_error_m = measured - true`` (positive:
+  too deep), as ``evaluation.json``'s ``error.points``.
+* ``tpu_*`` - the class-40 points the TPU propagated: ``tpu_true_depth_m``, ``tpu_error_m``,
+  ``tpu_sigma_depth_m`` (1 σ of the depth), ``tpu_group`` (photon window, else the row).
+* ``post_*`` - sampled depth posteriors with a start: ``post_true_depth_m``, ``post_median_m``,
+  ``post_lo68_m``, ``post_hi68_m``, ``post_lo95_m``, ``post_hi95_m``, ``post_converged``.
+* ``cell_*`` - non-empty grid cells: ``cell_x_m``, ``cell_y_m``, ``cell_depth_m`` (below the
+  datum), ``cell_true_depth_m`` (below the true mean level), ``cell_error_m``, ``cell_count``.
+* ``nb_depth_m`` - measured depths of the class-45 (no-bottom-found-at) points: each is a
+  pulse's own detection limit (:mod:`pipeline.process.detection_limit`), the run's measured
+  extinction depth.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.evaluate import grid_errors_m, point_errors_m
+from pipeline.process.classify import BATHYMETRIC_POINT, NO_BOTTOM_FOUND_AT
+
+__all__ = ["point_arrays", "write_evaluation_points"]
+
+
+def point_arrays(processed, grid, unc, post, truth_depth_m, grid_truth_depth_m, group=None):
+    """The arrays of ``evaluation_points.npz`` (see the module docstring).
+
+    Parameters
+    ----------
+    processed : ProcessedPoints
+    grid : Grid
+    unc : SurveyUncertainty
+    post : SurveyPosteriors or None
+    truth_depth_m, grid_truth_depth_m : callable
+        True depth below the local surface (points) and below the mean level (grid) at local
+        ``(x, y)``.
+    group : (n_tpu,) array_like, optional
+        Shared-measurement label of the TPU points (photon windows).
+
+    Returns
+    -------
+    dict of str to ndarray
+    """
+    pts = processed.points
+    p40 = pts.select(pts.classification == BATHYMETRIC_POINT)
+    err, true_d = point_errors_m(p40, truth_depth_m=truth_depth_m)
+    out = {
+        "pt_x_m": p40.xyz_m[:, 0],
+        "pt_y_m": p40.xyz_m[:, 1],
+        "pt_depth_m": p40.depth_m,
+        "pt_true_depth_m": true_d,
+        "pt_error_m": err,
+    }
+    terr, ttrue = point_errors_m(unc.points40, truth_depth_m=truth_depth_m)
+    n_tpu = terr.size
+    out.update(
+        tpu_true_depth_m=ttrue,
+        tpu_error_m=terr,
+        tpu_sigma_depth_m=np.asarray(unc.tpu40.sigma_depth_m, dtype=np.float64),
+        tpu_group=np.arange(n_tpu) if group is None else np.asarray(group).ravel(),
+    )
+    out.update(_posterior_arrays(post, truth_depth_m))
+    gerr, gtrue = grid_errors_m(grid, truth_depth_m=grid_truth_depth_m)
+    xx, yy = np.meshgrid(grid.x_m, grid.y_m)
+    full = grid.count > 0
+    out.update(
+        cell_x_m=xx[full],
+        cell_y_m=yy[full],
+        cell_depth_m=grid.depth_m[full],
+        cell_true_depth_m=np.asarray(gtrue, dtype=np.float64)[full],
+        cell_error_m=gerr[full],
+        cell_count=grid.count[full],
+    )
+    out["nb_depth_m"] = pts.depth_m[pts.classification == NO_BOTTOM_FOUND_AT]
+    return out
+
+
+def _posterior_arrays(post, truth_depth_m) -> dict[str, np.ndarray]:
+    """The ``post_*`` arrays: the started posteriors and the truth at their median position."""
+    keys = ("median", "lo68", "hi68", "lo95", "hi95")
+    empty = {f"post_{k}_m": np.zeros(0) for k in ("true_depth", *keys)}
+    empty["post_converged"] = np.zeros(0, dtype=bool)
+    if post is None or post.posteriors is None:
+        return empty
+    from pipeline.process.posterior import PosteriorFlag
+
+    p = post.posteriors
+    started = (p.flags & np.uint16(PosteriorFlag.NO_START)) == 0
+    xy = p.xyz_median_m[started]
+    out = {"post_true_depth_m": np.asarray(truth_depth_m(xy[:, 0], xy[:, 1]), dtype=np.float64)}
+    out.update({f"post_{k}_m": np.asarray(p.depth_m[k])[started] for k in keys})
+    out["post_converged"] = np.asarray(p.converged)[started]
+    return out
+
+
+def write_evaluation_points(path: Path, arrays: dict[str, np.ndarray]) -> Path:
+    """Write ``arrays`` to ``path`` (a compressed ``.npz``) and return the path."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez_compressed(tmp, **arrays)
+    tmp.replace(path)
+    return path

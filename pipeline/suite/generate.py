@@ -1,0 +1,351 @@
+"""Random survey scenes over the conditions users fly, and the tuning / held-out split.
+
+One seed gives one scene, drawn by ``numpy.random.default_rng(seed)`` in a fixed order
+(:func:`draw`), written as a TOML scene file that uses only the scene keys ``bathy keys``
+lists (:func:`scene_toml`): the same seed always gives the same file, byte for byte.
+
+Conditions (uniform unless said; the issue "Right off the shipped scenes", item 1):
+
+=====================  =======================================================================
+wind                   0-12 m/s at 12.5 m; surface ``waves`` with probability 1/2 (from 1 m/s),
+                       else ``flat`` (the wind then only sets Cox-Munk slopes and whitecaps)
+seabed                 plane, slope 0-20 deg, downslope east (across track) or north (along);
+                       roughness with probability 1/2 (0.05-0.3 m RMS, 3-10 m correlation)
+attenuation            beam attenuation c log-uniform in 0.05-0.8 1/m
+depths                 depth at the line centre from the shoreline (land 0-3 m high, 1 in 6)
+                       to past the extinction depth (planning guess 4.5 / c, capped at 60 m)
+altitude               200-800 m
+scanner / receiver     full waveform (3 in 4): Palmer 1/2, oscillating 3/10, profiler 1/5;
+                       photon counting (1 in 4): nadir profiler (its preset accumulates windows of
+                       consecutive shots, which a scan would smear over hundreds of metres)
+features               one IHO cube each of 0.5, 1 and 2 m, at random in the covered swath
+                       (seabed mesh 0.5 m under a profiler, 1 m under a scanner: a 0.5 m cube
+                       on a 1 m mesh is only sampled, so its detection there is a lower bound)
+=====================  =======================================================================
+
+**The split** (:func:`half`): a seed is ``"heldout"`` when the first byte of
+``sha256(b"bathy-suite:" + str(seed))`` is odd, else ``"tuning"``. Fixed once, independent of
+the draw and of the scene's outcome. **Never tune on the held-out half**: no threshold, constant
+or model choice may be set by looking at a held-out scene's results.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "Draw",
+    "half",
+    "suite_seeds",
+    "draw",
+    "scene_toml",
+    "write_scene",
+    "CI_SCENES",
+    "ci_draws",
+]
+
+#: Fixed CI subset: (seed, forced values) of small ("ci") scenes. The forced values make the
+#: eight cover both receivers, the three scanners, both surfaces, clear and turbid water and
+#: depths a few metres to past extinction (and the shoreline); every other value is the
+#: seed's own draw. Seeds from both halves (see :func:`half`).
+_CI_KEYS = ("receiver", "scanner", "surface", "depth_centre_m", "attenuation_per_m", "wind_m_s")
+_FW, _PC = "full_waveform", "photon_counting"
+# seed, then the forced values in the order of _CI_KEYS (None: the seed's own draw). 9007's own
+# wind, 1 m/s, makes the wave synthesis fail (terrain.WaveField: "mss calibration failed").
+_CI_TABLE = (
+    (9001, _FW, "palmer", "flat", 6.0, 0.15, None),
+    (9002, _FW, "oscillating", "waves", 8.0, 0.1, None),
+    (9003, _FW, "profiler", "flat", 4.0, 0.3, None),
+    (9004, _PC, "profiler", "flat", 5.0, 0.1, None),
+    (9005, _FW, "palmer", "waves", 3.0, 0.6, None),
+    (9006, _FW, "oscillating", "flat", 0.5, 0.2, None),
+    (9007, _PC, "profiler", "waves", 3.0, 0.15, 3.0),
+    (9008, _FW, "profiler", "waves", 25.0, 0.08, None),
+)
+CI_SCENES: tuple[tuple[int, dict[str, Any]], ...] = tuple(
+    (row[0], {k: v for k, v in zip(_CI_KEYS, row[1:], strict=True) if v is not None})
+    for row in _CI_TABLE
+)
+
+_GROUP_INDEX = 1.3638  # sea water at 532 nm (the presets' value): sizes the range gate only
+_C0_M_S = 299_792_458.0
+
+
+def half(seed: int) -> str:
+    """``"tuning"`` or ``"heldout"``: the seed's half, fixed once (see the module docstring)."""
+    digest = hashlib.sha256(b"bathy-suite:" + str(int(seed)).encode()).digest()
+    return "heldout" if digest[0] & 1 else "tuning"
+
+
+def suite_seeds(n: int, which: str = "both", start: int = 0) -> list[int]:
+    """The first ``n`` seeds from ``start`` of the half ``which`` (``both``: half of each).
+
+    Parameters
+    ----------
+    n : int
+        Number of scenes.
+    which : {"tuning", "heldout", "both"}
+    start : int
+        First seed looked at.
+
+    Returns
+    -------
+    list of int
+        Increasing seeds; with ``both``, ``ceil(n/2)`` tuning and ``floor(n/2)`` held-out.
+    """
+    if which not in ("tuning", "heldout", "both"):
+        raise ValueError(f"half must be tuning, heldout or both, not {which!r}")
+    want = {"tuning": n, "heldout": 0} if which == "tuning" else {"tuning": 0, "heldout": n}
+    if which == "both":
+        want = {"tuning": (n + 1) // 2, "heldout": n // 2}
+    out, seed = [], start
+    while sum(want.values()) > 0:
+        h = half(seed)
+        if want[h] > 0:
+            out.append(seed)
+            want[h] -= 1
+        seed += 1
+    return out
+
+
+@dataclass(frozen=True)
+class Draw:
+    """The drawn conditions of one scene (SI units in the names)."""
+
+    seed: int
+    size: str
+    receiver: str
+    scanner: str
+    surface: str
+    wind_m_s: float
+    attenuation_per_m: float
+    slope_deg: float
+    aspect_deg: float
+    roughness_rms_m: float
+    roughness_correlation_m: float
+    altitude_m: float
+    depth_centre_m: float
+    line_length_m: float
+    prf_hz: float
+    reflectance: float
+    window_s: float
+    cubes: tuple[tuple[float, float, float], ...] = field(default_factory=tuple)
+
+    @property
+    def half(self) -> str:
+        """The seed's half (:func:`half`)."""
+        return half(self.seed)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data, with the half."""
+        return {**asdict(self), "half": self.half, "cubes": [list(c) for c in self.cubes]}
+
+
+def _choice(rng, options: tuple[str, ...], p: tuple[float, ...]) -> str:
+    return str(options[int(rng.choice(len(options), p=p))])
+
+
+def draw(seed: int, size: str = "suite", force: dict[str, str] | None = None) -> Draw:
+    """The scene conditions of ``seed``.
+
+    Parameters
+    ----------
+    seed : int
+    size : {"suite", "ci"}
+        ``suite``: lines of 120-200 m (tens of seconds per scene); ``ci``: lines of 40-60 m and
+        a lower pulse rate (a few seconds).
+    force : dict, optional
+        Values to impose (``receiver``, ``scanner``, ``surface``, ``depth_centre_m``,
+        ``attenuation_per_m``, ``wind_m_s``); every value is still drawn first, in the same
+        order, so the rest of the scene does not change.
+
+    Returns
+    -------
+    Draw
+    """
+    rng = np.random.default_rng(int(seed))
+    receiver = _choice(rng, ("full_waveform", "photon_counting"), (0.75, 0.25))
+    scanner = _choice(rng, ("palmer", "oscillating", "profiler"), (0.5, 0.3, 0.2))
+    wind = float(rng.uniform(0.0, 12.0))
+    surface = "waves" if (rng.uniform() < 0.5 and wind >= 1.0) else "flat"
+    c = float(math.exp(rng.uniform(math.log(0.05), math.log(0.8))))
+    slope = float(rng.uniform(0.0, 20.0))
+    aspect = float(rng.choice((0.0, 90.0)))
+    rough = rng.uniform() < 0.5
+    rough_rms = float(rng.uniform(0.05, 0.3)) if rough else 0.0
+    rough_corr = float(rng.uniform(3.0, 10.0))
+    altitude = float(rng.uniform(200.0, 800.0))
+    ext_guess = min(4.5 / c, 60.0)
+    shore = rng.uniform() < 1.0 / 6.0
+    d_centre = float(rng.uniform(-3.0, 1.0) if shore else rng.uniform(0.1, 1.2 * ext_guess))
+    reflectance = float(rng.uniform(0.1, 0.4))
+    u_line = float(rng.uniform())
+    u_prf = float(rng.uniform())
+    u_cubes = rng.uniform(size=(3, 2))
+    force = force or {}
+    receiver = force.get("receiver", receiver)
+    scanner = force.get("scanner", scanner)
+    surface = force.get("surface", surface)
+    d_centre = float(force.get("depth_centre_m", d_centre))
+    c = float(force.get("attenuation_per_m", c))
+    wind = float(force.get("wind_m_s", wind))
+    ext_guess = min(4.5 / c, 60.0)
+    if surface == "waves":
+        wind = max(wind, 1.0)  # a wind sea needs wind
+    if receiver == "photon_counting":
+        scanner = "profiler"
+    ci = size == "ci"
+    line = (40.0 + 20.0 * u_line) if ci else (120.0 + 80.0 * u_line)
+    if receiver == "photon_counting":
+        prf = 32000.0 if not ci else 16000.0  # the preset's rate; CI halves it
+    elif scanner == "profiler":
+        prf = 2000.0 + 3000.0 * u_prf
+    else:
+        prf = (4000.0 + 4000.0 * u_prf) if ci else (8000.0 + 17000.0 * u_prf)
+    half_swath = 0.0 if scanner == "profiler" else altitude * math.tan(math.radians(20.0))
+    cubes = []
+    for size_m, (ua, ub) in zip((0.5, 1.0, 2.0), u_cubes, strict=True):
+        # across track within the swath (the Palmer circle's sides are densest), along within
+        # the line; a profiler's cubes sit on its track
+        x = (2.0 * ua - 1.0) * 0.9 * half_swath
+        y = (0.15 + 0.7 * ub) * line
+        cubes.append((round(float(x), 2), round(float(y), 2), size_m))
+    # deepest seabed in view: the centre depth plus the slope across the swath or along the line
+    reach = half_swath if aspect == 90.0 else 0.5 * line + half_swath
+    d_max = max(d_centre + math.tan(math.radians(slope)) * reach + 3.0 * rough_rms, 1.0)
+    d_max = min(d_max, 1.5 * ext_guess + 5.0)  # past extinction nothing comes back anyway
+    theta_w = math.asin(math.sin(math.radians(20.0)) / 1.34)
+    window = 2e-8 + 2.0 * _GROUP_INDEX * (d_max / math.cos(theta_w) + 2.0) / _C0_M_S + 4e-8
+    window = float(np.clip(window, 1.5e-7, 8e-7))
+    return Draw(
+        seed=int(seed),
+        size=size,
+        receiver=receiver,
+        scanner=scanner,
+        surface=surface,
+        wind_m_s=round(wind, 3),
+        attenuation_per_m=round(c, 4),
+        slope_deg=round(slope, 3),
+        aspect_deg=aspect,
+        roughness_rms_m=round(rough_rms, 3),
+        roughness_correlation_m=round(rough_corr, 2),
+        altitude_m=round(altitude, 1),
+        depth_centre_m=round(d_centre, 3),
+        line_length_m=round(line, 1),
+        prf_hz=round(prf, 0),
+        reflectance=round(reflectance, 3),
+        window_s=float(f"{window:.3e}"),
+        cubes=tuple(cubes),
+    )
+
+
+def ci_draws() -> list[Draw]:
+    """The fixed CI subset (:data:`CI_SCENES`), small scenes."""
+    return [draw(seed, "ci", force) for seed, force in CI_SCENES]
+
+
+def _value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    return repr(float(v)) if isinstance(v, float) else str(int(v))
+
+
+def _tables(d: Draw) -> dict[str, dict[str, Any]]:
+    """The scene file's tables (scene keys only)."""
+    fw = d.receiver == "full_waveform"
+    # the line centre sits at (0, L/2); the plane's depth_m is the depth at (0, 0), so shift
+    # it by the along-line slope when the seabed deepens north
+    dz = math.tan(math.radians(d.slope_deg)) * 0.5 * d.line_length_m if d.aspect_deg == 0 else 0
+    n_post = 0 if not fw else (8 if d.size == "ci" else 24)
+    t: dict[str, dict[str, Any]] = {
+        "scene": {
+            "name": f"suite_{d.seed:05d}",
+            "seed": d.seed,
+            "preset": "topobathy_full_waveform" if fw else "photon_counting",
+            "description": (
+                f"suite {d.half} seed {d.seed}: {d.receiver} {d.scanner}, {d.surface} water, "
+                f"wind {d.wind_m_s:g} m/s, c {d.attenuation_per_m:g} 1/m, slope "
+                f"{d.slope_deg:g} deg, altitude {d.altitude_m:g} m"
+            ),
+        },
+        "scanner": {"kind": d.scanner, "prf_hz": d.prf_hz},
+        "flight": {
+            "altitude_m": d.altitude_m,
+            "speed_m_s": 60.0,
+            "heading_deg": 0.0,
+            "area_m": [-1.0, 1.0, 0.0, d.line_length_m],
+            "n_lines": 1,
+        },
+        "water": {
+            "extinction_per_m": d.attenuation_per_m,
+            "backscatter_180_per_m_sr": round(2.0e-3 * d.attenuation_per_m / 0.15, 6),
+            "wind_speed_m_s": d.wind_m_s,
+        },
+        "water_surface": {"kind": d.surface},
+        "seabed": {
+            "kind": "plane",
+            "depth_m": round(d.depth_centre_m - dz, 3),
+            "slope_deg": d.slope_deg,
+            "aspect_deg": d.aspect_deg,
+            "reflectance": d.reflectance,
+            "roughness_rms_m": d.roughness_rms_m,
+            "roughness_correlation_m": d.roughness_correlation_m,
+            # 0.5 m under a profiler's narrow strip; 1 m (the default) under a wide swath,
+            # where a 0.5 m mesh of a 600 m extent would cost more than the survey
+            "mesh_resolution_m": 0.5 if d.scanner == "profiler" else 1.0,
+        },
+        "background": {"solar_irradiance_w_m2_nm": 1.5},
+        "process": {
+            "grid_resolution_m": 2.0,
+            "posterior_pulses_per_km2": 0.0,
+            "posterior_min_pulses": n_post,
+        },
+    }
+    if d.scanner == "oscillating":
+        t["scanner"]["scan_rate_hz"] = 20.0
+    if fw:
+        t["detector"] = {"window_s": d.window_s}
+    else:
+        t["process"]["photon_detect"] = {"shots_per_window": 200, "bin_m": 0.1}
+    return t
+
+
+def scene_toml(d: Draw) -> str:
+    """The TOML scene file of ``d`` (deterministic text)."""
+    lines = [
+        "# Generated by pipeline.suite.generate (bathy suite); do not edit: regenerate.",
+        f"# half: {d.half} (sha256 split of the seed; never tune on the held-out half)",
+        "",
+    ]
+    for name, table in _tables(d).items():
+        subs = {k: v for k, v in table.items() if isinstance(v, dict)}
+        lines.append(f"[{name}]")
+        lines += [f"{k} = {_value(v)}" for k, v in table.items() if not isinstance(v, dict)]
+        lines.append("")
+        for sub, st in subs.items():
+            lines.append(f"[{name}.{sub}]")
+            lines += [f"{k} = {_value(v)}" for k, v in st.items()]
+            lines.append("")
+        if name == "seabed":
+            for x, y, s in d.cubes:
+                lines += ["[[seabed.features]]", 'kind = "cube"', f"x_m = {x!r}", f"y_m = {y!r}"]
+                lines += [f"size_m = {s!r}", ""]
+    return "\n".join(lines)
+
+
+def write_scene(d: Draw, folder: str | Path) -> Path:
+    """Write ``d``'s scene file into ``folder`` as ``suite_<seed>.toml``; return its path."""
+    path = Path(folder) / f"suite_{d.seed:05d}.toml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(scene_toml(d))
+    return path

@@ -1,0 +1,311 @@
+"""The suite's floors and its outputs: ``RESULTS_suite.md`` and ``suite.csv``.
+
+Floors (the issue "Right off the shipped scenes", *What it must show*), checked per stratum in
+the depth window ``[1 m, 0.8 D_ext)`` (:mod:`pipeline.suite.strata`); the verdict that counts
+is the held-out half's, the tuning half's is shown beside it:
+
+* ``bias``: ``|bias| <= 0.03 m`` (strata with >= 30 class-40 points);
+* ``rmse``: ``RMSE <= 0.10 m`` when every scene of the stratum has wind <= 5 m/s, else
+  ``<= 0.15 m`` (the issue's 10 m/s figure, applied to every wind above 5 m/s);
+* ``grid``: grid-cell ``RMSE <= 0.10 m`` when every scene has wind <= 5 m/s;
+* ``gross``: no class-40 point more than 1 m off;
+* ``tpu68`` / ``tpu95``: TPU coverage in 64-72 % / 93-97 % (strata with >= 200 points);
+* ``post68`` / ``post95`` / ``conv``: posterior coverage likewise and >= 95 % of chains
+  converged (strata with >= 60 posteriors);
+* ``cube2``: 2 m cubes detected >= 95 % where the point density reaches 1 per m².
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.suite.strata import Pool, shallowest_unbiased_m
+
+__all__ = ["FLOORS", "floors", "write_csv", "write_markdown", "cube_density_table"]
+
+FLOORS = ("bias", "rmse", "grid", "gross", "tpu68", "tpu95", "post68", "post95", "conv", "cube2")
+_MIN_POINTS, _MIN_TPU, _MIN_POST = 30, 200, 60
+
+
+def _within(v, lo, hi) -> bool:
+    return lo <= v <= hi
+
+
+def floors(fig: dict[str, Any], wind_max_m_s: float | None) -> dict[str, str]:
+    """``PASS``, ``FAIL`` or ``n/a`` per floor (:data:`FLOORS`) of one stratum and half."""
+    out = dict.fromkeys(FLOORS, "n/a")
+    pts, cells = fig["points"], fig.get("cells") or {"n": 0}
+    calm = wind_max_m_s is not None and wind_max_m_s <= 5.0
+    verdict = {True: "PASS", False: "FAIL"}
+    if pts["n"] >= _MIN_POINTS:
+        out["bias"] = verdict[abs(pts["bias_m"]) <= 0.03]
+        out["rmse"] = verdict[pts["rmse_m"] <= (0.10 if calm else 0.15)]
+    if pts["n"]:
+        out["gross"] = verdict[fig["n_over_1m"] == 0]
+    if calm and cells["n"] >= _MIN_POINTS:
+        out["grid"] = verdict[cells["rmse_m"] <= 0.10]
+    tpu = fig.get("tpu") or {"n": 0}
+    if tpu["n"] >= _MIN_TPU:
+        out["tpu68"] = verdict[_within(tpu["cov68"], 0.64, 0.72)]
+        out["tpu95"] = verdict[_within(tpu["cov95"], 0.93, 0.97)]
+    post = fig.get("posterior") or {"n": 0}
+    if post["n"] >= _MIN_POST:
+        out["post68"] = verdict[_within(post["cov68"], 0.64, 0.72)]
+        out["post95"] = verdict[_within(post["cov95"], 0.93, 0.97)]
+        out["conv"] = verdict[post["converged"] >= 0.95]
+    c2 = (fig.get("cubes") or {}).get("2", {})
+    if c2.get("n_dense"):
+        out["cube2"] = verdict[c2["detected_dense"] / c2["n_dense"] >= 0.95]
+    return out
+
+
+def _flat(fig: dict[str, Any]) -> dict[str, Any]:
+    """One half's figures as flat columns."""
+    row: dict[str, Any] = {"scenes": fig["scenes"]}
+    for g in ("points", "cells"):
+        for k, v in (fig.get(g) or {}).items():
+            row[f"{g}_{k}"] = v
+    row["n_over_1m"] = fig.get("n_over_1m")
+    for g in ("tpu", "posterior"):
+        for k, v in (fig.get(g) or {}).items():
+            row[f"{g}_{k}"] = v
+    for size, c in (fig.get("cubes") or {}).items():
+        for k, v in c.items():
+            row[f"cube{size}_{k}"] = v
+    return row
+
+
+def write_csv(path: str | Path, strata: list[dict[str, Any]]) -> Path:
+    """``suite.csv``: one line per stratum and half, figures and floor verdicts."""
+    rows = []
+    for s in strata:
+        for h in ("tuning", "heldout"):
+            fl = floors(s[h], s["wind_max_m_s"]) if s["in_floor_window"] else {}
+            base = {"dimension": s["dimension"], "stratum": s["label"], "half": h}
+            rows.append({**base, **_flat(s[h]), **{f"floor_{k}": v for k, v in fl.items()}})
+    cols: list[str] = []
+    for r in rows:
+        cols += [k for k in r if k not in cols]
+    path = Path(path)
+    with path.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=cols)
+        w.writeheader()
+        w.writerows(rows)
+    return path
+
+
+def _f(v, fmt="{:+.3f}") -> str:
+    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else fmt.format(v)
+
+
+def _pct(v) -> str:
+    return _f(None if v is None else 100.0 * v, "{:.1f}")
+
+
+def cube_density_table(pool: Pool) -> list[str]:
+    """Markdown lines: cube detection per size and point-density band, both halves."""
+    bands = ((0.0, 0.25), (0.25, 0.5), (0.5, 1.0), (1.0, 2.0), (2.0, math.inf))
+    lines = _head(
+        ["cube (m)", "density (points/m²)", "tuning detected / cubes", "held-out detected / cubes"]
+    )
+    halves = [m["half"] for m in pool.meta]
+    shallow = [c for c in pool.cubes if c["depth_m"] < 0.8 * pool.meta[c["run"]]["d_ext_m"]]
+    for size in (0.5, 1.0, 2.0):
+        for lo, hi in bands:
+            cells = []
+            for h in ("tuning", "heldout"):
+                cs = [
+                    c
+                    for c in shallow
+                    if c["size_m"] == size
+                    and halves[c["run"]] == h
+                    and lo <= c["density_per_m2"] < hi
+                ]
+                cells.append(f"{sum(c['detected'] for c in cs)} / {len(cs)}")
+            lines.append(f"| {size:g} | {lo:g}-{hi:g} | {cells[0]} | {cells[1]} |")
+    return lines
+
+
+def _row(cells) -> str:
+    """One Markdown table row."""
+    return "| " + " | ".join(str(c) for c in cells) + " |"
+
+
+def _head(cells) -> list[str]:
+    """A Markdown table's header and rule."""
+    return [_row(cells), "|" + "---|" * len(cells)]
+
+
+def _error_table(strata) -> list[str]:
+    side = ["n", "bias", "RMSE", "p95", "max"]
+    lines = _head(
+        ["stratum", *(f"T {c}" for c in side), *(f"H {c}" for c in side)]
+        + ["grid T RMSE / p95", "grid H RMSE / p95"]
+    )
+    for s in strata:
+        cells = [f"{s['dimension']}: {s['label']}"]
+        for h in ("tuning", "heldout"):
+            p = s[h]["points"]
+            cells += [str(p["n"]), _f(p["bias_m"]), _f(p["rmse_m"], "{:.3f}")]
+            cells += [_f(p["p95_m"], "{:.3f}"), _f(p["max_m"], "{:.2f}")]
+        for h in ("tuning", "heldout"):
+            c = s[h].get("cells")
+            cells.append(
+                "-" if not c else f"{_f(c['rmse_m'], '{:.3f}')} / {_f(c['p95_m'], '{:.3f}')}"
+            )
+        lines.append(_row(cells))
+    return lines
+
+
+def _coverage_table(strata) -> list[str]:
+    lines = _head(
+        ["stratum", "TPU T 68/95 % (n)", "TPU H 68/95 % (n)"]
+        + ["post T 68/95 % (n, conv)", "post H 68/95 % (n, conv)"]
+        + ["cubes T detected/n (0.5, 1, 2 m)", "cubes H detected/n (0.5, 1, 2 m)"]
+    )
+    for s in strata:
+        if "tpu" not in s["tuning"]:
+            continue
+        cells = [f"{s['dimension']}: {s['label']}"]
+        for h in ("tuning", "heldout"):
+            t = s[h]["tpu"]
+            cells.append(f"{_pct(t['cov68'])} / {_pct(t['cov95'])} ({t['n']})")
+        for h in ("tuning", "heldout"):
+            p = s[h]["posterior"]
+            cells.append(
+                f"{_pct(p['cov68'])} / {_pct(p['cov95'])} ({p['n']}, {_pct(p['converged'])})"
+            )
+        for h in ("tuning", "heldout"):
+            c = s[h]["cubes"]
+            sizes = ("0.5", "1", "2")
+            cells.append(
+                ", ".join(f"{c[k]['detected']}/{c[k]['n']}" if k in c else "-" for k in sizes)
+            )
+        lines.append(_row(cells))
+    return lines
+
+
+def _floor_table(strata) -> tuple[list[str], dict[str, int]]:
+    lines = _head(["stratum", *FLOORS])
+    fails = dict.fromkeys(FLOORS, 0)
+    for s in strata:
+        if not s["in_floor_window"]:
+            continue
+        ft, fh = floors(s["tuning"], s["wind_max_m_s"]), floors(s["heldout"], s["wind_max_m_s"])
+        for k in FLOORS:
+            fails[k] += fh[k] == "FAIL"
+        cells = [f"{fh[k]} ({ft[k]})" for k in FLOORS]
+        lines.append(f"| {s['dimension']}: {s['label']} | " + " | ".join(cells) + " |")
+    return lines, fails
+
+
+def _shallow_table(pool: Pool) -> list[str]:
+    lines = _head(
+        ["receiver", "water", "tuning: shallowest depth (m)", "held-out: shallowest depth (m)"]
+        + ["held-out bias per band (n)"]
+    )
+    for rec in ("full_waveform", "photon_counting"):
+        for name, rng in (("calm (wind 0-2 m/s)", (0.0, 2.0)), ("5 m/s (4-6 m/s)", (4.0, 6.0))):
+            t = shallowest_unbiased_m(pool, rec, rng, "tuning")
+            h = shallowest_unbiased_m(pool, rec, rng, "heldout")
+            bands = ", ".join(
+                f"{b['band']}: {_f(b['bias_m'])} ({b['n']})" for b in h["bands"] if b["n"]
+            )
+            td = "none" if t["depth_m"] is None else f"{t['depth_m']:g}"
+            hd = "none" if h["depth_m"] is None else f"{h['depth_m']:g}"
+            lines.append(
+                _row(
+                    [rec, name, f"{td} ({t['scenes']} scenes)", f"{hd} ({h['scenes']} scenes)"]
+                    + [bands or "-"]
+                )
+            )
+    return lines
+
+
+def _scene_table(pool: Pool, times: list[tuple[float, float]]) -> list[str]:
+    lines = _head(
+        ["seed", "half", "receiver", "scanner", "surface", "wind m/s", "c 1/m", "slope °"]
+        + ["rough m", "altitude m", "depth at centre m", "D_ext m (source)", "class-40 points"]
+        + ["wall / CPU s"]
+    )
+    n_pts = np.bincount(pool.scene["pt"], minlength=len(pool.meta))
+    for i, m in enumerate(pool.meta):
+        lines.append(
+            f"| {m['seed']} | {m['half']} | {m['receiver']} | {m['scanner']} | {m['surface']} | "
+            f"{m['wind_m_s']:.1f} | {m['attenuation_per_m']:.3f} | {m['slope_deg']:.1f} | "
+            f"{m['roughness_rms_m']:.2f} | {m['altitude_m']:.0f} | {m['depth_centre_m']:.1f} | "
+            f"{m['d_ext_m']:.1f} ({m['d_ext_source']}) | {n_pts[i]} | "
+            f"{times[i][0]:.0f} / {times[i][1]:.0f} |"
+        )
+    return lines
+
+
+def write_markdown(
+    path: str | Path,
+    command: str,
+    pool: Pool,
+    strata: list[dict[str, Any]],
+    times: list[tuple[float, float]],
+    failed: list[int],
+    preface: str = "",
+) -> Path:
+    """``RESULTS_suite.md``: command, tables per stratum (halves side by side), floors.
+
+    ``times``: per run, wall and CPU seconds.
+    """
+    floor_lines, fails = _floor_table(strata)
+    n_half = {h: sum(m["half"] == h for m in pool.meta) for h in ("tuning", "heldout")}
+    lines = [
+        "# Scene suite: results per stratum, tuning and held-out halves",
+        "",
+        preface,
+        "",
+        "Command:",
+        "",
+        f"    {command}",
+        "",
+        f"{len(pool.meta)} scenes ran in {sum(t[1] for t in times):.0f} s of CPU"
+        f" ({n_half['tuning']} tuning, {n_half['heldout']} held-out);"
+        f" failed runs: {failed or 'none'}. Generator, split, strata and floors:"
+        " `pipeline/suite/` (module docstrings). T = tuning half, H = held-out half.",
+        "Errors are measured minus true depth (positive: too deep), in metres, over class-40"
+        " points with true depth in [1 m, 0.8 D_ext) unless the stratum is a depth band.",
+        "",
+        "## Floors (held-out verdict, tuning in brackets)",
+        "",
+        "Held-out strata failing each floor: "
+        + ", ".join(f"{k} {v}" for k, v in fails.items())
+        + ". n/a: too few points, posteriors or dense cubes in the stratum (see"
+        " `pipeline/suite/report.py`).",
+        "",
+        *floor_lines,
+        "",
+        "## Class-40 points and grid cells",
+        "",
+        *_error_table(strata),
+        "",
+        "## TPU and posterior coverage",
+        "",
+        *_coverage_table(strata),
+        "",
+        "## Cube detection by point density (all depths shallower than 0.8 D_ext)",
+        "",
+        *cube_density_table(pool),
+        "",
+        "## Shallowest depth with |bias| <= 0.10 m (bands from 2 m upward must all pass)",
+        "",
+        *_shallow_table(pool),
+        "",
+        "## Scenes",
+        "",
+        *_scene_table(pool, times),
+        "",
+    ]
+    path = Path(path)
+    path.write_text("\n".join(lines))
+    return path
