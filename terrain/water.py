@@ -6,7 +6,9 @@ Waves (:class:`WaveField`) are linear (Gaussian) deep-water waves synthesised by
 grid (Tessendorf 2001): mode ``k`` has complex amplitude ``h0(k)``, an independent complex Gaussian
 with ``E|h0|**2 = Psi(k) dkx dky / 2``, and
 ``eta(x, t) = mean_level + sum_k [h0(k) e^{-i w t} + conj(h0(-k)) e^{i w t}] e^{i k.x}`` with
-``w**2 = g |k|``, so each component travels along its own wavevector and the field is real.
+``w**2 = g |k|`` (or ``g |k| tanh(|k| h)`` with ``water_depth_m``), so each component travels along
+its own wavevector at its phase speed and the field is real; :mod:`terrain.evolving_sea` evaluates
+it at every pulse's time.
 ``Psi(kx, ky) = F(k) D(theta - direction) / k`` from the Pierson-Moskowitz or JONSWAP spectrum and
 cos-2s or cos**2 spreading (:mod:`terrain.wave_spectra`). The frozen surface is a periodic
 :class:`~terrain.gridded.GridSurface`: the truth is the cubic spline of the node values.

@@ -93,11 +93,15 @@ class WaveCaster:
     def _solve(self, oi, di, ti):
         """Newton (then bisection where needed) for rays of one slab."""
         s = (self.level_m - oi[:, 2]) / di[:, 2]
-        for _ in range(NEWTON_STEPS):
-            f, fp, gx, gy = self._f(oi, di, s, ti)
-            ok = np.abs(fp) > 1e-12
-            s = s - np.divide(f, fp, out=np.zeros_like(f), where=ok)
         f, fp, gx, gy = self._f(oi, di, s, ti)
+        act = np.arange(s.size)
+        for _ in range(NEWTON_STEPS):  # only the rays not yet on the surface step again
+            act = act[~(np.abs(f[act]) <= TOLERANCE_M)]
+            if act.size == 0:
+                break
+            ok = np.abs(fp[act]) > 1e-12
+            s[act] -= np.divide(f[act], fp[act], out=np.zeros(act.size), where=ok)
+            f[act], fp[act], gx[act], gy[act] = self._f(oi[act], di[act], s[act], ti[act])
         bad = np.flatnonzero(~(np.abs(f) <= TOLERANCE_M) | (s < 0))
         if bad.size:
             s[bad], gx[bad], gy[bad], f_bad = self._bisect(oi[bad], di[bad], ti[bad])

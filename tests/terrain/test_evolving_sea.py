@@ -92,3 +92,14 @@ def test_frozen_sea_is_the_surface_at_t0():
     np.testing.assert_allclose(frozen.height_m(x, 3.0, 7.3), at0, atol=1e-6)
     np.testing.assert_allclose(moving.height_m(x, 3.0, 0.0), at0, atol=1e-6)
     np.testing.assert_allclose(_caster_heights(frozen, x, 7.3), at0, atol=1e-6)
+
+
+def test_hs_sampling_error_matches_the_spread_over_seeds():
+    """The tile criterion: the predicted Hs sampling error against 80 independent tiles."""
+    side = 2 * 22.3  # two peak wavelengths at 5 m/s: ~10 % (the old default tile)
+    kw = {"extent": (0, side, 0, side), "spacing_m": side / 128, "calibrate_mss": False}
+    hs = [WaveField(5.0, rng=s, **kw).significant_wave_height_m() for s in range(80)]
+    predicted = WaveField(5.0, rng=0, **kw).hs_sampling_error
+    # the std of 80 draws is known to ~8 %; the prediction neglects 4th-order terms
+    assert np.std(hs) / np.mean(hs) == pytest.approx(predicted, rel=0.25)
+    assert 0.05 < predicted < 0.15
