@@ -97,6 +97,8 @@ class WaterSurface:
         Residual standard deviation of the global plane fit.
     air_index : float
         Index of air used for every air range.
+    time_window_s : float or None
+        The fit's time window (neighbours this close in time); None: none.
     """
 
     entry_m: np.ndarray
@@ -114,6 +116,7 @@ class WaterSurface:
     global_plane: np.ndarray
     global_sigma_m: float
     air_index: float
+    time_window_s: float | None = None
 
     def __len__(self) -> int:
         return int(self.entry_m.shape[0])
@@ -367,4 +370,5 @@ def fit_water_surface(
         global_plane=gplane,
         global_sigma_m=float(gsigma),
         air_index=float(st.air_index),
+        time_window_s=st.time_window_s if returns.t_emit_s is not None else None,
     )

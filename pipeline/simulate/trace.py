@@ -252,7 +252,18 @@ def trace(
     )
     cos_land = np.clip(-np.einsum("ij,ij->i", d, n_b), 0.0, 1.0)
     incidence = np.where(water, theta, np.where(land, np.arccos(cos_land), 0.0))
-    refr, _ = optics.refract_direction(d, safe_nrm, world.n_air, world.n_water)
+    refr_nrm = safe_nrm
+    u_mss = getattr(world.water, "unresolved_mss", 0.0)
+    if u_mss > 0.0:
+        from pipeline.simulate.wave_caster import unresolved_normals
+
+        # the waves below the traced scale tilt each sub-ray's entry facet (the glint takes
+        # them as a density, the refracted beam as draws); a draw the ray cannot enter
+        # (facing away) leaves the resolved facet
+        tilted = unresolved_normals(safe_nrm, pulses.pulse_id, k, u_mss, world.water.seed)
+        enters = np.einsum("ij,ij->i", d, tilted) < -1e-6
+        refr_nrm = np.where((water & enters)[:, None], tilted, safe_nrm)
+    refr, _ = optics.refract_direction(d, refr_nrm, world.n_air, world.n_water)
 
     hit_sb, t_sb, n_sb = world.seabed.cast(surf_xyz, refr, th)
     bottom_ok = water & hit_sb

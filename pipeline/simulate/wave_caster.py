@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["WaveCaster", "NEWTON_STEPS", "TOLERANCE_M"]
+__all__ = ["WaveCaster", "NEWTON_STEPS", "TOLERANCE_M", "unresolved_normals"]
 
 NEWTON_STEPS = 8
 TOLERANCE_M = 1e-6
@@ -34,10 +34,18 @@ class WaveCaster:
     Parameters
     ----------
     sea : EvolvingSea
+    unresolved_mss : float
+        Slope variance of the waves the sea does not resolve (Cox-Munk minus the resolved);
+        the tracer refracts each sub-ray through a facet tilted by a draw of it
+        (:func:`unresolved_normals`).
+    seed : int
+        Seed of those draws.
     """
 
-    def __init__(self, sea) -> None:
+    def __init__(self, sea, unresolved_mss: float = 0.0, seed: int = 0) -> None:
         self.sea = sea
+        self.unresolved_mss = float(unresolved_mss)
+        self.seed = int(seed)
         self.level_m = sea.mean_level_m
         self.zmax = self.level_m + sea.height_bound_m
         self.zmin = self.level_m - sea.height_bound_m
@@ -128,3 +136,50 @@ class WaveCaster:
         s = 0.5 * (a + b)
         f, _, gx, gy = self._f(o, d, s, t)
         return s, gx, gy, f
+
+
+def _splitmix64(x: np.ndarray) -> np.ndarray:
+    """Counter-based hash (SplitMix64) of uint64 counters: chunk-invariant random bits."""
+    z = x + np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+def unresolved_normals(normal, pulse_id, n_sub, mss, seed):
+    """Facet normals with the unresolved slopes added: what each sub-ray refracts through.
+
+    The traced surface carries waves longer than a few footprints; the shorter ones (most of
+    the Cox-Munk variance, capillary to decimetre scales, correlated over centimetres) tilt the
+    facet each sub-ray enters. Their slopes add to the resolved gradient,
+    ``grad = grad_resolved + g``, ``g`` Gaussian with variance ``mss / 2`` per axis (isotropic),
+    drawn from a counter hash of ``(seed, pulse_id, sub-ray)`` so any chunking gives the same
+    draws. Without them the in-water beam would not spread as it does under a real sea.
+
+    Parameters
+    ----------
+    normal : (n_pulses * n_sub, 3) float64
+        Upward unit normals of the resolved surface.
+    pulse_id : (n_pulses,) int64
+    n_sub : int
+    mss : float
+        Unresolved slope variance (total of both axes).
+    seed : int
+
+    Returns
+    -------
+    (n_pulses * n_sub, 3) float64
+        Upward unit normals.
+    """
+    pid = np.repeat(np.asarray(pulse_id, dtype=np.uint64), n_sub)
+    sub = np.tile(np.arange(n_sub, dtype=np.uint64), np.asarray(pulse_id).size)
+    base = (pid * np.uint64(1024) + sub) * np.uint64(4) + np.uint64(seed) * np.uint64(0x10001)
+    u1 = ((_splitmix64(base) >> np.uint64(11)).astype(np.float64) + 0.5) / 2.0**53
+    u2 = ((_splitmix64(base + np.uint64(1)) >> np.uint64(11)).astype(np.float64) + 0.5) / 2.0**53
+    r = np.sqrt(-2.0 * np.log(u1)) * np.sqrt(0.5 * mss)  # Box-Muller
+    gx_u, gy_u = r * np.cos(2.0 * np.pi * u2), r * np.sin(2.0 * np.pi * u2)
+    nz = np.where(normal[:, 2] > 0.0, normal[:, 2], 1.0)
+    gx = -normal[:, 0] / nz + gx_u
+    gy = -normal[:, 1] / nz + gy_u
+    out = np.column_stack([-gx, -gy, np.ones_like(gx)])
+    return out / np.linalg.norm(out, axis=1, keepdims=True)

@@ -350,10 +350,14 @@ def build_world(scene, truth: Truth, extent_m):
     if ws.kind == "flat":
         water = _plane_caster(ws.level_m, extent_m, pad_m=1000.0)
     else:
+        from pipeline.simulate.budget import surface_mean_square_slope
         from pipeline.simulate.wave_caster import WaveCaster
 
-        # the moving sea: each ray meets the surface at its pulse's time, no mesh
-        water = WaveCaster(truth.water)
+        # the moving sea: each ray meets the surface at its pulse's time, no mesh; the
+        # slopes it does not resolve tilt each sub-ray's entry (trace)
+        resolved = truth.water.field.mean_square_slope(0.0)
+        unresolved = float(surface_mean_square_slope(scene.water.wind_speed_m_s, resolved))
+        water = WaveCaster(truth.water, unresolved_mss=unresolved, seed=scene.scene.seed)
     return World(
         water=water,
         seabed=seabed,
