@@ -150,3 +150,32 @@ def test_waves_without_wind_is_a_clear_error(survey_scene):
     scene = _wave_scene(survey_scene, wind=0.0)
     with pytest.raises(SceneError, match="`water.wind_speed_m_s` must be > 0"):
         build_truth(scene, (0.0, 10.0, 0.0, 10.0))
+
+
+def test_moving_sea_paths_do_not_depend_on_the_chunking(survey_scene):
+    scene = _wave_scene(survey_scene, wind=5.0)
+    extent = (0.0, 300.0, 0.0, 600.0)
+    world = build_world(scene, build_truth(scene, extent), extent)
+    rng = np.random.default_rng(9)
+    n = 300
+
+    class Pulses:
+        def __init__(self, sl):
+            self.origin_m = origin[sl]
+            self.direction = direction[sl]
+            self.pulse_id = np.arange(n)[sl]
+            self.yaw_rad = np.zeros(n)[sl]
+            self.t_s = times[sl]
+
+    origin = np.column_stack([rng.uniform(50, 250, (n, 2)), np.full(n, 400.0)])
+    az = rng.uniform(0, 2 * np.pi, n)
+    s, c = math.sin(0.35), math.cos(0.35)
+    direction = np.column_stack([s * np.sin(az), s * np.cos(az), np.full(n, -c)])
+    times = np.sort(rng.uniform(0.0, 1.0, n))
+    settings = replace(scene.trace, subrays=7)
+    whole = trace(Pulses(slice(None)), world, settings, 1e-3)
+    parts = [trace(Pulses(slice(a, b)), world, settings, 1e-3) for a, b in ((0, 120), (120, n))]
+    for name in ("surface_xyz_m", "refracted_dir", "bottom_xyz_m", "flags"):
+        np.testing.assert_array_equal(
+            np.concatenate([getattr(p, name) for p in parts]), getattr(whole, name)
+        )
