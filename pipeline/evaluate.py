@@ -3,6 +3,9 @@
 The truth comes in as a callable, never by import: ``truth_depth_m(x_m, y_m)`` (depth below the
 water level, positive down) or ``truth_z_m(x_m, y_m)`` (seabed elevation in the local frame),
 both vectorised over local coordinates. The orchestrator builds it from the simulated world.
+Over a moving sea the depth below the surface depends on when the pulse saw it: a truth callable
+with a true ``per_pulse`` attribute is called ``truth_depth_m(x_m, y_m, pulse_id)`` for points
+(each point's own pulse), and as ``truth_depth_m(x_m, y_m)`` where there is no pulse (cells).
 
 Errors are *depth* errors, positive when the measurement is too deep:
 ``error = depth_measured - depth_true`` with ``truth_depth_m``, or
@@ -156,6 +159,13 @@ def iho_fractions(errors_m: Any, depth_m: Any) -> tuple[IhoResult, ...]:
     return tuple(out)
 
 
+def _at(fn: TruthFn, x: np.ndarray, y: np.ndarray, pulse_id: Any = None) -> np.ndarray:
+    """The truth at points, each at its own pulse's time when the truth is per pulse."""
+    if pulse_id is not None and getattr(fn, "per_pulse", False):
+        return np.asarray(fn(x, y, pulse_id), dtype=np.float64)
+    return np.asarray(fn(x, y), dtype=np.float64)
+
+
 def _truth(truth_depth_m, truth_z_m):
     if (truth_depth_m is None) == (truth_z_m is None):
         raise ValueError("give exactly one of `truth_depth_m` and `truth_z_m`")
@@ -174,9 +184,9 @@ def point_errors_m(
     _truth(truth_depth_m, truth_z_m)
     x, y, z = points.xyz_m[:, 0], points.xyz_m[:, 1], points.xyz_m[:, 2]
     if truth_depth_m is not None:
-        true_d = np.asarray(truth_depth_m(x, y), dtype=np.float64)
+        true_d = _at(truth_depth_m, x, y, points.pulse_id)
         return points.depth_m - true_d, true_d
-    true_z = np.asarray(truth_z_m(x, y), dtype=np.float64)
+    true_z = _at(truth_z_m, x, y, points.pulse_id)
     return true_z - z, np.maximum(points.depth_m, 0.0)
 
 
@@ -356,7 +366,8 @@ def posterior_coverage(posteriors, *, truth_depth_m: TruthFn) -> dict[str, Any]:
     d = posteriors.depth_m
     started = (posteriors.flags & np.uint16(PosteriorFlag.NO_START)) == 0
     xy = posteriors.xyz_median_m[started]
-    truth = np.asarray(truth_depth_m(xy[:, 0], xy[:, 1]), dtype=np.float64)
+    pid = getattr(posteriors, "pulse_id", None)
+    truth = _at(truth_depth_m, xy[:, 0], xy[:, 1], None if pid is None else pid[started])
     sub = {k: v[started] for k, v in d.items()}
     conv = posteriors.converged[started]
 

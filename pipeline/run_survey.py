@@ -94,6 +94,7 @@ def simulate_detections(
     the result is the same wherever they run.
     """
     from pipeline.simulate import survey
+    from pipeline.simulate.trace_settings import resolved_trace_settings
     from pipeline.simulate.world import build_truth, build_world, wave_surface
 
     with clock.stage("terrain"):
@@ -106,28 +107,36 @@ def simulate_detections(
     with clock.stage("terrain"):
         truth = build_truth(scene, extent, water=water)
         world = build_world(scene, truth, extent)
+        # the evaluation takes the surface each pulse saw: pulse times by id, from the plan
+        prf = scene.scanner.prf_hz
+        truth = dataclasses.replace(
+            truth, pulse_time_s=lambda ids: survey.pulse_times_s(lines, prf, ids)
+        )
     if plan.runs("waves"):
         with clock.stage("waves"):
-            # the wave mesh already tilts each facet: the return model adds only the slope
-            # variance the mesh does not carry (Cox-Munk minus the mesh's own)
-            w = truth.water
-            xx, yy = np.meshgrid(
-                w.x0_m + w.dx_m * np.arange(w.z_m.shape[1]),
-                w.y0_m + w.dy_m * np.arange(w.z_m.shape[0]),
-            )
-            gx, gy = w.gradient(xx, yy)
-            resolved = float(np.mean(gx**2 + gy**2))
+            # the footprint split: the traced surface tilts each footprint by the waves it
+            # resolves; the surface echo adds, statistically, only the slope variance below
+            # them (Cox-Munk minus the resolved waves' own, pipeline.simulate.budget)
+            resolved = water.field.mean_square_slope(0.0)
             scene = dataclasses.replace(
                 scene,
                 returns=dataclasses.replace(scene.returns, resolved_mean_square_slope=resolved),
             )
-        log(f"  wave surface: mean-square slope {resolved:.4f} carried by the mesh")
+        f = water.field
+        log(
+            f"  wave surface: tile {f.extent[1] - f.extent[0]:.0f} m ({f.shape[1]} nodes, Hs "
+            f"sampling error {100 * f.hs_sampling_error:.1f} %), resolved mean-square slope "
+            f"{resolved:.4f}, time slabs {water.slab_s:.3f} s"
+            + ("" if water.evolving else " (frozen at t = 0)")
+        )
     log(
         f"  {lines.n_lines} lines, {lines.n_pulses_total} pulses, swath "
         f"{lines.swath_width_m:.1f} m, line spacing {lines.line_spacing_m:.1f} m"
     )
     ps, ins = scene.process, ctx.instrument
-    chunk = scene.run.chunk_pulses
+    trace_settings = resolved_trace_settings(scene)
+    # a chunk holds at most a million sub-rays (memory); results do not depend on the chunking
+    chunk = max(1, min(scene.run.chunk_pulses, 1_000_000 // trace_settings.subrays))
     if ins.photon_counting:  # whole accumulation windows per chunk, so chunking cannot change them
         chunk = max(ins.shots_per_window, chunk // ins.shots_per_window * ins.shots_per_window)
     # waveforms of a bounded share of the pulses are kept for posteriors (a few times the

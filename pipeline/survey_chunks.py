@@ -90,6 +90,7 @@ def run_chunk(job: ChunkJob, c: int) -> ChunkResult:
     from pipeline.simulate import survey
     from pipeline.simulate.detector import describe_pulse_flags
     from pipeline.simulate.trace import trace
+    from pipeline.simulate.trace_settings import resolved_trace_settings
 
     scene, clock = job.scene, StageClock()
     with clock.stage("survey"):
@@ -105,7 +106,10 @@ def run_chunk(job: ChunkJob, c: int) -> ChunkResult:
         )
     with clock.stage("trace"):
         div_rad = scene.scanner.beam_divergence_mrad * 1e-3
-        paths = trace(pulses, job.world, scene.trace, div_rad, scene.scanner.polarisation)
+        # the scene's trace settings with the sub-rays a wave surface needs (a user's value wins)
+        paths = trace(
+            pulses, job.world, resolved_trace_settings(scene), div_rad, scene.scanner.polarisation
+        )
     kept = nb = None
     pulse_flags: dict[str, int] = {}
     if job.waveform:

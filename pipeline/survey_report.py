@@ -70,7 +70,7 @@ def evaluate_survey(
         grid=grid,
         # points: depth below the local water surface (their depth_m's reference); GNSS
         # height errors common to the surface and the seabed returns cancel in it
-        truth_depth_m=truth.depth_m,
+        truth_depth_m=truth.depth_at_pulses_m,  # below the sea as each pulse saw it
         # grid: depth below the mean water level, as the grid's datum
         grid_truth_depth_m=grid_truth,
     ).to_dict()
@@ -80,7 +80,7 @@ def evaluate_survey(
     if ctx.instrument.photon_counting:
         group = unc.points40.pulse_id // ctx.instrument.shots_per_window
     coverage = tpu_coverage(
-        unc.points40, unc.tpu40.sigma_depth_m, truth_depth_m=truth.depth_m, group=group
+        unc.points40, unc.tpu40.sigma_depth_m, truth_depth_m=truth.depth_at_pulses_m, group=group
     )
     from pipeline.evaluation_points import point_arrays, write_evaluation_points
 
@@ -103,7 +103,7 @@ def evaluate_survey(
 
         post_eval = {"n": 0}
         if post.posteriors is not None:
-            post_eval = posterior_coverage(post.posteriors, truth_depth_m=truth.depth_m)
+            post_eval = posterior_coverage(post.posteriors, truth_depth_m=truth.depth_at_pulses_m)
             post_eval["seconds_per_pulse"] = post.cost_s / max(len(post.point_index), 1)
         post_eval["skipped_in_column_return"] = post.skipped_column
         post_eval["cells_with_posterior"] = int(np.count_nonzero(unc.cells.n_posterior))

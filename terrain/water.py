@@ -6,7 +6,9 @@ Waves (:class:`WaveField`) are linear (Gaussian) deep-water waves synthesised by
 grid (Tessendorf 2001): mode ``k`` has complex amplitude ``h0(k)``, an independent complex Gaussian
 with ``E|h0|**2 = Psi(k) dkx dky / 2``, and
 ``eta(x, t) = mean_level + sum_k [h0(k) e^{-i w t} + conj(h0(-k)) e^{i w t}] e^{i k.x}`` with
-``w**2 = g |k|``, so each component travels along its own wavevector and the field is real.
+``w**2 = g |k|`` (or ``g |k| tanh(|k| h)`` with ``water_depth_m``), so each component travels along
+its own wavevector at its phase speed and the field is real; :mod:`terrain.evolving_sea` evaluates
+it at every pulse's time.
 ``Psi(kx, ky) = F(k) D(theta - direction) / k`` from the Pierson-Moskowitz or JONSWAP spectrum and
 cos-2s or cos**2 spreading (:mod:`terrain.wave_spectra`). The frozen surface is a periodic
 :class:`~terrain.gridded.GridSurface`: the truth is the cubic spline of the node values.
@@ -146,6 +148,20 @@ class WaveField:
         Scale the spectral tail so the expected mean-square slope equals Cox-Munk (module doc).
     mean_level_m : float
         Mean water level (local z, metres).
+    water_depth_m : float, optional
+        Depth for the finite-depth dispersion ``w**2 = g k tanh(k h)`` of the phase evolution;
+        None (default) is deep water ``w**2 = g k``. The spectrum itself stays the deep-water one.
+
+    Attributes
+    ----------
+    hs_sampling_error : float
+        Expected relative standard deviation of the realised Hs on this periodic patch, from the
+        mode energies ``E``: each real mode's energy is exponentially distributed, so
+        ``std(m0) / m0 = sqrt(sum E**2) / sum E`` over independent modes and Hs = 4 sqrt(m0)
+        halves it. About ``0.2 / (patch side in peak wavelengths)`` for PM with cos-2s.
+    acceleration_rms_m_s2 : float
+        Expected rms vertical acceleration ``sqrt(sum w**4 Psi dk)``, m/s**2 (sets how long the
+        surface may be interpolated linearly in time; :mod:`terrain.evolving_sea`).
     """
 
     def __init__(
@@ -165,6 +181,7 @@ class WaveField:
         cutoff_wavenumber_rad_m: float | None = None,
         calibrate_mss: bool = True,
         mean_level_m: float = 0.0,
+        water_depth_m: float | None = None,
     ) -> None:
         u = check_number("wind_speed_m_s", wind_speed_m_s, gt=0.0)
         zw = check_number("wind_height_m", wind_height_m, gt=0.0)
@@ -235,6 +252,17 @@ class WaveField:
         self.expected_m0_m2 = float(np.sum(psi)) * dk2
         self.expected_mss = float(np.sum(k * k * psi)) * dk2
         self.expected_hs_m = 4.0 * math.sqrt(self.expected_m0_m2)
+        # a real mode is the pair (k, -k); both are in the sums over the full plane, twice
+        pair = psi + psi[(-np.arange(ny)) % ny][:, (-np.arange(nx)) % nx]
+        s1, s2 = float(np.sum(pair)) / 2.0, float(np.sum(pair**2)) / 2.0
+        self.hs_sampling_error = 0.5 * math.sqrt(s2) / s1 if s1 > 0 else math.inf
+        if water_depth_m is None:
+            omega = np.sqrt(ws.GRAVITY_M_S2 * k)
+        else:
+            h = check_number("water_depth_m", water_depth_m, gt=0.0)
+            omega = np.sqrt(ws.GRAVITY_M_S2 * k * np.tanh(k * h))
+        self.water_depth_m = water_depth_m
+        self.acceleration_rms_m_s2 = math.sqrt(float(np.sum(omega**4 * psi)) * dk2)
 
         gen = as_rng(rng)
         noise = gen.standard_normal((2, ny, nx))
@@ -243,7 +271,7 @@ class WaveField:
         neg = h0[(-np.arange(ny)) % ny][:, (-np.arange(nh)) % nx]
         self._h_plus = h0[:, :nh]
         self._h_minus = np.conj(neg)
-        self._omega = np.sqrt(ws.GRAVITY_M_S2 * k[:, :nh])
+        self._omega = omega[:, :nh]
         self._kx, self._ky = kxx[:, :nh], kyy[:, :nh]
         weight = np.full(nh, 2.0)
         weight[0] = 1.0

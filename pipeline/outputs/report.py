@@ -208,7 +208,7 @@ def write_survey_report(
 
 def _error_section(truth, pts, grid, level_m, area_m, evaluation) -> str:
     is40 = pts.select(pts.classification == BATHYMETRIC_POINT)
-    err, true_d = point_errors_m(is40, truth_depth_m=truth.depth_m)
+    err, true_d = point_errors_m(is40, truth_depth_m=truth.depth_at_pulses_m)
     gerr, _ = grid_errors_m(grid, truth_depth_m=lambda x, y: level_m - truth.seabed.height_m(x, y))
     bands = depth_bands(true_d, err)
     fig = F.error_figure(grid.x_m, grid.y_m, grid.resolution_m, gerr, area_m, err, true_d, bands)
@@ -259,7 +259,7 @@ def _calibration_section(unc, ctx, truth, evaluation) -> str:
     cov = tpu_coverage(
         unc.points40,
         unc.tpu40.sigma_depth_m,
-        truth_depth_m=truth.depth_m,
+        truth_depth_m=truth.depth_at_pulses_m,
         ks=CALIBRATION_KS,
         group=group,
     )

@@ -31,6 +31,14 @@ Method
    slope, which keeps nearly collinear neighbourhoods (a profiler track) solvable; those are
    flagged ``SURFACE_ILL_CONDITIONED``. With fewer than ``min_neighbours`` neighbours the
    global plane is used, flagged ``SURFACE_GLOBAL_FALLBACK``.
+   The sea moves: neighbours must also be close in time, within ``time_window_s`` of the
+   pulse's recorded emission time (``DetectedReturns.t_emit_s``; no window when absent). The
+   search runs in ``(x, y, v t)`` with ``v = radius_m / time_window_s`` (one k-d tree), and
+   neighbours farther than ``radius_m`` across or ``time_window_s`` apart are dropped. The
+   default, 1 s, keeps a Palmer scan's own look at a spot (its neighbours within 5 m are a few
+   scan periods, < 0.3 s, apart at 20 Hz) and drops the other look (``2 H tan(theta) / v``
+   later, ~5 s at 400 m and 60 m/s), during which a 5 m/s sea's peak waves (period ~4 s,
+   speed ~6 m/s) have moved by tens of metres; and adjacent lines (minutes).
 4. The beam meets its local plane at the entry point; the plane's upward unit normal is the
    surface normal for Snell's law. A plane over ``k`` neighbours smooths waves shorter than
    about twice the neighbourhood radius; longer waves and any tilt are kept.
@@ -45,7 +53,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from pipeline.config import setting
 from pipeline.constants import MAD_TO_SIGMA
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.returns import DetectedReturns, DetectorFlag, PointFlag
@@ -55,92 +62,12 @@ from pipeline.process.surface_land import (
     masked_median,
     no_water_seen,
 )
+from pipeline.process.surface_settings import SurfaceFitSettings
 
 __all__ = ["SurfaceFitSettings", "WaterSurface", "fit_water_surface", "surface_points_m"]
 
 #: |N . d| below this: the beam runs along the surface (no usable entry point).
 _GRAZING_COS = 1e-6
-
-
-@dataclass(frozen=True, kw_only=True)
-class SurfaceFitSettings:
-    """Settings of the water-surface fit."""
-
-    air_index: float | None = setting(
-        1.000277, ge=1.0, le=1.01, doc="index of air for the air range (None: the atmosphere's)"
-    )
-    k_neighbours: int = setting(16, ge=3, le=256, doc="surface points per local plane fit")
-    radius_m: float = setting(5.0, ge=0.1, le=1000.0, doc="neighbour search radius")
-    min_neighbours: int = setting(6, ge=3, le=256, doc="fewer: use the global plane")
-    robust_iterations: int = setting(2, ge=0, le=10, doc="outlier-rejection passes")
-    outlier_sigma: float = setting(3.0, gt=0.0, doc="rejection threshold in robust sigmas")
-    own_outlier_sigma: float = setting(
-        5.0, gt=0.0, doc="a pulse's own surface point further off its fit: SURFACE_OUTLIER"
-    )
-    outlier_floor_m: float = setting(
-        0.02, ge=0.0, doc="residuals below this are never rejected (exact data)"
-    )
-    land_margin_m: float = setting(
-        1.0, gt=0.0, doc="higher above the water level: land candidate (see surface_land)"
-    )
-    land_sea_sigmas: float = setting(
-        4.0,
-        ge=0.0,
-        doc="land stands this many measured sea-height sigmas above the level (Hs ~ 4 sigma)",
-    )
-    land_radius_m: float = setting(
-        5.0, gt=0.0, le=1000.0, doc="neighbour radius of the land support and height"
-    )
-    land_neighbours: int = setting(32, ge=1, le=1024, doc="neighbours of the land support")
-    land_support_fraction: float = setting(
-        0.25, ge=0.0, le=1.0, doc="fewer land candidates among the neighbours: not land"
-    )
-    land_link_m: float = setting(
-        2.0,
-        gt=0.0,
-        le=1000.0,
-        doc="land candidates this close to land above the sea state are land too",
-    )
-    land_extent_sigmas: float = setting(
-        400.0,
-        gt=0.0,
-        doc="a region of linked land candidates this wide, in sea sigmas, is land (a crest "
-        "region spans ~ a wavelength ~ 150 sigma)",
-    )
-    below_margin_m: float = setting(1.0, gt=0.0, doc="lower below the water level: not surface")
-    water_level_hint_m: float | None = setting(
-        None, doc="known water level (local z) to start from instead of the histogram mode"
-    )
-    level_bin_m: float = setting(0.25, gt=0.0, doc="histogram bin of the water-level search")
-    min_wet_pulses: int = setting(
-        3,
-        ge=1,
-        doc="pulses showing light under their surface return (a bottom or in-column return "
-        "level_min_depth_m below it, or a measured water column) needed to conclude there is "
-        "water; fewer, and no water_level_hint_m: every return is land",
-    )
-    level_min_depth_m: float = setting(
-        1.0,
-        ge=0.0,
-        doc="water-level search: surface points with a bottom this far below (air range) first",
-    )
-    slope_prior_m: float = setting(
-        0.05, ge=1e-3, le=100.0, doc="ridge towards the global slope, as an equivalent spread"
-    )
-    min_spread_m: float = setting(
-        0.25, ge=0.0, le=1000.0, doc="smaller neighbour spread across: flag ill-conditioned"
-    )
-    fallback_water_level_m: float = setting(
-        0.0, doc="water level used when there are fewer than 3 surface returns"
-    )
-    chunk_size: int = setting(131072, ge=1, doc="pulses per batched local fit")
-
-    def __post_init__(self) -> None:
-        if self.min_neighbours > self.k_neighbours:
-            raise ValueError(
-                f"`min_neighbours` ({self.min_neighbours}) must be <= `k_neighbours` "
-                f"({self.k_neighbours})"
-            )
 
 
 @dataclass(frozen=True)
@@ -179,6 +106,8 @@ class WaterSurface:
         Residual standard deviation of the global plane fit.
     air_index : float
         Index of air used for every air range.
+    time_window_s : float or None
+        The fit's time window (neighbours this close in time); None: none.
     """
 
     entry_m: np.ndarray
@@ -196,6 +125,7 @@ class WaterSurface:
     global_plane: np.ndarray
     global_sigma_m: float
     air_index: float
+    time_window_s: float | None = None
 
     def __len__(self) -> int:
         return int(self.entry_m.shape[0])
@@ -246,16 +176,25 @@ def _solve(w, dx, dy, z, lam):
     return params, inv, (sw, sx, sy, sxx, syy, sxy)
 
 
-def _local_fit(tree, spts, qxy, st):
-    """Robust local planes of the residual heights ``spts[:, 2]`` around queries ``qxy``."""
+def _local_fit(tree, spts, qxy, st, key=None, qkey=None):
+    """Robust local planes of the residual heights ``spts[:, 2]`` around queries ``qxy``.
+
+    ``key`` / ``qkey``: the tree's and the queries' search coordinates when they are not the
+    horizontal positions (``(x, y, v t)`` with a time window, :func:`_search_keys`).
+    """
     m, ns = len(qxy), len(spts)
     k = min(st.k_neighbours, ns)
-    _, idx = tree.query(qxy, k=k, distance_upper_bound=st.radius_m, workers=-1)
+    q = qxy if qkey is None else qkey
+    bound = st.radius_m if qkey is None else st.radius_m * np.sqrt(2.0)
+    _, idx = tree.query(q, k=k, distance_upper_bound=bound, workers=-1)
     idx = np.asarray(idx).reshape(m, k)
     valid = idx < ns
     ic = np.where(valid, idx, 0)
     dx = np.where(valid, spts[ic, 0] - qxy[:, :1], 0.0)
     dy = np.where(valid, spts[ic, 1] - qxy[:, 1:], 0.0)
+    if qkey is not None:  # in the window: within the radius across and the time window apart
+        dt_scaled = key[ic, 2] - qkey[:, 2:3]
+        valid &= (dx * dx + dy * dy <= st.radius_m**2) & (np.abs(dt_scaled) <= st.radius_m)
     z = np.where(valid, spts[ic, 2], 0.0)
     count = valid.sum(1)
     lam = count * st.slope_prior_m**2
@@ -287,6 +226,13 @@ def _local_fit(tree, spts, qxy, st):
     n_sigma = sigma * np.sqrt(np.maximum(inv[:, 1, 1] + inv[:, 2, 2], 0.0))
     ok = count >= st.min_neighbours
     return params, ok, n_used.astype(np.int64), sigma, h_sigma, n_sigma, ill
+
+
+def _search_keys(xy, t_s, st):
+    """Search coordinates ``(x, y, v t)``, ``v = radius / window`` (None without a window)."""
+    if st.time_window_s is None or t_s is None:
+        return None
+    return np.column_stack([xy, np.asarray(t_s, dtype=np.float64) * st.radius_m / st.time_window_s])
 
 
 def _intersect(origin, direction, point, normal):
@@ -378,13 +324,18 @@ def fit_water_surface(
     q = np.flatnonzero(water)
     qxy = np.where(water_s[q, None], ps[q, :2], entry[q, :2])
     spts = np.column_stack([ps[water_s, :2], res_s[water_s]])
+    t_emit = returns.t_emit_s
+    key = _search_keys(spts[:, :2], None if t_emit is None else t_emit[water_s], st)
+    qkey = _search_keys(qxy, None if t_emit is None else t_emit[q], st)
     fallback = np.ones(len(q), dtype=bool)
     if len(spts) >= 1 and len(q):
-        tree = cKDTree(spts[:, :2])
+        tree = cKDTree(spts[:, :2] if key is None else key)
         for lo in range(0, len(q), st.chunk_size):
             sl = slice(lo, lo + st.chunk_size)
             qi, xy = q[sl], qxy[sl]
-            params, ok, used, sig, hsig, nsig, ill = _local_fit(tree, spts, xy, st)
+            params, ok, used, sig, hsig, nsig, ill = _local_fit(
+                tree, spts, xy, st, key, None if qkey is None else qkey[sl]
+            )
             fallback[sl] = ~ok
             qi, xy, params = qi[ok], xy[ok], params[ok]
             sx, sy = gx + params[:, 1], gy + params[:, 2]
@@ -436,4 +387,5 @@ def fit_water_surface(
         global_plane=gplane,
         global_sigma_m=float(gsigma),
         air_index=float(st.air_index),
+        time_window_s=st.time_window_s if returns.t_emit_s is not None else None,
     )

@@ -198,6 +198,9 @@ def surface_over_sounding(
     not see), it holds the two planes' tilt errors and the bending of the waves between ``E``
     and ``B`` that one plane cannot follow. Where ``B`` lies within the fit's own
     neighbourhood the two planes share their points and ``T`` understates the tilt error.
+    The sea moves: with the fit's time window (``surface.time_window_s``), the surface return
+    over ``B`` is the nearest of the 16 nearest that is within the window of the pulse's own
+    time (the same look), else the nearest.
 
     Parameters
     ----------
@@ -220,7 +223,17 @@ def surface_over_sounding(
     ws = np.flatnonzero(surface.is_water & returns.has_surface)
     if ws.size == 0 or rows.size == 0:
         return np.full(rows.size, np.nan), delta
-    _, j = cKDTree(surface.surface_point_m[ws, :2]).query(xy, k=1, workers=-1)
+    tree = cKDTree(surface.surface_point_m[ws, :2])
+    if surface.time_window_s is None or returns.t_emit_s is None:
+        _, j = tree.query(xy, k=1, workers=-1)
+    else:
+        k = min(16, ws.size)
+        _, near = tree.query(xy, k=k, workers=-1)
+        near = np.asarray(near).reshape(xy.shape[0], k)
+        dt = np.abs(returns.t_emit_s[ws[near]] - returns.t_emit_s[rows][:, None])
+        same = dt <= surface.time_window_s
+        # argmax finds the first (nearest) in the window; none in it: the nearest
+        j = near[np.arange(near.shape[0]), np.where(same.any(1), np.argmax(same, axis=1), 0)]
 
     def apart(x, y):  # the plane over the sounding less the pulse's own, at (x, y)
         return surface.surface_z_m(ws[j], x, y) - surface.surface_z_m(rows, x, y)

@@ -79,6 +79,7 @@ __all__ = [
     "n_chunks",
     "navigation_errors",
     "plan_lines",
+    "pulse_times_s",
     "pulses_for_range",
     "rotate_body_to_local",
     "swath_width_m",
@@ -146,6 +147,13 @@ class Pulses:
         return Pulses(**{k: np.concatenate([getattr(p, k) for p in parts]) for k in names})
 
 
+def pulse_times_s(lines: FlightLines, prf_hz: float, pulse_id) -> np.ndarray:
+    """Emission times (s) of pulses by global index: ``t_start[line] + (i - offset) / prf``."""
+    ids = np.asarray(pulse_id, dtype=np.int64)
+    line = np.searchsorted(lines.pulse_offset, ids, side="right").astype(np.int64) - 1
+    return lines.t_start_s[line] + (ids - lines.pulse_offset[line]) / prf_hz
+
+
 def pulses_for_range(
     flight: FlightSettings,
     attitude: AttitudeSettings,
@@ -177,7 +185,7 @@ def pulses_for_range(
     ids = np.arange(start, stop, dtype=np.int64)
     line = np.searchsorted(lines.pulse_offset, ids, side="right").astype(np.int64) - 1
     dt = (ids - lines.pulse_offset[line]) / scanner.prf_hz
-    t = lines.t_start_s[line] + dt
+    t = pulse_times_s(lines, scanner.prf_hz, ids)
     heading = lines.heading_rad[line]
     along = dt * flight.speed_m_s
     origin = np.empty((ids.size, 3))

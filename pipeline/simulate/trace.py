@@ -84,13 +84,16 @@ class MeshCaster:
         """Build from a :class:`trimesh.Trimesh`."""
         return cls(np.asarray(mesh.vertices), np.asarray(mesh.faces))
 
-    def cast(self, origin_m: np.ndarray, direction: np.ndarray, nthreads: int = 0):
+    def cast(self, origin_m: np.ndarray, direction: np.ndarray, nthreads: int = 0, t_s=None):
         """First hit of each ray.
 
         Parameters
         ----------
         origin_m, direction : (n, 3) float64
             Ray origins and unit directions.
+        t_s : (n,) float64, optional
+            Ray times; a mesh does not move, so they are ignored (the moving sea's caster,
+            :class:`~pipeline.simulate.wave_caster.WaveCaster`, uses them).
 
         Returns
         -------
@@ -217,7 +220,8 @@ def trace(
     ----------
     pulses : Pulses
         Needs ``pulse_id`` (n,), ``origin_m`` (n, 3), ``direction`` (n, 3) and ``yaw_rad`` (n,)
-        (the true geometry: this is the simulation side).
+        (the true geometry: this is the simulation side); ``t_s`` (n,) emission times if the
+        water surface moves (absent: t = 0).
     world : World
     settings : TraceSettings
     divergence_rad : float
@@ -230,12 +234,19 @@ def trace(
         Shapes ``(n_pulses, n_sub)``; see :class:`~pipeline.simulate.paths.Paths`.
     """
     n = pulses.pulse_id.shape[0]
-    offsets, weights = subray_pattern(settings.subrays, divergence_rad, settings.cone_extent)
+    # an undecided count (no scene to decide it, resolved_trace_settings) is the beam axis
+    n_sub = settings.subrays or 1
+    offsets, weights = subray_pattern(n_sub, divergence_rad, settings.cone_extent)
     k = weights.size
     d = subray_directions(np.asarray(pulses.direction, dtype=np.float64), offsets).reshape(-1, 3)
     o = np.repeat(np.asarray(pulses.origin_m, dtype=np.float64), k, axis=0)
     th = settings.nthreads
-    hit_w, t_w, n_w = world.water.cast(o, d, th)
+    # each sub-ray meets the sea as it is at its pulse's emission time (the flight time of
+    # light, microseconds, is negligible against the waves' periods)
+    t_emit = getattr(pulses, "t_s", None)
+    t_ray = None if t_emit is None else np.repeat(np.asarray(t_emit, dtype=np.float64), k)
+    timed = {} if t_ray is None else {"t_s": t_ray}
+    hit_w, t_w, n_w = world.water.cast(o, d, th, **timed)
     hit_b, t_b, n_b = world.seabed.cast(o, d, th)
     land = hit_b & (~hit_w | (t_b < t_w))
     water = hit_w & ~land
@@ -254,7 +265,18 @@ def trace(
     )
     cos_land = np.clip(-np.einsum("ij,ij->i", d, n_b), 0.0, 1.0)
     incidence = np.where(water, theta, np.where(land, np.arccos(cos_land), 0.0))
-    refr, _ = optics.refract_direction(d, safe_nrm, world.n_air, world.n_water)
+    refr_nrm = safe_nrm
+    u_mss = getattr(world.water, "unresolved_mss", 0.0)
+    if u_mss > 0.0:
+        from pipeline.simulate.wave_caster import unresolved_normals
+
+        # the waves below the traced scale tilt each sub-ray's entry facet (the glint takes
+        # them as a density, the refracted beam as draws); a draw the ray cannot enter
+        # (facing away) leaves the resolved facet
+        tilted = unresolved_normals(safe_nrm, pulses.pulse_id, k, u_mss, world.water.seed)
+        enters = np.einsum("ij,ij->i", d, tilted) < -1e-6
+        refr_nrm = np.where((water & enters)[:, None], tilted, safe_nrm)
+    refr, _ = optics.refract_direction(d, refr_nrm, world.n_air, world.n_water)
 
     hit_sb, t_sb, n_sb = world.seabed.cast(surf_xyz, refr, th)
     bottom_ok = water & hit_sb
@@ -267,7 +289,7 @@ def trace(
 
     # the return: from the seabed back up the reversed refracted ray to the surface
     up = -refr
-    hit_up, _, n_up = world.water.cast(bottom_xyz, up, th)
+    hit_up, _, n_up = world.water.cast(bottom_xyz, up, th, **timed)
     exit_nrm = np.where((bottom_ok & hit_up)[:, None], n_up, safe_nrm)
     _, tir = optics.refract_direction(up, exit_nrm, world.n_water, world.n_air)
     cos_up = np.clip(np.einsum("ij,ij->i", up, exit_nrm), 0.0, 1.0)

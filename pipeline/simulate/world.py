@@ -4,9 +4,10 @@ Settings for ``[seabed]``, ``[[seabed.features]]``, ``[water_surface]`` and ``[f
 here; :func:`build_truth` turns them into :mod:`terrain` surfaces (the exact truth, kept for
 evaluation) and :func:`build_world` into meshes for the tracer.
 
-The wave field is periodic, so its mesh is one period tile plus a margin; rays are moved to the
-slab that holds the waves, wrapped into the tile, cast, and moved back (:class:`PeriodicCaster`).
-That keeps the water mesh small (one tile at wave-resolving resolution) at any survey size.
+The wave field is periodic and moves: it is one period tile evaluated at each pulse's time
+(:class:`terrain.evolving_sea.EvolvingSea`), and rays meet it on the height field itself
+(:class:`pipeline.simulate.wave_caster.WaveCaster`), with no mesh, so memory stays a few tile
+grids at any survey size and length.
 """
 
 from __future__ import annotations
@@ -25,7 +26,6 @@ __all__ = [
     "WaterSurfaceSettings",
     "FrameSettings",
     "Truth",
-    "PeriodicCaster",
     "build_truth",
     "build_world",
     "wave_surface",
@@ -90,20 +90,31 @@ class WaterSurfaceSettings:
         "pierson-moskowitz", choices=("pierson-moskowitz", "jonswap"), doc="wave spectrum"
     )
     fetch_m: float = setting(50_000.0, gt=0.0, doc="JONSWAP fetch")
-    tile_peak_wavelengths: float = setting(
-        2.0, ge=1.0, le=16.0, doc="periodic wave tile size, in peak wavelengths"
+    hs_sampling_error: float = setting(
+        0.025,
+        ge=0.002,
+        le=0.5,
+        doc="tile size: expected relative sampling std of the realised Hs on the periodic tile",
     )
-    grid_nodes: int = setting(512, ge=64, le=4096, doc="wave grid nodes per tile side")
-
-    def __post_init__(self) -> None:
-        # the mesh must carry 40 peak wavenumbers at 4 nodes per shortest wave for the slope
-        # calibration to Cox-Munk (terrain.water): nodes >= 160 x tile in peak wavelengths
-        need = math.ceil(160 * self.tile_peak_wavelengths)
-        if self.kind == "waves" and self.grid_nodes < need:
-            raise SceneError(
-                f"`water_surface.grid_nodes` must be >= 160 x `tile_peak_wavelengths` = {need} "
-                f"to resolve the wave slopes; got {self.grid_nodes}."
-            )
+    tile_peak_wavelengths: float | None = setting(
+        None, ge=1.0, le=64.0, doc="periodic tile size in peak wavelengths (None: from Hs error)"
+    )
+    resolved_footprints: float = setting(
+        4.0,
+        ge=1.0,
+        le=100.0,
+        doc="shortest wave the grid resolves, in nadir footprint diameters (shorter: statistics)",
+    )
+    grid_nodes: int | None = setting(
+        None, ge=64, le=4096, doc="wave grid nodes per tile side (None: from the footprint)"
+    )
+    evolving: bool = setting(True, doc="the sea moves (False: frozen at t = 0 for all pulses)")
+    time_tolerance_m: float = setting(
+        0.002, gt=0.0, le=0.1, doc="surface error of the linear-in-time slabs (sets their length)"
+    )
+    dispersion_depth_m: float | None = setting(
+        None, gt=0.0, le=11000.0, doc="finite-depth dispersion w^2 = g k tanh(k h) (None: deep)"
+    )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -117,15 +128,41 @@ class FrameSettings:
 
 @dataclass(frozen=True)
 class Truth:
-    """The exact world: surfaces valid at any point (evaluation reads only this)."""
+    """The exact world: surfaces valid at any point (evaluation reads only this).
+
+    ``pulse_time_s``: emission time of pulses by id (``(n,) int -> (n,) s``), for the depth
+    below a moving sea as each pulse saw it (:attr:`depth_at_pulses_m`); None: t = 0.
+    """
 
     seabed: object
     water: object
     frame: object
+    pulse_time_s: object = None
 
-    def depth_m(self, x_m, y_m):
-        """True water depth (positive down) at local points."""
+    @property
+    def depth_at_pulses_m(self):
+        """Truth callable ``(x, y[, pulse_id])``: depth below the sea at each pulse's time."""
+        return _PulseDepth(self)
+
+    def depth_m(self, x_m, y_m, t_s=0.0):
+        """True water depth (positive down) at local points, below the surface at ``t_s``."""
+        if hasattr(self.water, "evolving"):  # a moving sea: its surface at the given time
+            return self.water.height_m(x_m, y_m, t_s) - self.seabed.height_m(x_m, y_m)
         return self.water.height_m(x_m, y_m) - self.seabed.height_m(x_m, y_m)
+
+
+class _PulseDepth:
+    """``Truth.depth_m`` at each point's pulse time (pipeline.evaluate's per-pulse truth)."""
+
+    per_pulse = True
+
+    def __init__(self, truth: Truth) -> None:
+        self.truth = truth
+
+    def __call__(self, x_m, y_m, pulse_id=None):
+        if pulse_id is None or self.truth.pulse_time_s is None:
+            return self.truth.depth_m(x_m, y_m)
+        return self.truth.depth_m(x_m, y_m, self.truth.pulse_time_s(np.asarray(pulse_id)))
 
 
 def _feature(f: FeatureSettings):
@@ -204,8 +241,46 @@ def build_truth(scene, extent_m: tuple[float, float, float, float], water=None) 
 
 
 def wave_surface(scene):
-    """The scene's wind sea (``water_surface.kind = 'waves'``) at t = 0: a periodic surface."""
-    return _wave_field(scene).at_time(0.0)
+    """The scene's wind sea (``water_surface.kind = 'waves'``): an evolving periodic sea.
+
+    Returns
+    -------
+    terrain.evolving_sea.EvolvingSea
+        The wave field at any time (frozen at t = 0 when ``water_surface.evolving`` is false).
+    """
+    from terrain.evolving_sea import EvolvingSea, slab_for_tolerance_s
+
+    ws = scene.water_surface
+    field = _wave_field(scene)
+    slab = slab_for_tolerance_s(field.acceleration_rms_m_s2, ws.time_tolerance_m)
+    return EvolvingSea(field, slab, evolving=ws.evolving)
+
+
+def wave_grid(scene, peak_wavelength_m: float, hs_error_4: float) -> tuple[float, int]:
+    """Tile side (m) and grid nodes of the scene's wave field (documented criteria).
+
+    * Tile: the realised Hs of a periodic tile has a sampling error ``~ 1 / side`` (each mode's
+      energy is exponentially distributed; :attr:`terrain.WaveField.hs_sampling_error`), so the
+      side is ``4 lambda_p x err(4 lambda_p) / hs_sampling_error`` (err measured on a 4-peak-
+      wavelength probe), unless ``tile_peak_wavelengths`` is given.
+    * Grid: 4 nodes per shortest resolved wave, the shortest being ``resolved_footprints``
+      nadir footprint diameters: slopes on scales below it vary inside one footprint and are
+      handled statistically by the surface echo (Cox-Munk with the unresolved variance), longer
+      waves tilt whole footprints and are traced. Clipped to [64, 4096] nodes, unless
+      ``grid_nodes`` is given.
+    """
+    from pipeline.simulate.scanner import footprint_diameter_m
+
+    ws = scene.water_surface
+    if ws.tile_peak_wavelengths is not None:
+        tile = ws.tile_peak_wavelengths * peak_wavelength_m
+    else:
+        tile = 4.0 * peak_wavelength_m * max(hs_error_4 / ws.hs_sampling_error, 0.25)
+    if ws.grid_nodes is not None:
+        return tile, ws.grid_nodes
+    shortest = ws.resolved_footprints * footprint_diameter_m(scene.scanner, scene.flight.altitude_m)
+    nodes = int(min(max(math.ceil(4.0 * tile / shortest), 64), 4096))
+    return tile, nodes + nodes % 2
 
 
 def _wave_field(scene):
@@ -217,87 +292,31 @@ def _wave_field(scene):
         raise SceneError(
             f"`water.wind_speed_m_s` must be > 0 when `water_surface.kind` = 'waves'; got {u}."
         )
+    common = {
+        "wind_height_m": 12.5,
+        "direction_rad": math.radians(ws.wind_direction_deg),
+        "spectrum": ws.spectrum,
+        "fetch_m": ws.fetch_m if ws.spectrum == "jonswap" else None,
+        # the footprint split: the spectrum as published down to the shortest resolved wave;
+        # the rest of the Cox-Munk slope variance is the surface echo's (run_survey, budget)
+        "calibrate_mss": False,
+    }
+    lp = terrain.WaveField(
+        u, extent=(0, 100, 0, 100), spacing_m=100 / 64, rng=0, **common
+    ).peak_wavelength_m
     probe = terrain.WaveField(
-        u,
-        extent=(0, 100, 0, 100),
-        spacing_m=100 / 64,
-        rng=0,
-        wind_height_m=12.5,
-        calibrate_mss=False,
+        u, extent=(0, 4 * lp, 0, 4 * lp), spacing_m=4 * lp / 128, rng=0, **common
     )
-    tile = ws.tile_peak_wavelengths * probe.peak_wavelength_m
+    tile, nodes = wave_grid(scene, lp, probe.hs_sampling_error)
     return terrain.WaveField(
         u,
         extent=(0.0, tile, 0.0, tile),
-        spacing_m=tile / ws.grid_nodes,
+        spacing_m=tile / nodes,
         rng=np.random.default_rng([scene.scene.seed, 202]),
-        wind_height_m=12.5,
-        direction_rad=math.radians(ws.wind_direction_deg),
-        spectrum=ws.spectrum,
-        fetch_m=ws.fetch_m if ws.spectrum == "jonswap" else None,
         mean_level_m=ws.level_m,
+        water_depth_m=ws.dispersion_depth_m,
+        **common,
     )
-
-
-class PeriodicCaster:
-    """Ray casting against a surface periodic in x and y, from one tile's mesh.
-
-    Parameters
-    ----------
-    surface : GridSurface
-        Periodic surface with period ``(period_x_m, period_y_m)`` starting at ``(x0, y0)``.
-    resolution_m : float
-        Mesh grid spacing.
-    margin_m : float
-        Mesh beyond the tile on every side; rays must cross the slab ``zmin ≤ z ≤ zmax``
-        within this horizontal distance (true for beams within ~60° of vertical).
-    """
-
-    def __init__(
-        self,
-        surface,
-        x0: float,
-        y0: float,
-        period_x_m: float,
-        period_y_m: float,
-        resolution_m: float,
-        margin_m: float,
-    ) -> None:
-        self.x0, self.y0, self.px, self.py = x0, y0, period_x_m, period_y_m
-        bounds = (
-            x0 - margin_m,
-            x0 + period_x_m + margin_m,
-            y0 - margin_m,
-            y0 + period_y_m + margin_m,
-        )
-        from pipeline.simulate.trace import MeshCaster
-
-        mesh = surface.to_mesh(resolution_m, bounds)
-        self.mesh = MeshCaster.from_trimesh(mesh)
-        z = np.asarray(mesh.vertices)[:, 2]
-        self.zmin, self.zmax = float(z.min()), float(z.max())
-        self.margin_m = margin_m
-
-    def cast(self, origin_m: np.ndarray, direction: np.ndarray, nthreads: int = 0):
-        """First hit of each ray; same contract as :meth:`MeshCaster.cast`."""
-        dz = direction[:, 2]
-        top, bottom = self.zmax + 1e-3, self.zmin - 1e-3
-        # distance along the ray to the slab's entry plane (never negative: inside stays put)
-        entry_z = np.where(dz < 0, top, bottom)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = np.where(dz != 0, (entry_z - origin_m[:, 2]) / dz, 0.0)
-        inside = (origin_m[:, 2] <= top) & (origin_m[:, 2] >= bottom)
-        s = np.where(inside | (s < 0), 0.0, s)
-        start = origin_m + s[:, None] * direction
-        shift_x = np.floor((start[:, 0] - self.x0) / self.px) * self.px
-        shift_y = np.floor((start[:, 1] - self.y0) / self.py) * self.py
-        local = start - np.column_stack([shift_x, shift_y, np.zeros_like(shift_x)])
-        hit, t, nrm = self.mesh.cast(local, direction, nthreads)
-        # rays moving away from the slab, or flat ones, never meet it
-        away = ((dz >= 0) & (origin_m[:, 2] > top)) | ((dz <= 0) & (origin_m[:, 2] < bottom))
-        hit &= ~away
-        t = np.where(hit, t + s, 0.0)
-        return hit, t, np.where(hit[:, None], nrm, 0.0)
 
 
 def _plane_caster(z_m: float, extent_m, pad_m: float):
@@ -331,19 +350,14 @@ def build_world(scene, truth: Truth, extent_m):
     if ws.kind == "flat":
         water = _plane_caster(ws.level_m, extent_m, pad_m=1000.0)
     else:
-        s = truth.water  # a periodic GridSurface: one period is nx × dx by ny × dy
-        px, py = s.dx_m * s.z_m.shape[1], s.dy_m * s.z_m.shape[0]
-        # half the wave grid spacing: the shortest waves carried span 4 grid nodes, so a
-        # mesh at the grid spacing would cut their crests (cm errors); at half it is mm
-        water = PeriodicCaster(
-            s,
-            s.x0_m,
-            s.y0_m,
-            px,
-            py,
-            resolution_m=0.5 * min(s.dx_m, s.dy_m),
-            margin_m=min(px, py) / 4,
-        )
+        from pipeline.simulate.budget import surface_mean_square_slope
+        from pipeline.simulate.wave_caster import WaveCaster
+
+        # the moving sea: each ray meets the surface at its pulse's time, no mesh; the
+        # slopes it does not resolve tilt each sub-ray's entry (trace)
+        resolved = truth.water.field.mean_square_slope(0.0)
+        unresolved = float(surface_mean_square_slope(scene.water.wind_speed_m_s, resolved))
+        water = WaveCaster(truth.water, unresolved_mss=unresolved, seed=scene.scene.seed)
     return World(
         water=water,
         seabed=seabed,

@@ -268,3 +268,27 @@ def test_level_land_with_no_light_under_it_is_land():
     ws = fit_water_surface(wet, FIT)
     assert ws.is_water.all()
     assert abs(ws.global_plane[0] - 5.0) < 1e-6
+
+
+def test_neighbours_are_taken_from_the_pulses_own_look():
+    """Two looks at one spot 5 s apart (a Palmer scan's fore and aft): the sea moved between.
+
+    Look A sees the plane z = +0.25 m at t = 0-0.2 s, look B z = -0.25 m at t = 5-5.2 s, their
+    pulses interleaved on one grid. Each pulse's local plane must be its own look's (the time
+    window); without it, the neighbours mix the looks and the heights land in between.
+    """
+    x, y, d = beams(n_side=30, spacing_m=0.8)
+    n = x.size
+    look_b = (np.arange(n) % 2) == 1
+    z = np.where(look_b, -0.25, 0.25)
+    o, r = from_hits(np.column_stack([x, y, z]), d)
+    rng = np.random.default_rng(7)
+    t = np.where(look_b, 5.0, 0.0) + rng.uniform(0.0, 0.2, n)
+    ret = make_returns(o, d, r)
+    ret = dataclasses.replace(ret, t_emit_s=t)
+    ws = fit_water_surface(ret, FIT)
+    inner = (np.abs(x) < 8) & (np.abs(y) < 8)  # whole neighbourhoods of both looks
+    np.testing.assert_allclose(ws.entry_m[inner, 2], z[inner], atol=0.02)
+    # the window is a setting: without it the looks mix
+    mixed = fit_water_surface(ret, SurfaceFitSettings(air_index=N_AIR, time_window_s=None))
+    assert np.abs(mixed.entry_m[inner, 2] - z[inner]).mean() > 0.1

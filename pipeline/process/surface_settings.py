@@ -1,0 +1,96 @@
+"""Settings of the water-surface fit (:mod:`pipeline.process.surface_fit`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from pipeline.config import setting
+
+__all__ = ["SurfaceFitSettings"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class SurfaceFitSettings:
+    """Settings of the water-surface fit."""
+
+    air_index: float | None = setting(
+        1.000277, ge=1.0, le=1.01, doc="index of air for the air range (None: the atmosphere's)"
+    )
+    k_neighbours: int = setting(16, ge=3, le=256, doc="surface points per local plane fit")
+    radius_m: float = setting(5.0, ge=0.1, le=1000.0, doc="neighbour search radius")
+    min_neighbours: int = setting(6, ge=3, le=256, doc="fewer: use the global plane")
+    robust_iterations: int = setting(2, ge=0, le=10, doc="outlier-rejection passes")
+    outlier_sigma: float = setting(3.0, gt=0.0, doc="rejection threshold in robust sigmas")
+    own_outlier_sigma: float = setting(
+        5.0, gt=0.0, doc="a pulse's own surface point further off its fit: SURFACE_OUTLIER"
+    )
+    outlier_floor_m: float = setting(
+        0.02, ge=0.0, doc="residuals below this are never rejected (exact data)"
+    )
+    land_margin_m: float = setting(
+        1.0, gt=0.0, doc="higher above the water level: land candidate (see surface_land)"
+    )
+    land_sea_sigmas: float = setting(
+        4.0,
+        ge=0.0,
+        doc="land stands this many measured sea-height sigmas above the level (Hs ~ 4 sigma)",
+    )
+    land_radius_m: float = setting(
+        5.0, gt=0.0, le=1000.0, doc="neighbour radius of the land support and height"
+    )
+    land_neighbours: int = setting(32, ge=1, le=1024, doc="neighbours of the land support")
+    land_support_fraction: float = setting(
+        0.25, ge=0.0, le=1.0, doc="fewer land candidates among the neighbours: not land"
+    )
+    land_link_m: float = setting(
+        2.0,
+        gt=0.0,
+        le=1000.0,
+        doc="land candidates this close to land above the sea state are land too",
+    )
+    land_extent_sigmas: float = setting(
+        400.0,
+        gt=0.0,
+        doc="a region of linked land candidates this wide, in sea sigmas, is land (a crest "
+        "region spans ~ a wavelength ~ 150 sigma)",
+    )
+    below_margin_m: float = setting(1.0, gt=0.0, doc="lower below the water level: not surface")
+    water_level_hint_m: float | None = setting(
+        None, doc="known water level (local z) to start from instead of the histogram mode"
+    )
+    level_bin_m: float = setting(0.25, gt=0.0, doc="histogram bin of the water-level search")
+    min_wet_pulses: int = setting(
+        3,
+        ge=1,
+        doc="pulses showing light under their surface return (a bottom or in-column return "
+        "level_min_depth_m below it, or a measured water column) needed to conclude there is "
+        "water; fewer, and no water_level_hint_m: every return is land",
+    )
+    level_min_depth_m: float = setting(
+        1.0,
+        ge=0.0,
+        doc="water-level search: surface points with a bottom this far below (air range) first",
+    )
+    slope_prior_m: float = setting(
+        0.05, ge=1e-3, le=100.0, doc="ridge towards the global slope, as an equivalent spread"
+    )
+    min_spread_m: float = setting(
+        0.25, ge=0.0, le=1000.0, doc="smaller neighbour spread across: flag ill-conditioned"
+    )
+    fallback_water_level_m: float = setting(
+        0.0, doc="water level used when there are fewer than 3 surface returns"
+    )
+    chunk_size: int = setting(131072, ge=1, doc="pulses per batched local fit")
+    time_window_s: float | None = setting(
+        1.0,
+        gt=0.0,
+        le=1e6,
+        doc="neighbours within this time of the pulse (recorded emission times; None: any)",
+    )
+
+    def __post_init__(self) -> None:
+        if self.min_neighbours > self.k_neighbours:
+            raise ValueError(
+                f"`min_neighbours` ({self.min_neighbours}) must be <= `k_neighbours` "
+                f"({self.k_neighbours})"
+            )
