@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.evaluate import grid_errors_m, point_errors_m
+from pipeline.outputs.atomic import atomic_path
 from pipeline.process.classify import BATHYMETRIC_POINT, NO_BOTTOM_FOUND_AT
 
 __all__ = ["point_arrays", "write_evaluation_points"]
@@ -108,7 +109,7 @@ def _posterior_arrays(post, truth_depth_m) -> dict[str, np.ndarray]:
 def write_evaluation_points(path: Path, arrays: dict[str, np.ndarray]) -> Path:
     """Write ``arrays`` to ``path`` (a compressed ``.npz``) and return the path."""
     path = Path(path)
-    tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez_compressed(tmp, **arrays)
-    tmp.replace(path)
+    # through an open file: numpy would append ".npz" to a temporary path without it
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, **arrays)
     return path

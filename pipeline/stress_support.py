@@ -284,6 +284,24 @@ def _rmse(o: Outputs, arg: str) -> str:
     return f"points' RMSE against the truth {rmse:.3f} m > {arg} m" if rmse > float(arg) else ""
 
 
+def _max_error(o: Outputs, arg: str) -> str:
+    # the trust issue's "no class-40 point more than 1 m off": a survey may abstain (no class-40
+    # point at all) where its data cannot measure a depth, but never claim a wrong one
+    st = (o.evaluation.get("error") or {}).get("points") or {}
+    worst = st.get("max_abs_m")
+    if worst is None or worst <= float(arg):
+        return ""
+    return f"a class-40 point {worst:.3f} m off the truth (> {arg} m)"
+
+
+def _only_noise(o: Outputs, arg: str) -> str:
+    # noise alone may cross a per-sample threshold now and then (a constant false-alarm rate),
+    # but what it gives must be classed noise (7 low, 18 high), never a surface, bottom or land
+    c = _classes(o)
+    bad = c[(c != 7) & (c != 18)]
+    return f"{bad.size} non-noise points (classes {sorted(set(bad.tolist()))})" if bad.size else ""
+
+
 def _posteriors(o: Outputs, arg: str) -> str:
     post = o.evaluation.get("posterior_against_truth") or {}
     return "" if (post.get("n") or 0) >= int(arg) else f"posteriors: {post.get('n')}"
@@ -305,5 +323,7 @@ CHECKS: dict[str, Callable[[Outputs, str], str]] = {
     "grid_cells": _grid_cells,
     "datum_error": _datum_error,
     "rmse": _rmse,
+    "max_error": _max_error,
+    "only_noise": _only_noise,
     "posteriors": _posteriors,
 }

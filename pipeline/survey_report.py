@@ -92,7 +92,7 @@ def evaluate_survey(
             grid,
             unc,
             post,
-            truth.depth_m,
+            truth.depth_at_pulses_m,  # as evaluation.json: the sea each pulse saw
             grid_truth,
             group=group,
         ),

@@ -217,6 +217,11 @@ def design(
     points = [SweepPoint(CENTRE, "", base, centre)]
     for key in [*knobs, *(k for k in levels if k not in knobs)]:
         value = scene_value(centre, key)
+        if key == "trace.subrays" and value is None:
+            # None: the trace's own choice for the scene's surface (what the run will use)
+            from pipeline.simulate.trace_settings import resolved_trace_settings
+
+            value = resolved_trace_settings(centre).subrays
         if key in levels:
             vals = levels[key]
         elif key in KNOBS:

@@ -59,3 +59,25 @@ def test_scene_toml_round_trips(value):
         assert math.isnan(back)
     else:
         assert back == value
+
+
+def test_noise_and_abstention_checks_on_hand_made_outputs():
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from pipeline.stress_support import CHECKS, Outputs
+
+    def outputs(classes, max_abs_m):
+        las = SimpleNamespace(classification=np.array(classes, dtype=np.uint8))
+        points = {} if max_abs_m is None else {"max_abs_m": max_abs_m}
+        return Outputs({"error": {"points": points}}, las, {})
+
+    # noise alone classed 7 or 18 passes; one surface (41) among it does not
+    assert CHECKS["only_noise"](outputs([7, 18, 7], None), "") == ""
+    assert CHECKS["only_noise"](outputs([], None), "") == ""
+    assert "41" in CHECKS["only_noise"](outputs([7, 41], None), "")
+    # abstaining (no class-40 point compared) passes; a claimed depth 1.2 m off does not
+    assert CHECKS["max_error"](outputs([2, 2], None), "1.0") == ""
+    assert CHECKS["max_error"](outputs([40], 0.4), "1.0") == ""
+    assert "1.200 m off" in CHECKS["max_error"](outputs([40], 1.2), "1.0")

@@ -122,10 +122,13 @@ n_lines = 1
 run_in_m = 150.0
 [water]
 extinction_per_m = 0.15
+wind_speed_m_s = 5.0
 [seabed]
 depth_m = 4.0
 reflectance = 0.25
 mesh_resolution_m = 2.0
+[detector]
+window_s = 3.5e-7
 [process]
 grid_resolution_m = 4.0
 posterior_pulses_per_km2 = 0.0

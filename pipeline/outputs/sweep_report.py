@@ -87,8 +87,12 @@ def sweep_figure(rows: list[dict[str, Any]], summary: dict[str, Any]) -> bytes:
             zorder=4,
             label=f"cheapest meeting {order}",
         )
+    # a log axis needs a positive cost on a plotted (finite RMSE) run: a tiny run's clock can
+    # read 0, and a survey with no class-40 point plots nothing
+    log_x = bool(np.any(np.isfinite(cost) & (np.asarray(cost) > 0) & np.isfinite(rmse)))
     for a in (ax, ax2):
-        a.set_xscale("log")
+        if log_x:
+            a.set_xscale("log")
         a.set_xlabel("CPU seconds per km² (survey stages)")
         a.grid(True, which="both", alpha=0.3)
     finite = rmse[np.isfinite(rmse) & (rmse > 0)]

@@ -60,11 +60,13 @@ class SurfaceFitSettings:
     )
     level_bin_m: float = setting(0.25, gt=0.0, doc="histogram bin of the water-level search")
     min_wet_pulses: int = setting(
-        3,
-        ge=1,
+        0,
+        ge=0,
         doc="pulses showing light under their surface return (a bottom or in-column return "
         "level_min_depth_m below it, or a measured water column) needed to conclude there is "
-        "water; fewer, and no water_level_hint_m: every return is land",
+        "water; fewer, and no water_level_hint_m: every return is land. 0 (default): off, "
+        "since water whose bottom and column the detector cannot see (a small or sparse "
+        "survey) would read as land",
     )
     level_min_depth_m: float = setting(
         1.0,

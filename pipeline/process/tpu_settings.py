@@ -78,7 +78,9 @@ class TpuSettings:
         0.008, ge=0.0, le=10.0, doc="IMU heading (None: navigation.ins_heading_sigma_deg)"
     )
     pointing_jitter_deg: float = setting(0.001, ge=0.0, le=10.0, doc="per-pulse beam jitter")
-    timing_sigma_s: float = setting(1e-10, ge=0.0, doc="per-return timing if not given")
+    timing_sigma_s: float = setting(
+        1e-10, ge=0.0, le=1e-6, doc="per-return timing if not given (at most 1 us: 150 m of range)"
+    )
     temperature_sigma_c: float = setting(2.0, ge=0.0, doc="water temperature uncertainty")
     salinity_sigma_psu: float = setting(2.0, ge=0.0, doc="salinity uncertainty")
     wavelength_nm: float | None = setting(

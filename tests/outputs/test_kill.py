@@ -29,6 +29,7 @@ OUTPUTS = {
     "grid.tif",
     "grid.nc",
     "evaluation.json",
+    "evaluation_points.npz",
     "report.html",
     "manifest.json",
     "view",
@@ -133,6 +134,9 @@ def _assert_complete_or_nothing(work):
         assert (out / "report.html").read_text().rstrip().endswith("</html>")
     for name in names & {"evaluation.json", "manifest.json"}:
         json.loads((out / name).read_text())
+    if "evaluation_points.npz" in names:  # a whole zip: every array reads back
+        with np.load(out / "evaluation_points.npz") as z:
+            assert all(z[k].size >= 0 for k in z.files)
     return names
 
 

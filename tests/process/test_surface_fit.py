@@ -261,11 +261,12 @@ def test_level_land_with_no_light_under_it_is_land():
     # surface return (no-bottom limits given) and found none, nor any bottom: no water
     o, d, r, *_ = tilted_returns(tilt_deg=0.0, z0=5.0)
     dry = dataclasses.replace(make_returns(o, d, r), t_no_bottom_s=np.zeros(len(o)))
-    ws = fit_water_surface(dry, FIT)
+    fit = dataclasses.replace(FIT, min_wet_pulses=3)  # off by default
+    ws = fit_water_surface(dry, fit)
     assert ws.is_land.all() and not ws.is_water.any()
     # control: the same returns, a column measured under each (2 m of water below them)
     wet = dataclasses.replace(dry, t_no_bottom_s=dry.t_surface_s + 2 * 2.0 * 1.34 / C)
-    ws = fit_water_surface(wet, FIT)
+    ws = fit_water_surface(wet, fit)
     assert ws.is_water.all()
     assert abs(ws.global_plane[0] - 5.0) < 1e-6
 
