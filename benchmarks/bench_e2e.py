@@ -33,6 +33,7 @@ import psutil
 
 from pipeline.scene import parse_scene
 from pipeline.simulate import survey
+from pipeline.stress_support import to_toml
 
 ROOT = Path(__file__).resolve().parents[1]
 PALMER = ROOT / "data_synthetic" / "scenes" / "palmer_survey.toml"
@@ -65,30 +66,10 @@ def palmer(pulses: int, posteriors: bool, chunk: int) -> dict:
     return data
 
 
-def toml_text(data: dict) -> str:
-    """A minimal TOML writer for the scene's tables of scalars and lists."""
-
-    def val(v):
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, str):
-            return json.dumps(v)
-        if isinstance(v, list | tuple):
-            return "[" + ", ".join(val(x) for x in v) + "]"
-        return repr(v)
-
-    out = []
-    for table, body in data.items():
-        out.append(f"[{table}]")
-        out += [f"{k} = {val(v)}" for k, v in body.items()]
-        out.append("")
-    return "\n".join(out)
-
-
 def run_one(scene: dict, workers: int, tmp: Path, name: str) -> dict:
     """``bathy run`` in a child; its figures from the manifest and the rusage."""
     path = tmp / f"{name}.toml"
-    path.write_text(toml_text(scene))
+    path.write_text(to_toml(scene))  # the stress suite's scene writer
     out = tmp / name
     cmd = [str(BATHY), "run", str(path), "--out", str(out), "--overwrite", "--quiet"]
     cmd += ["--workers", str(workers)]
