@@ -23,19 +23,19 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests" / "process"))
+sys.path.insert(0, str(ROOT / "tests" / "uncertainty"))
 
-from pipeline.process.cell_uncertainty import cell_uncertainty, select_posterior_pulses  # noqa: E402
 from pipeline.process.grid import grid_points  # noqa: E402
-from pipeline.process.posterior import (  # noqa: E402
+from pipeline.process.refraction import RefractionSettings  # noqa: E402
+from pipeline.uncertainty.cell_uncertainty import cell_uncertainty, select_posterior_pulses  # noqa: E402
+from pipeline.uncertainty.posterior import (  # noqa: E402
     PosteriorFlag,
     PosteriorSettings,
     interval_summary,
     sample_batch,
 )
-from pipeline.process.refraction import RefractionSettings  # noqa: E402
-from pipeline.process.tpu import PointTpu, TpuSettings, monte_carlo_points, point_tpu  # noqa: E402
-from pipeline.process.waveform_model import (  # noqa: E402
+from pipeline.uncertainty.tpu import PointTpu, TpuSettings, monte_carlo_points, point_tpu  # noqa: E402
+from pipeline.uncertainty.waveform_model import (  # noqa: E402
     WaveformSystem,
     depth_crb_m,
     draw_waveform,

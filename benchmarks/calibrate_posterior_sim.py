@@ -30,16 +30,16 @@ import numpy as np
 
 from pipeline.process.context import processing_context
 from pipeline.process.detect import detect_full_waveform
-from pipeline.process.posterior import (
+from pipeline.scene import load_scene
+from pipeline.simulate.flat_paths import flat_paths
+from pipeline.simulate.waveform import simulate_waveforms
+from pipeline.uncertainty.posterior import (
     PosteriorFlag,
     PosteriorSettings,
     interval_summary,
     sample_batch,
 )
-from pipeline.process.waveform_model import WaveformSystem
-from pipeline.scene import load_scene
-from pipeline.simulate.flat_paths import flat_paths
-from pipeline.simulate.waveform import simulate_waveforms
+from pipeline.uncertainty.waveform_model import WaveformSystem
 
 WATERS = (  # (name, beam attenuation 1/m, backscatter 1/(m sr), deepest depth drawn m)
     ("clear", 0.08, 1.0e-3, 22.0),

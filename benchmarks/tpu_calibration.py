@@ -29,10 +29,10 @@ from pipeline.process.context import processing_context
 from pipeline.process.grid import grid_seabed
 from pipeline.process.refraction import seabed_points
 from pipeline.process.survey_points import process_detections
-from pipeline.process.survey_uncertainty import survey_uncertainty
 from pipeline.run_survey import simulate_detections
 from pipeline.scene import load_scene, parse_scene
 from pipeline.stages import StageClock, plan
+from pipeline.uncertainty.survey_uncertainty import survey_uncertainty
 
 EDGES = (0.0, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 20.0, 30.0, 40.0)
 

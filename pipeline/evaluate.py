@@ -349,7 +349,7 @@ def posterior_coverage(posteriors, *, truth_depth_m: TruthFn) -> dict[str, Any]:
     Parameters
     ----------
     posteriors : SeabedPosteriors
-        :func:`pipeline.process.seabed_posterior.seabed_posteriors` output (depth below the
+        :func:`pipeline.uncertainty.seabed_posterior.seabed_posteriors` output (depth below the
         fitted surface; the truth is taken at the posterior median position).
     truth_depth_m : callable
         True depth at local ``(x, y)``.
@@ -361,7 +361,7 @@ def posterior_coverage(posteriors, *, truth_depth_m: TruthFn) -> dict[str, Any]:
         binomial standard errors (also for the converged pulses alone), the normalised
         errors' mean and spread, the median posterior sd and the median |error|, metres.
     """
-    from pipeline.process.posterior import PosteriorFlag
+    from pipeline.uncertainty.posterior import PosteriorFlag
 
     d = posteriors.depth_m
     started = (posteriors.flags & np.uint16(PosteriorFlag.NO_START)) == 0

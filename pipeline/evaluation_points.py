@@ -95,7 +95,7 @@ def _posterior_arrays(post, truth_depth_m) -> dict[str, np.ndarray]:
     empty["post_converged"] = np.zeros(0, dtype=bool)
     if post is None or post.posteriors is None:
         return empty
-    from pipeline.process.posterior import PosteriorFlag
+    from pipeline.uncertainty.posterior import PosteriorFlag
 
     p = post.posteriors
     started = (p.flags & np.uint16(PosteriorFlag.NO_START)) == 0

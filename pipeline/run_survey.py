@@ -22,10 +22,10 @@ from tqdm import tqdm
 
 from pipeline.parallel import Executor
 from pipeline.process.context import ProcessingContext, processing_context
-from pipeline.process.posterior_selection import KeptWaveforms, posterior_budget
 from pipeline.process.returns import DetectedReturns
 from pipeline.stages import Plan, StageClock
 from pipeline.survey_chunks import ChunkJob, run_chunk
+from pipeline.uncertainty.posterior_selection import KeptWaveforms, posterior_budget
 
 __all__ = ["SimulatedSurvey", "survey_extent_m", "simulate_detections", "run_survey"]
 
@@ -264,7 +264,7 @@ def run_survey(
     from pipeline.process.datum import survey_datum
     from pipeline.process.grid import grid_seabed, snap_bounds_m
     from pipeline.process.survey_points import process_detections
-    from pipeline.process.survey_uncertainty import survey_uncertainty, with_tpu
+    from pipeline.uncertainty.survey_uncertainty import survey_uncertainty, with_tpu
 
     ctx = processing_context(scene)
     sim = simulate_detections(scene, plan, ctx, clock, log, progress, executor)
@@ -310,8 +310,8 @@ def run_survey(
     if plan.runs("posterior"):
         with clock.stage("posterior"):
             # imported here: a survey without posteriors never imports emcee
-            from pipeline.process.survey_posterior import survey_posteriors
-            from pipeline.process.survey_uncertainty import with_posteriors
+            from pipeline.uncertainty.survey_posterior import survey_posteriors
+            from pipeline.uncertainty.survey_uncertainty import with_posteriors
 
             post = survey_posteriors(
                 scene, sim.returns, sim.kept, processed, ctx, unc, grid, progress=progress

@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 
 from pipeline.process.context import ProcessingContext
-from pipeline.process.posterior_selection import KeptWaveforms, kept_for_posterior
 from pipeline.stages import StageClock
+from pipeline.uncertainty.posterior_selection import KeptWaveforms, kept_for_posterior
 
 __all__ = ["ChunkJob", "ChunkResult", "run_chunk"]
 

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from pipeline.process.posterior_selection import choose_points, kept_for_posterior
+from pipeline.uncertainty.posterior_selection import choose_points, kept_for_posterior
 
 
 def test_kept_share_matches_the_fraction_and_ignores_chunking():
@@ -39,9 +39,9 @@ def test_choose_points_takes_the_cells_that_matter_first_and_stays_bounded():
 def test_posterior_budget_is_per_km2_with_a_floor():
     import dataclasses
 
-    from pipeline.process.posterior_selection import posterior_budget
     from pipeline.process.settings import ProcessSettings
     from pipeline.scene import load_scene
+    from pipeline.uncertainty.posterior_selection import posterior_budget
 
     from .conftest import ROOT
 

@@ -37,8 +37,8 @@ import pyproj
 from pipeline.iho import CLASSIFIED_ORDERS, NO_DATA, NO_ORDER
 from pipeline.outputs.atomic import atomic_path
 from pipeline.outputs.raster import NODATA, depth_reference, grid_layers
-from pipeline.process.cell_uncertainty import CellUncertainty
 from pipeline.process.grid import Grid
+from pipeline.uncertainty.cell_uncertainty import CellUncertainty
 
 __all__ = ["DEPTH_STANDARD_NAME", "ORDER_FLAG_MEANINGS", "write_grid_nc"]
 

@@ -4,7 +4,7 @@ Layout
 ------
 Six float32 bands, in this order (:data:`TIF_BANDS`): ``depth_m`` (mean depth, positive down,
 below the survey's datum), ``tvu95_m`` and ``thu95_m`` (the cell's 95 % total vertical and
-horizontal uncertainty, :mod:`pipeline.process.cell_uncertainty`), ``iho_order`` (strictest
+horizontal uncertainty, :mod:`pipeline.uncertainty.cell_uncertainty`), ``iho_order`` (strictest
 IHO S-44 order met, the codes of :func:`pipeline.iho.strictest_order`: 0 exclusive,
 1 special, 2 order 1a/1b, 3 order 2, 4 none), ``count`` (points per cell) and ``spread_m``
 (standard deviation of the cell's depths). Every band has its name as band description and
@@ -35,8 +35,8 @@ from affine import Affine
 from rasterio.io import MemoryFile
 
 from pipeline.outputs.atomic import atomic_path
-from pipeline.process.cell_uncertainty import CellUncertainty
 from pipeline.process.grid import Grid
+from pipeline.uncertainty.cell_uncertainty import CellUncertainty
 
 __all__ = [
     "NODATA",

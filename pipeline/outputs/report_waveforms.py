@@ -1,7 +1,7 @@
 """Section 3 of ``report.html``: example waveforms, with the depth posterior's fit overlaid.
 
 The fit (the waveform model at the per-parameter posterior median,
-:func:`pipeline.process.waveform_model.expected_waveform`) is drawn only for pulses the depth
+:func:`pipeline.uncertainty.waveform_model.expected_waveform`) is drawn only for pulses the depth
 posteriors sampled: a run without posteriors shows the waveforms and the detector's times only.
 """
 
@@ -28,8 +28,8 @@ def _posterior_fits(post, system, n_samples: int) -> dict[int, np.ndarray]:
     p = None if post is None else post.posteriors
     if p is None or p.theta_median is None or system is None:
         return {}
-    from pipeline.process.posterior_settings import PosteriorFlag
-    from pipeline.process.waveform_model import expected_waveform
+    from pipeline.uncertainty.posterior_settings import PosteriorFlag
+    from pipeline.uncertainty.waveform_model import expected_waveform
 
     started = np.flatnonzero((p.flags & np.uint16(PosteriorFlag.NO_START)) == 0)
     return {
@@ -44,7 +44,7 @@ def posterior_system(scene, ctx, post):
     """The posteriors' waveform system, or None when they did not run (emcee not imported)."""
     if post is None or post.posteriors is None:
         return None
-    from pipeline.process.survey_posterior import waveform_system
+    from pipeline.uncertainty.survey_posterior import waveform_system
 
     return waveform_system(scene, ctx)
 
@@ -53,7 +53,7 @@ def waveform_section(sim, ctx, pts, post=None, system=None) -> str:
     """Example waveforms; with the posterior's fit overlaid when the depth posteriors ran.
 
     ``post`` is the posterior stage's result (None when it did not run) and ``system`` the
-    :class:`~pipeline.process.waveform_model.WaveformSystem` the posteriors used.
+    :class:`~pipeline.uncertainty.waveform_model.WaveformSystem` the posteriors used.
     """
     kept, r = sim.kept, sim.returns
     if kept is None or not kept.pulse_id.size:

@@ -24,7 +24,7 @@ from pipeline import optics
 from pipeline.errors import SceneError
 from pipeline.process.refraction import RefractionSettings
 from pipeline.process.surface_fit import SurfaceFitSettings
-from pipeline.process.tpu import TpuSettings
+from pipeline.uncertainty.tpu import TpuSettings
 
 __all__ = ["Instrument", "ProcessingContext", "instrument", "processing_context"]
 

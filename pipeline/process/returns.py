@@ -77,7 +77,7 @@ class PointFlag(enum.IntFlag):
     SYNTHETIC = 1 << 7
     #: The neighbours of the local surface fit are nearly collinear; the slope is regularised.
     SURFACE_ILL_CONDITIONED = 1 << 8
-    #: Left out of the propagated uncertainty (:mod:`pipeline.process.tpu_screen`): its
+    #: Left out of the propagated uncertainty (:mod:`pipeline.uncertainty.tpu_screen`): its
     #: uncertainty is the a-priori one.
     NO_TPU = 1 << 9
 

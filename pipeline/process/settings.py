@@ -10,9 +10,9 @@ from pipeline.process.datum import DatumSettings
 from pipeline.process.detect import DetectSettings
 from pipeline.process.detect_photons import PhotonDetectSettings
 from pipeline.process.detection_limit import NoBottomSettings
-from pipeline.process.posterior_settings import PosteriorSettings
 from pipeline.process.surface_fit import SurfaceFitSettings
-from pipeline.process.tpu import TpuSettings
+from pipeline.uncertainty.posterior_settings import PosteriorSettings
+from pipeline.uncertainty.tpu import TpuSettings
 
 __all__ = ["ProcessSettings"]
 

@@ -10,8 +10,8 @@ import pytest
 import rasterio
 
 from pipeline.outputs.raster import write_grid_tif
-from pipeline.process.cell_uncertainty import CellUncertainty
 from pipeline.process.grid import grid_points
+from pipeline.uncertainty.cell_uncertainty import CellUncertainty
 
 xr = pytest.importorskip("xarray")
 pytest.importorskip("netCDF4")

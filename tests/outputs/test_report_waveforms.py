@@ -14,7 +14,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from pipeline.outputs import report_figures, report_waveforms
-from pipeline.process.waveform_model import WaveformSystem
+from pipeline.uncertainty.waveform_model import WaveformSystem
 
 DT_S = 1e-9
 N_SAMPLES = 200

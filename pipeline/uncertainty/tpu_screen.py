@@ -1,6 +1,6 @@
 """Pulses the first-order TPU cannot propagate: screened out and counted, never fatal.
 
-:func:`pipeline.process.tpu.point_tpu` linearises the georeferencing about each bottom return.
+:func:`pipeline.uncertainty.tpu.point_tpu` linearises the georeferencing about each bottom return.
 That is meaningless for a bottom whose timing uncertainty is as large as its separation from
 the surface return (the one-sigma interval of ``t_b - t_s`` reaches the surface: the return
 cannot be told from the surface echo, and a perturbation of one sigma would put the bottom

@@ -14,7 +14,7 @@ from scipy import constants
 from pipeline.process.refraction import RefractionSettings, seabed_points
 from pipeline.process.returns import DetectedReturns
 from pipeline.process.surface_fit import SurfaceFitSettings, fit_water_surface
-from pipeline.process.tpu import (
+from pipeline.uncertainty.tpu import (
     CORRELATED_TERMS,
     RANDOM_TERMS,
     TIMING_TERMS,
@@ -30,7 +30,11 @@ from pipeline.process.tpu import (
     timing_from_scatter,
     timing_sigma_s,
 )
-from pipeline.process.waveform_model import WaveformSystem, expected_waveform, fisher_information
+from pipeline.uncertainty.waveform_model import (
+    WaveformSystem,
+    expected_waveform,
+    fisher_information,
+)
 
 C = constants.c
 N_AIR, N_W, N_G = 1.000277, 1.3415, 1.3638

@@ -1,7 +1,7 @@
 """The TPU's inputs measured from neighbouring soundings.
 
 The seabed gradient, the depth scatter, the water surface over each sounding, and the timing
-sigmas the scatter implies (:mod:`pipeline.process.tpu`).
+sigmas the scatter implies (:mod:`pipeline.uncertainty.tpu`).
 """
 
 from __future__ import annotations
@@ -18,13 +18,13 @@ from pipeline.process.refraction import RefractionSettings
 from pipeline.process.returns import DetectedReturns
 from pipeline.process.surface_fit import WaterSurface
 from pipeline.process.surface_land import masked_median
-from pipeline.process.tpu_settings import (
+from pipeline.uncertainty.tpu_settings import (
     DEPTH,
     RANDOM_TERMS,
     TIMING_TERMS,
     TpuSettings,
 )
-from pipeline.process.tpu_terms import _inputs, _terms
+from pipeline.uncertainty.tpu_terms import _inputs, _terms
 
 
 def _plane_fit(w, dx, dy, z, ridge):

@@ -3,11 +3,12 @@
 Measured data and the :class:`~pipeline.process.context.ProcessingContext` only: the seabed
 gradient under every bottom point (which couples the horizontal errors into the depth compared
 at the measured position) is a local plane through the neighbouring bathymetric soundings
-(:func:`~pipeline.process.tpu.seabed_gradient`); the water plane's tilt uncertainty is the
+(:func:`~pipeline.uncertainty.tpu.seabed_gradient`); the water plane's tilt uncertainty is the
 larger of the fit's and the one measured over the soundings
-(:func:`~pipeline.process.tpu.surface_tilt_sigma`). When the detector reports no per-return
+(:func:`~pipeline.uncertainty.tpu.surface_tilt_sigma`). When the detector reports no per-return
 timing sigma, the timing terms are set from the scatter of successive soundings
-(:func:`~pipeline.process.tpu.pair_scatter`, :func:`~pipeline.process.tpu.timing_from_scatter`).
+(:func:`~pipeline.uncertainty.tpu.pair_scatter`,
+:func:`~pipeline.uncertainty.tpu.timing_from_scatter`).
 A photon-counting window's shots share one detection: they count as one sounding. Pulses the
 TPU cannot propagate are left out, flagged ``NO_TPU`` and counted.
 """
@@ -22,13 +23,13 @@ from typing import Any
 import numpy as np
 
 from pipeline import iho
-from pipeline.process.cell_uncertainty import CellUncertainty, cell_uncertainty
 from pipeline.process.classify import BATHYMETRIC_POINT
 from pipeline.process.context import ProcessingContext
 from pipeline.process.grid import Grid
 from pipeline.process.refraction import ProcessedPoints, seabed_points
 from pipeline.process.returns import DetectedReturns, PointFlag, Points, ReturnKind
-from pipeline.process.tpu import (
+from pipeline.uncertainty.cell_uncertainty import CellUncertainty, cell_uncertainty
+from pipeline.uncertainty.tpu import (
     PointTpu,
     pair_scatter,
     point_tpu,
@@ -175,7 +176,7 @@ def with_posteriors(
 
     The posterior covers the waveform timing of both returns (and its nuisances), which the
     TPU's timing terms approximate; in the cells where points were sampled their variance
-    replaces those terms (:func:`pipeline.process.cell_uncertainty.cell_uncertainty`).
+    replaces those terms (:func:`pipeline.uncertainty.cell_uncertainty.cell_uncertainty`).
 
     Parameters
     ----------

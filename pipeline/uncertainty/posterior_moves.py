@@ -3,7 +3,7 @@
 :class:`BlockDEMove` (differential evolution) and :class:`BlockIndependenceMove`
 (independence Metropolis–Hastings from a Student-t) each accept or reject every pulse's block
 on its own log posterior (the ``blobs`` of
-:func:`~pipeline.process.posterior_target.log_prob_blocks`): every pulse is an exact MCMC of
+:func:`~pipeline.uncertainty.posterior_target.log_prob_blocks`): every pulse is an exact MCMC of
 its own posterior, and the model is evaluated once for all pulses and walkers.
 """
 

@@ -1,7 +1,7 @@
-"""Settings and per-pulse flags of the depth posterior (:mod:`pipeline.process.posterior`).
+"""Settings and per-pulse flags of the depth posterior (:mod:`pipeline.uncertainty.posterior`).
 
 :class:`PosteriorSettings` holds the sampler's settings and the bounds of the priors (which
-:mod:`pipeline.process.posterior_target` describes); :class:`PosteriorFlag` the per-pulse bits
+:mod:`pipeline.uncertainty.posterior_target` describes); :class:`PosteriorFlag` the per-pulse bits
 the sampling sets.
 """
 

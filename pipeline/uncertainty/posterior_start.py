@@ -18,14 +18,14 @@ import numpy as np
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.detect import DetectSettings, detect_full_waveform
-from pipeline.process.posterior_target import (
+from pipeline.uncertainty.posterior_target import (
     PulseBatch,
     _prior_precision,
     _prior_score,
     log_prob,
     log_prob_blocks,
 )
-from pipeline.process.waveform_model import (
+from pipeline.uncertainty.waveform_model import (
     N_PARAMS,
     WaveformSystem,
     covariance,

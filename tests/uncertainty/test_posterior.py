@@ -21,7 +21,10 @@ from scipy.signal import fftconvolve
 from scipy.special import log_ndtr, ndtr
 
 from pipeline.errors import NumericalError, SceneError
-from pipeline.process.posterior import (
+from pipeline.process.refraction import RefractionSettings
+from pipeline.process.returns import DetectedReturns
+from pipeline.process.surface_fit import SurfaceFitSettings, fit_water_surface
+from pipeline.uncertainty.posterior import (
     PosteriorFlag,
     PosteriorSettings,
     interval_summary,
@@ -31,11 +34,8 @@ from pipeline.process.posterior import (
     sample_batch,
     start_theta,
 )
-from pipeline.process.refraction import RefractionSettings
-from pipeline.process.returns import DetectedReturns
-from pipeline.process.seabed_posterior import draws_to_seabed, seabed_posteriors, water_cosine
-from pipeline.process.surface_fit import SurfaceFitSettings, fit_water_surface
-from pipeline.process.waveform_model import (
+from pipeline.uncertainty.seabed_posterior import draws_to_seabed, seabed_posteriors, water_cosine
+from pipeline.uncertainty.waveform_model import (
     N_PARAMS,
     WaveformSystem,
     depth_crb_m,
@@ -328,8 +328,8 @@ def test_converged_chains_sample_a_known_gaussian_posterior(monkeypatch):
     ``m`` and ``C``: the whitened draws have mean 0 and covariance I, and the analytic 68 % /
     95 % depth intervals hold 68 % / 95 % of the draws.
     """
-    import pipeline.process.posterior as posterior_module
-    from pipeline.process.waveform_model import covariance
+    import pipeline.uncertainty.posterior as posterior_module
+    from pipeline.uncertainty.waveform_model import covariance
 
     rng = np.random.default_rng(51)
     th, waves = draw_truths(10, rng)

@@ -1,13 +1,13 @@
 """Depth posteriors of a bounded sample of a survey's bathymetric points (``bathy run``).
 
 The chunk loop keeps the waveforms of a fixed share of the pulses
-(:func:`~pipeline.process.posterior_selection.kept_for_posterior`);
+(:func:`~pipeline.uncertainty.posterior_selection.kept_for_posterior`);
 here, once the points, their TPU and the cells exist, :func:`posterior_budget` of the kept
 bathymetric points are chosen, first in the cells that matter
-(:func:`pipeline.process.cell_uncertainty.select_posterior_pulses`: the IHO order could flip,
+(:func:`pipeline.uncertainty.cell_uncertainty.select_posterior_pulses`: the IHO order could flip,
 or a flagged point), then evenly among the rest, and their emcee posteriors are sampled and
 carried through refraction onto the seabed point
-(:func:`pipeline.process.seabed_posterior.seabed_posteriors`). Cost: the budget times about
+(:func:`pipeline.uncertainty.seabed_posterior.seabed_posteriors`). Cost: the budget times about
 0.3-0.5 s (about 15 min per km² at the default 2000/km²), linear in the area, bounded per km².
 """
 
@@ -18,20 +18,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.process.cell_uncertainty import select_posterior_pulses
 from pipeline.process.context import ProcessingContext
 from pipeline.process.grid import Grid
-from pipeline.process.posterior_selection import (
+from pipeline.process.refraction import ProcessedPoints
+from pipeline.process.returns import DetectedReturns
+from pipeline.uncertainty.cell_uncertainty import select_posterior_pulses
+from pipeline.uncertainty.posterior_selection import (
     KeptWaveforms,
     choose_points,
     posterior_budget,
     sounded_area_km2,
 )
-from pipeline.process.refraction import ProcessedPoints
-from pipeline.process.returns import DetectedReturns
-from pipeline.process.seabed_posterior import SeabedPosteriors, seabed_posteriors, take_surface
-from pipeline.process.survey_uncertainty import SurveyUncertainty
-from pipeline.process.waveform_model import WaveformSystem
+from pipeline.uncertainty.seabed_posterior import SeabedPosteriors, seabed_posteriors, take_surface
+from pipeline.uncertainty.survey_uncertainty import SurveyUncertainty
+from pipeline.uncertainty.waveform_model import WaveformSystem
 
 __all__ = ["SurveyPosteriors", "waveform_system", "survey_posteriors"]
 

@@ -61,7 +61,7 @@ footprint              R   the return's centroid within the beam footprint: per 
 =====================  ==  ====================================================================
 
 The attenuation does not enter the georeferencing (only the waveform's timing, which the
-posterior in :mod:`pipeline.process.posterior` covers). Systematic detector biases (a green
+posterior in :mod:`pipeline.uncertainty.posterior` covers). Systematic detector biases (a green
 surface return late in waves, the first-photon bias of a dead-time-limited photon counter, the
 merged returns of the shallowest metre) are not uncertainties: they are not in the TPU
 (``benchmarks/RESULTS_tpu_calibration.md``).
@@ -77,7 +77,7 @@ circular normal, ``sqrt((s_x^2 + s_y^2) / 2)``. The IHO 95 % values are ``1.96 s
 :func:`monte_carlo_points` redraws every input and recomputes the points with
 :func:`~pipeline.process.refraction.seabed_points` (the check of the linearisation).
 Pulses the linearisation cannot hold (a timing sigma reaching the surface-bottom separation, a
-term not finite) are left out and counted, never fatal (:mod:`pipeline.process.tpu_screen`).
+term not finite) are left out and counted, never fatal (:mod:`pipeline.uncertainty.tpu_screen`).
 """
 
 from __future__ import annotations
@@ -89,20 +89,20 @@ import numpy as np
 from pipeline.process.refraction import RefractionSettings
 from pipeline.process.returns import DetectedReturns
 from pipeline.process.surface_fit import WaterSurface
-from pipeline.process.tpu_monte_carlo import monte_carlo_points
-from pipeline.process.tpu_neighbours import (
+from pipeline.uncertainty.tpu_monte_carlo import monte_carlo_points
+from pipeline.uncertainty.tpu_neighbours import (
     pair_scatter,
     seabed_gradient,
     surface_over_sounding,
     surface_tilt_sigma,
     timing_from_scatter,
 )
-from pipeline.process.tpu_screen import (
+from pipeline.uncertainty.tpu_screen import (
     TERM_NOT_FINITE,
     LeftOut,
     timing_unresolved,
 )
-from pipeline.process.tpu_settings import (
+from pipeline.uncertainty.tpu_settings import (
     CORRELATED_TERMS,
     DEPTH,
     RANDOM_TERMS,
@@ -116,7 +116,7 @@ from pipeline.process.tpu_settings import (
     index_derivatives,
     timing_sigma_s,
 )
-from pipeline.process.tpu_terms import _inputs, _take_inputs, _terms
+from pipeline.uncertainty.tpu_terms import _inputs, _take_inputs, _terms
 
 __all__ = [
     "DEPTH",
@@ -174,7 +174,7 @@ def point_tpu(
         :func:`~pipeline.process.refraction.seabed_points`, except the pulses left out
         (``PointTpu.left_out``): a timing sigma not below the surface-bottom separation, or a
         term not finite (e.g. a beam grazing its perturbed surface); see
-        :mod:`pipeline.process.tpu_screen`.
+        :mod:`pipeline.uncertainty.tpu_screen`.
     """
     st = settings or TpuSettings()
     rst = refraction_settings or RefractionSettings()

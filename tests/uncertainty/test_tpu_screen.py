@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.process.tpu import DEPTH, point_tpu, timing_from_scatter
-from pipeline.process.tpu_screen import REASONS
-from tests.process.test_tpu import N_AIR, N_G, N_W, RST, C, survey
+from pipeline.uncertainty.tpu import DEPTH, point_tpu, timing_from_scatter
+from pipeline.uncertainty.tpu_screen import REASONS
+from tests.uncertainty.test_tpu import N_AIR, N_G, N_W, RST, C, survey
 
 SIGMA_S = 1e-10  # the well-behaved pulses' timing sigma
 ODD_GAP = 4e-9  # false bottoms 4 ns after the surface

@@ -2,10 +2,10 @@
 
 Parameters and priors
 ---------------------
-``theta`` follows :data:`pipeline.process.waveform_model.PARAM_NAMES`: depth (m), surface time
+``theta`` follows :data:`pipeline.uncertainty.waveform_model.PARAM_NAMES`: depth (m), surface time
 (ns), log surface / column / bottom areas (counts), log attenuation ``ln k`` (``k`` in 1/m),
 background (counts per sample). Independent bounded priors
-(:class:`~pipeline.process.posterior_settings.PosteriorSettings`), so the log prior is a
+(:class:`~pipeline.uncertainty.posterior_settings.PosteriorSettings`), so the log prior is a
 constant inside the box and ``-inf`` outside:
 
 * depth: flat on ``depth_bounds_m``;
@@ -34,8 +34,8 @@ from typing import Any
 import numpy as np
 
 from pipeline.errors import NumericalError
-from pipeline.process.posterior_settings import PosteriorSettings
-from pipeline.process.waveform_model import (
+from pipeline.uncertainty.posterior_settings import PosteriorSettings
+from pipeline.uncertainty.waveform_model import (
     N_PARAMS,
     WaveformSystem,
     expected_waveform,
@@ -231,7 +231,7 @@ def log_prob(theta: Any, data: PulseBatch, system: WaveformSystem) -> Any:
     Parameters
     ----------
     theta : (8 P,) or (n_walkers, 9 P) array_like
-        Parameters in :data:`~pipeline.process.waveform_model.PARAM_NAMES` order, pulse by
+        Parameters in :data:`~pipeline.uncertainty.waveform_model.PARAM_NAMES` order, pulse by
         pulse (``P = len(data)``; one pulse: a 9-vector).
     data : PulseBatch
     system : WaveformSystem

@@ -11,8 +11,15 @@ import numpy as np
 from pipeline.process.refraction import RefractionSettings, seabed_points
 from pipeline.process.returns import DetectedReturns
 from pipeline.process.surface_fit import WaterSurface
-from pipeline.process.tpu_settings import DEPTH, TpuSettings, index_derivatives
-from pipeline.process.tpu_terms import _footprint, _inputs, _on_plane, _perp_axes, _rotate, _xyzd
+from pipeline.uncertainty.tpu_settings import DEPTH, TpuSettings, index_derivatives
+from pipeline.uncertainty.tpu_terms import (
+    _footprint,
+    _inputs,
+    _on_plane,
+    _perp_axes,
+    _rotate,
+    _xyzd,
+)
 
 
 def monte_carlo_points(

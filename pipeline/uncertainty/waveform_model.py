@@ -1,6 +1,6 @@
 """The expected waveform of one pulse from system parameters and measured quantities only.
 
-A process-side forward model for inference (:mod:`pipeline.process.posterior`): it knows the
+A process-side forward model for inference (:mod:`pipeline.uncertainty.posterior`): it knows the
 instrument (sample clock, system response, noise law, water group index) and the geometry of
 the pulse (the in-water angle from the measured beam and the fitted surface), nothing of the
 simulated world.

@@ -1,6 +1,6 @@
 """Depth posteriors of pulses carried to the refraction-corrected seabed point.
 
-The posterior draws of ``(depth, t_s)`` (:func:`pipeline.process.posterior.sample_batch`)
+The posterior draws of ``(depth, t_s)`` (:func:`pipeline.uncertainty.posterior.sample_batch`)
 become round-trip times ``t0 + t_s`` and ``t0 + t_s + tau(depth)`` and go through
 :func:`pipeline.process.refraction.seabed_points` (all draws of a pulse in one call), so the
 reported posterior is on the 3-D seabed point (and its depth below the fitted surface), with
@@ -20,12 +20,12 @@ import numpy as np
 from tqdm import tqdm
 
 from pipeline.process.detect import DetectSettings
-from pipeline.process.posterior import interval_summary, sample_batch
-from pipeline.process.posterior_settings import PosteriorFlag, PosteriorSettings
 from pipeline.process.refraction import RefractionSettings, seabed_points
 from pipeline.process.returns import DetectedReturns
 from pipeline.process.surface_fit import WaterSurface
-from pipeline.process.waveform_model import N_PARAMS, WaveformSystem, in_water_delay_s
+from pipeline.uncertainty.posterior import interval_summary, sample_batch
+from pipeline.uncertainty.posterior_settings import PosteriorFlag, PosteriorSettings
+from pipeline.uncertainty.waveform_model import N_PARAMS, WaveformSystem, in_water_delay_s
 
 __all__ = [
     "SeabedPosteriors",
@@ -101,7 +101,7 @@ class SeabedPosteriors:
     theta_median : (n, 9) ndarray or None
         Per-parameter posterior median of the waveform model's parameters (zeros where
         NO_START): with ``cos_water`` it gives the posterior's fitted waveform
-        (:func:`~pipeline.process.waveform_model.expected_waveform`), e.g. for the report.
+        (:func:`~pipeline.uncertainty.waveform_model.expected_waveform`), e.g. for the report.
     cos_water : (n,) ndarray or None
         Cosine of each pulse's in-water angle the model used.
     """

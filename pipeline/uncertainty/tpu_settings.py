@@ -1,4 +1,4 @@
-"""Settings, result type and closed-form pieces of the TPU (:mod:`pipeline.process.tpu`)."""
+"""Settings, result type and closed-form pieces of the TPU (:mod:`pipeline.uncertainty.tpu`)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from pipeline.config import setting
 from pipeline.constants import FWHM_TO_SIGMA
 from pipeline.lidar_equation import cox_munk_mean_square_slope
 from pipeline.optics import SPEED_OF_LIGHT_M_S, water_group_index, water_phase_index
-from pipeline.process.tpu_screen import LeftOut
+from pipeline.uncertainty.tpu_screen import LeftOut
 
 _C = SPEED_OF_LIGHT_M_S
 #: Columns of a term: the point's x, y, z and its depth at the measured position.

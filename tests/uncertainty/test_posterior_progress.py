@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.process import seabed_posterior as sp
-from pipeline.process.posterior import PulseChains
-from pipeline.process.posterior_settings import PosteriorFlag, PosteriorSettings
-from pipeline.process.waveform_model import N_PARAMS, WaveformSystem
+from pipeline.uncertainty import seabed_posterior as sp
+from pipeline.uncertainty.posterior import PulseChains
+from pipeline.uncertainty.posterior_settings import PosteriorFlag, PosteriorSettings
+from pipeline.uncertainty.waveform_model import N_PARAMS, WaveformSystem
 
 
 class _Rows:

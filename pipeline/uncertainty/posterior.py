@@ -2,25 +2,25 @@
 
 Modules
 -------
-* :mod:`~pipeline.process.posterior_settings`: settings, prior bounds and per-pulse flags;
-* :mod:`~pipeline.process.posterior_target`: the pulses' data, the priors and the log
+* :mod:`~pipeline.uncertainty.posterior_settings`: settings, prior bounds and per-pulse flags;
+* :mod:`~pipeline.uncertainty.posterior_target`: the pulses' data, the priors and the log
   posterior;
-* :mod:`~pipeline.process.posterior_start`: detector starts, posterior modes, start balls;
-* :mod:`~pipeline.process.posterior_moves`: the block-wise emcee moves;
+* :mod:`~pipeline.uncertainty.posterior_start`: detector starts, posterior modes, start balls;
+* :mod:`~pipeline.uncertainty.posterior_moves`: the block-wise emcee moves;
 * this module: the sampler and its convergence (:func:`sample_batch`); it re-exports the
   public names of the four above;
-* :mod:`~pipeline.process.seabed_posterior`: the draws carried to the refracted seabed point.
+* :mod:`~pipeline.uncertainty.seabed_posterior`: the draws carried to the refracted seabed point.
 
 Parameters and priors
 ---------------------
-``theta`` follows :data:`pipeline.process.waveform_model.PARAM_NAMES` (depth, surface time,
+``theta`` follows :data:`pipeline.uncertainty.waveform_model.PARAM_NAMES` (depth, surface time,
 log areas, log attenuation, background, widths) under independent bounded priors (see
-:mod:`~pipeline.process.posterior_target`).
+:mod:`~pipeline.uncertainty.posterior_target`).
 
 Sampling
 --------
 1. Start: the detector's estimate, moved to every pulse's posterior mode by batched damped
-   Fisher scoring (:mod:`~pipeline.process.posterior_start`).
+   Fisher scoring (:mod:`~pipeline.uncertainty.posterior_start`).
 2. Walkers: the mode plus a small ball of the Laplace covariance times ``init_scale``.
 3. :class:`emcee.EnsembleSampler` (``vectorize=True``) with the pulses of a batch side by side
    in one walker vector: two emcee moves act on each pulse's block independently
@@ -40,7 +40,7 @@ Sampling
 Seabed point
 ------------
 The draws become 3-D seabed points with the processing's own refraction in
-:mod:`pipeline.process.seabed_posterior`.
+:mod:`pipeline.uncertainty.seabed_posterior`.
 
 Cost: see ``benchmarks/RESULTS_posterior.md`` (a few tenths of a second per pulse).
 """
@@ -54,23 +54,23 @@ import emcee
 import numpy as np
 
 from pipeline.process.detect import DetectSettings
-from pipeline.process.posterior_moves import BlockDEMove, BlockIndependenceMove
-from pipeline.process.posterior_settings import PosteriorFlag, PosteriorSettings
-from pipeline.process.posterior_start import (
+from pipeline.uncertainty.posterior_moves import BlockDEMove, BlockIndependenceMove
+from pipeline.uncertainty.posterior_settings import PosteriorFlag, PosteriorSettings
+from pipeline.uncertainty.posterior_start import (
     _best_modes,
     _initial_ball,
     _start,
     posterior_modes,
     start_theta,
 )
-from pipeline.process.posterior_target import (
+from pipeline.uncertainty.posterior_target import (
     PulseBatch,
     _prior_precision,
     log_prob,
     log_prob_blocks,
     make_pulse_batch,
 )
-from pipeline.process.waveform_model import N_PARAMS, WaveformSystem, covariance
+from pipeline.uncertainty.waveform_model import N_PARAMS, WaveformSystem, covariance
 
 __all__ = [
     "PosteriorFlag",

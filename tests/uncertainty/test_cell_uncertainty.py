@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 
 from pipeline.iho import NO_DATA
-from pipeline.process.cell_uncertainty import (
+from pipeline.process.grid import grid_points
+from pipeline.uncertainty.cell_uncertainty import (
     cell_index,
     cell_uncertainty,
     select_posterior_pulses,
 )
-from pipeline.process.grid import grid_points
-from pipeline.process.tpu import CORRELATED_TERMS, RANDOM_TERMS, PointTpu
+from pipeline.uncertainty.tpu import CORRELATED_TERMS, RANDOM_TERMS, PointTpu
 
 
 def make_tpu(xyz, sv_r, sv_c, sh_r, sh_c, timing_v=None):

@@ -20,7 +20,7 @@ Posterior sampling where it matters
 :func:`select_posterior_pulses` picks at most ``k_per_cell`` pulses in the cells whose order
 is marginal (TVU95 within ``margin`` of an order's allowance) or that hold flagged pulses,
 at most ``max_pulses`` in all: the cost is ``n_selected x`` (seconds per pulse of
-:mod:`pipeline.process.posterior`), bounded by ``max_pulses`` whatever the survey size. Their
+:mod:`pipeline.uncertainty.posterior`), bounded by ``max_pulses`` whatever the survey size. Their
 posterior depth sigma replaces the TPU's waveform timing terms in the cell: the cell's timing
 variance is scaled by ``mean(posterior var) / mean(TPU timing var)`` of the sampled pulses.
 """
@@ -41,7 +41,7 @@ from pipeline.iho import (
     tvu_allowance_m,
 )
 from pipeline.process.grid import Grid
-from pipeline.process.tpu import PointTpu
+from pipeline.uncertainty.tpu import PointTpu
 
 __all__ = [
     "CellUncertainty",

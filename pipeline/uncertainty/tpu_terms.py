@@ -1,6 +1,6 @@
 """The TPU's perturbation machinery: each input moved by its sigma, the points recomputed.
 
-Private to :mod:`pipeline.process.tpu` and its siblings: :func:`_terms` gives each
+Private to :mod:`pipeline.uncertainty.tpu` and its siblings: :func:`_terms` gives each
 uncertainty term's effect on x, y, z and the depth at the measured position.
 """
 
@@ -15,10 +15,10 @@ import numpy as np
 from pipeline.process.refraction import RefractionSettings, seabed_points
 from pipeline.process.returns import DetectedReturns
 from pipeline.process.surface_fit import WaterSurface
-from pipeline.process.tpu_screen import (
+from pipeline.uncertainty.tpu_screen import (
     max_timing_step_s,
 )
-from pipeline.process.tpu_settings import (
+from pipeline.uncertainty.tpu_settings import (
     _C,
     CORRELATED_TERMS,
     DEPTH,
