@@ -69,10 +69,10 @@ from pipeline.simulate import paths as P
 from pipeline.simulate.forward_scatter import bottom_delay, water_tables
 from pipeline.simulate.geometry import (
     LOG_ZERO,
+    column_aggregate,
     log_aperture_factor,
     log_column_integral,
     safe_log,
-    virtual_source_slopes,
 )
 from pipeline.simulate.layer import LayerEcho, layer_echo
 from pipeline.simulate.water_optics import scattering_split, water_attenuation
@@ -383,7 +383,7 @@ def return_budget(paths, scene, detector, settings: ReturnSettings | None = None
         + log_column_integral(k_col, col_len, np.where(wet, r_air, 1.0), cos_a, n_a, n_w)
     )
     log_col = np.where(wet & (col_len > 0.0), np.maximum(log_col, LOG_ZERO), LOG_ZERO)
-    col = _column_aggregate(log_col, t_surf, col_len, r_air, cos_a, k_col, n_a, n_w, n_g, sig_sys2)
+    col = column_aggregate(log_col, t_surf, col_len, r_air, cos_a, k_col, n_a, n_w, n_g, sig_sys2)
 
     # scattering layer: only when the scene has one, so layer-free budgets stay as they were
     layer = {}
@@ -446,32 +446,3 @@ def return_budget(paths, scene, detector, settings: ReturnSettings | None = None
         **col,
         **layer,
     )
-
-
-def _column_aggregate(log_col, t_surf, col_len, r_air, cos_a, k_col, n_a, n_w, n_g, sig_sys2):
-    """One column component per pulse: N-weighted start, duration, decay rate and blur."""
-    lmax = np.max(log_col, axis=1)
-    present = log_col > LOG_ZERO / 2
-    q = np.where(present, np.exp(log_col - lmax[:, None]), 0.0)  # relative: never overflows
-    qsum = q.sum(axis=1)
-    has = qsum > 0.0
-    wq = q / np.where(has, qsum, 1.0)[:, None]
-    log_total = np.where(has, lmax + np.log(np.where(has, qsum, 1.0)), LOG_ZERO)
-    start = (wq * t_surf).sum(axis=1)
-    spread2 = (wq * (t_surf - start[:, None]) ** 2).sum(axis=1)
-    to_time = 2.0 * n_g / C0  # seconds per metre of in-water path, two-way
-    width = (wq * col_len).sum(axis=1) * to_time
-    # decay per metre: 2k plus the slope of the aperture term at the mean scattering depth
-    s = 2.0 * np.asarray(k_col, dtype=np.float64)
-    mean_l = np.minimum(1.0 / np.where(s > 0, s, 1e-300), 0.5 * col_len)
-    k_t, k_s = virtual_source_slopes(cos_a, n_a, n_w)
-    r = np.where(present, r_air, 1.0)
-    gamma = np.where(present, k_t / (r + k_t * mean_l) + k_s / (r + k_s * mean_l), 0.0)
-    rate = (wq * (s + gamma)).sum(axis=1) / to_time
-    return {
-        "column_log_pe": log_total,
-        "column_start_s": start,
-        "column_width_s": width,
-        "column_rate_per_s": rate,
-        "column_sigma_s": np.sqrt(sig_sys2 + spread2),
-    }
