@@ -18,9 +18,11 @@ Lidar attenuation between c and K_d (Gordon 1982, Appl. Opt. 21:2996)
 Gordon's Monte Carlo of an airborne lidar found that the return decays with depth at a rate
 ``k`` that goes from the beam attenuation ``c`` for a narrow receiver field of view (``c R -> 0``,
 ``R`` the radius of the receiver's field of view at that depth) to the diffuse attenuation
-``K_d`` for a wide one (``c R`` above ~5-6). Between the limits we use the exponential bridge in
-the field-of-view diameter ``D = 2 R`` quoted for Gordon's results in the oceanographic-lidar
-literature (Churnside 2014, Opt. Eng. 53:051405):
+``K_d`` for a wide one (``c R`` above ~5-6). Between the limits we use an exponential bridge in
+the field-of-view diameter ``D = 2 R`` of the form used for Gordon's results in the
+oceanographic-lidar literature (e.g. the review of Churnside 2014, Opt. Eng. 53:051405; the
+coefficient 0.85 is as recalled from there and was not re-checked against the paper, the tests
+check only Gordon's two limits and monotonicity):
 ``k(R) = K_d + (c - K_d) exp(-0.85 c D)``; it is within 1 % of ``c - K_d`` of ``K_d`` from
 ``c R = 2.7`` and within 1e-4 from ``c R = 5.4``. Along a refracted path the field of view
 widens, ``R(l) = tan(fov/2) (R_air + l n_a / n_w)`` (the sagittal virtual-source distance of
