@@ -29,11 +29,11 @@ from pipeline.simulate.noise import NavigationNoiseSettings
 from pipeline.simulate.scanner import ScannerSettings
 from pipeline.simulate.trace_settings import TraceSettings
 from pipeline.simulate.trajectory import AttitudeSettings, FlightSettings
-from pipeline.simulate.water_optics import (
+from pipeline.simulate.world import FrameSettings, SeabedSettings, WaterSurfaceSettings
+from pipeline.water_optics import (
     default_backscatter_180_per_m_sr,
     default_diffuse_attenuation_per_m,
 )
-from pipeline.simulate.world import FrameSettings, SeabedSettings, WaterSurfaceSettings
 
 __all__ = [
     "SceneInfo",
@@ -105,7 +105,7 @@ class WaterSettings:
         ge=0.0,
         le=10.0,
         doc="volume scattering function at 180 degrees; None: from c and the albedo through "
-        "Petzold's phase function (pipeline.simulate.water_optics)",
+        "Petzold's phase function (pipeline.water_optics)",
     )
     # 0.55: b/c of Petzold's (1972) coastal station (b = 0.219, c = 0.398 1/m at 530 nm)
     single_scattering_albedo: float = setting(
@@ -144,7 +144,7 @@ class WaterSettings:
 
     @property
     def kd_per_m(self) -> float:
-        """K_d: the scene's, or ``min(0.2 c + 0.04, c)`` (:mod:`pipeline.simulate.water_optics`)."""
+        """K_d: the scene's, or ``min(0.2 c + 0.04, c)`` (:mod:`pipeline.water_optics`)."""
         if self.diffuse_attenuation_per_m is not None:
             return self.diffuse_attenuation_per_m
         return default_diffuse_attenuation_per_m(self.extinction_per_m)

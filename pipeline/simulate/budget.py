@@ -24,14 +24,15 @@ Returns
   reflectance (desert sand by default), range ``R``.
 * **Bottom**: ``T_down T_up T_w^2 (rho_b / pi) cos(t_b)`` times the refracted aperture term
   (:mod:`.geometry`), ``T_w = exp(-∫ k dl)`` with the lidar attenuation ``k`` between ``c`` and
-  ``K_d`` set by the receiver's field of view (Gordon 1982, :mod:`.water_optics`;
+  ``K_d`` set by the receiver's field of view (Gordon 1982, :mod:`pipeline.water_optics`;
   ``returns.lidar_attenuation = "beam"``: ``k = c``, the single-scattering equation).
 * **Water column**: ``T_down T_up beta(180) ∫ exp(-2 k l) dOmega_w(l) dl``, ``k`` at the
   field-of-view radius where the sub-ray enters the water (the radius grows by
   ``tan(fov/2) n_a / n_w`` per metre, a few % over a column); ``T_up`` by reciprocity at the
   entry facet (unpolarised T air→water at the same angle pair), because the trace stage only
   gives ``T_up`` for bottom returns. NO_BOTTOM sub-rays scatter until the end of the window.
-  ``beta(180)``: the scene's, or from ``c`` through a named phase function (:mod:`.water_optics`).
+  ``beta(180)``: the scene's, or from ``c`` through a named phase function
+  (:mod:`pipeline.water_optics`).
 * **Scattering layer** (optional, ``water.layer_depth_m > 0``): a horizontal slab of thickness
   ``T`` centred ``layer_depth_m`` below the mean water level (``water_surface.level_m``) that adds
   ``beta_L`` to the volume backscatter at 180°. Each wet sub-ray crosses it along its refracted
@@ -45,8 +46,8 @@ Returns
 
 Time: echoes at ``2 n_air R / c0`` and ``+ 2 n_g L / c0`` (group index in water). Gaussian
 widths ``sigma^2 = sigma_pulse^2 + sigma_detector^2``. Forward scattering
-(:mod:`.forward_scatter`, ``returns.forward_scatter = "small_angle"``) splits each bottom echo
-into the undelayed pulse and a tail, the pulse convolved with an exponential delay (a column-
+(:mod:`pipeline.forward_scatter`, ``returns.forward_scatter = "small_angle"``) splits each bottom
+echo into the undelayed pulse and a tail, the pulse convolved with an exponential delay (a column-
 shaped component of unbounded width), so the echo is skewed late and its centroid delayed by
 the mean two-way excess path ``n_g kappa_1 / c0``. The column of a pulse is one component:
 N-weighted mean start, decay rate ``2k + d ln(dOmega_w)/dl`` and duration. The layer echo's
@@ -65,8 +66,8 @@ from pipeline import lidar_equation as le
 from pipeline import optics
 from pipeline.config import setting
 from pipeline.constants import FWHM_TO_SIGMA
+from pipeline.forward_scatter import bottom_delay, water_tables
 from pipeline.simulate import paths as P
-from pipeline.simulate.forward_scatter import bottom_delay, water_tables
 from pipeline.simulate.geometry import (
     LOG_ZERO,
     column_aggregate,
@@ -75,7 +76,7 @@ from pipeline.simulate.geometry import (
     safe_log,
 )
 from pipeline.simulate.layer import LayerEcho, layer_echo
-from pipeline.simulate.water_optics import scattering_split, water_attenuation
+from pipeline.water_optics import scattering_split, water_attenuation
 
 __all__ = [
     "ReturnSettings",
@@ -112,7 +113,7 @@ class ReturnSettings:
     forward_scatter: str = setting(
         "small_angle",
         choices=("small_angle", "none"),
-        doc="bottom-echo delay by forward scattering (pipeline.simulate.forward_scatter)",
+        doc="bottom-echo delay by forward scattering (pipeline.forward_scatter)",
     )
     lidar_attenuation: str = setting(
         "fov",
@@ -196,7 +197,7 @@ class ReturnBudget:
         Centre and sigma of the bottom echo's undelayed pulse (0 where there is none).
     bottom_tail_weight, bottom_tail_s : float64
         Share ``w`` of the bottom echo delayed by forward scattering and the mean ``tau`` (s)
-        of its exponential delay (:mod:`.forward_scatter`); 0 where there is none.
+        of its exponential delay (:mod:`pipeline.forward_scatter`); 0 where there is none.
     column_log_pe, column_start_s, column_width_s, column_rate_per_s, column_sigma_s : (n_pulses,)
         The pulse's water column as one truncated-exponential-plus-Gaussian component.
     background_rate_hz : (n_pulses,) float64

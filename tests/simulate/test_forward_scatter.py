@@ -6,7 +6,7 @@ coefficient b), scatter with a Henyey-Greenstein phase function (g = 0.9), are a
 weight exp(-a s), and count when they reach a flat seabed at depth L within the receiver's
 field-of-view radius R. Two ways: the up leg is, by reciprocity, the same experiment (the
 Lambertian seabed forgets the direction), so the two-way excess path is the sum of two
-independent draws. The model (pipeline.simulate.forward_scatter) gets only the phase function.
+independent draws. The model (pipeline.forward_scatter) gets only the phase function.
 """
 
 from __future__ import annotations
@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 from waveform_support import clean_scene, detector
 
+from pipeline.forward_scatter import ScatterTables, bottom_delay
 from pipeline.simulate.budget import return_budget
 from pipeline.simulate.flat_paths import flat_paths
-from pipeline.simulate.forward_scatter import ScatterTables, bottom_delay
 from pipeline.simulate.waveform import expected_waveform
 
 G_HG = 0.9

@@ -20,8 +20,8 @@ from waveform_support import clean_scene, common_pe, detector, fresnel_unpolaris
 from pipeline.errors import SceneError
 from pipeline.simulate.budget import return_budget
 from pipeline.simulate.flat_paths import flat_paths
-from pipeline.simulate.water_optics import ff_phase_per_sr
 from pipeline.simulate.waveform import expected_waveform
+from pipeline.water_optics import ff_phase_per_sr
 
 
 def test_petzold_phase_function_is_normalised_with_its_published_backscatter_fraction():

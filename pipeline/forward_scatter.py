@@ -25,11 +25,11 @@ scatterings of the photons that arrive are again a Poisson process, of intensity
     H_m(rho) = ∫_0^1 x^m G_m(rho / x) dx,   G_m(t) = ∫_{tan theta <= t} (sec theta - 1)^m p dOmega,
 
 and the probability of no accepted scattering is ``exp(-b L H_0(R/L))``. ``G_m`` and ``H_m`` are
-tabulated once per phase function (the water's: :mod:`.water_optics`). Two ways: the down and
-up legs are independent and alike (reciprocity; a Lambertian seabed forgets the direction), so
-the cumulants double. The approximation (events judged alone, sideways moves not added as
-vectors) overestimates the delay when several scatterings are accepted; against the Monte
-Carlo of the tests (Henyey-Greenstein g = 0.9, b = 0.12 1/m, R = 2 m) the mean excess is
+tabulated once per phase function (the water's: :mod:`pipeline.water_optics`). Two ways:
+the down and up legs are independent and alike (reciprocity; a Lambertian seabed forgets the
+direction), so the cumulants double. The approximation (events judged alone, sideways moves
+not added as vectors) overestimates the delay when several scatterings are accepted; against
+the Monte Carlo of the tests (Henyey-Greenstein g = 0.9, b = 0.12 1/m, R = 2 m) the mean excess is
 5 % high at b L = 0.6 and 10 % high at b L = 2.4.
 
 Echo shape: the delay distribution is represented by its first two cumulants as a mixture of
@@ -48,7 +48,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from pipeline.simulate import water_optics as wo
+from pipeline import water_optics as wo
 
 __all__ = ["ScatterTables", "water_tables", "DelayShape", "bottom_delay"]
 
