@@ -115,6 +115,9 @@ class ScatterBiasModel:
         One-sigma relative error of the correction (the TPU's ``forward_scatter`` term).
     scale : float
         Multiplies the correction (1; the TPU perturbs it).
+    estimator : str
+        Whose bottom time is corrected: ``"detector"`` (points) or ``"gaussian_fit"`` (the
+        depth posteriors' symmetric echo model, :mod:`pipeline.uncertainty.seabed_posterior`).
     """
 
     beam_attenuation_per_m: float
@@ -126,6 +129,7 @@ class ScatterBiasModel:
     wavelength_nm: float
     relative_sigma: float = 0.5
     scale: float = 1.0
+    estimator: str = "detector"
 
     def detector(self) -> DetectorTiming | None:
         """The detector's timing in sigma units (None without samples), as detect.py sets it."""
@@ -209,8 +213,49 @@ def _detected_peak(w, tau, det: DetectorTiming):
     return est.reshape(w.size, _PHASES.size).mean(axis=1)
 
 
+def _fitted_centre(w, tau, det: DetectorTiming, iterations: int = 40):
+    """Mean over sample phases of the centre of a free-width Gaussian fitted to the echo.
+
+    What the depth posteriors' symmetric echo model (:mod:`pipeline.uncertainty.waveform_model`)
+    makes of a skewed echo: weighted least squares, weights ``1 / (y + 1e-3 max y)`` (the
+    shot-noise law of a bright echo), Levenberg-Marquardt from the highest sample.
+    """
+    k = np.arange(-math.ceil(8.0 / det.step), math.ceil(12.0 / det.step) + 1)
+    x = ((k[None, :] + _PHASES[:, None]) * det.step)[None, :, :]
+    y = _filtered_mixture(w[:, None, None], tau[:, None, None], x).reshape(-1, k.size)
+    x = np.broadcast_to(x, (w.size, *x.shape[1:])).reshape(-1, k.size)
+    wt = 1.0 / (y + 1e-3 * y.max(axis=1, keepdims=True))
+    i = np.argmax(y, axis=1)
+    p = np.stack([y[np.arange(y.shape[0]), i], x[np.arange(y.shape[0]), i], np.ones(len(y))], 1)
+    lam = np.full(len(y), 1e-3)
+
+    def cost(q):
+        e = np.exp(-0.5 * ((x - q[:, 1:2]) / q[:, 2:3]) ** 2)
+        return e, np.sum(wt * (q[:, :1] * e - y) ** 2, axis=1)
+
+    e, c0 = cost(p)
+    for _ in range(iterations):
+        u = (x - p[:, 1:2]) / p[:, 2:3]
+        jac = np.stack([e, p[:, :1] * e * u / p[:, 2:3], p[:, :1] * e * u * u / p[:, 2:3]], 2)
+        r = p[:, :1] * e - y
+        jtj = np.einsum("nki,nk,nkj->nij", jac, wt, jac)
+        jtr = np.einsum("nki,nk,nk->ni", jac, wt, r)
+        damp = jtj + lam[:, None, None] * np.eye(3) * np.diagonal(jtj, axis1=1, axis2=2)[:, None]
+        q = p - np.linalg.solve(damp, jtr[..., None])[..., 0]
+        q[:, 2] = np.abs(q[:, 2])
+        e_q, c_q = cost(q)
+        better = c_q < c0
+        p = np.where(better[:, None], q, p)
+        e = np.where(better[:, None], e_q, e)
+        c0 = np.where(better, c_q, c0)
+        lam = np.where(better, lam * 0.3, lam * 10.0)
+    return p[:, 1].reshape(w.size, _PHASES.size).mean(axis=1)
+
+
 @lru_cache(maxsize=8)
-def _shift_table(det: DetectorTiming | None) -> RegularGridInterpolator:
+def _shift_table(
+    det: DetectorTiming | None, estimator: str = "detector"
+) -> RegularGridInterpolator:
     """Peak offset (sigma units) of the mixture echo on the ``(w, log10 tau)`` grid.
 
     ``det`` None: the continuous peak of the matched filter's output (sigma sqrt 2).
@@ -222,12 +267,20 @@ def _shift_table(det: DetectorTiming | None) -> RegularGridInterpolator:
             f = _filtered_mixture(w, math.sqrt(0.5) * tau[:, None], _X[None, :])
             table[i] = math.sqrt(2.0) * _continuous_peak(f)
     else:
+        if estimator == "gaussian_fit":
+            # smooth in both; a coarser grid keeps the fits to ~1 s
+            w_grid, log_tau = _W_GRID[::4], _LOG_TAU[::4]
+            ww, tt = np.meshgrid(w_grid, 10.0**log_tau, indexing="ij")
+            table = _fitted_centre(ww.ravel(), tt.ravel(), det).reshape(ww.shape)
+            return RegularGridInterpolator((w_grid, log_tau), table)
         ww, tt = np.meshgrid(_W_GRID, tau, indexing="ij")
         table = _detected_peak(ww.ravel(), tt.ravel(), det).reshape(ww.shape)
     return RegularGridInterpolator((_W_GRID, _LOG_TAU), table)
 
 
-def peak_shift(weight, tail_mean, sigma, detector: DetectorTiming | None = None):
+def peak_shift(
+    weight, tail_mean, sigma, detector: DetectorTiming | None = None, estimator="detector"
+):
     """Where a matched-filter detector times an echo delayed by the mixture (see module).
 
     Parameters
@@ -239,6 +292,9 @@ def peak_shift(weight, tail_mean, sigma, detector: DetectorTiming | None = None)
     detector : DetectorTiming, optional
         The sampled detector's timing (sample phase averaged); None: the continuous peak of
         the filter's output.
+    estimator : str
+        ``"detector"`` (the detector's time) or ``"gaussian_fit"`` (the centre of a symmetric
+        Gaussian fitted to the sampled echo, as the depth posteriors' model; needs ``detector``).
 
     Returns
     -------
@@ -254,7 +310,8 @@ def peak_shift(weight, tail_mean, sigma, detector: DetectorTiming | None = None)
     # flat over the pulse and the table's last column holds
     small = lr < _LOG_TAU[0]
     pts = np.stack([w.ravel(), np.clip(lr, _LOG_TAU[0], _LOG_TAU[-1]).ravel()], axis=1)
-    tab = _shift_table(detector)(pts).reshape(w.shape) if w.size else np.zeros(w.shape)
+    est = estimator if detector is not None else "detector"
+    tab = _shift_table(detector, est)(pts).reshape(w.shape) if w.size else np.zeros(w.shape)
     out = np.where(small, w * rel, tab) * sigma
     return np.where(has, out, 0.0)
 
@@ -287,7 +344,9 @@ def range_bias_m(
     delay = bottom_delay(path, np.maximum(radius, 0.0), model.scattering_per_m(), water_tables())
     # the system response in two-way path units (a delay dt is an excess path dt c / n_g)
     sig_path = model.system_sigma_s * _C / group_index
-    two_way = peak_shift(delay.tail_weight, delay.tail_mean_m, sig_path, model.detector())
+    two_way = peak_shift(
+        delay.tail_weight, delay.tail_mean_m, sig_path, model.detector(), model.estimator
+    )
     return np.where(ok, model.scale * 0.5 * two_way, 0.0)
 
 

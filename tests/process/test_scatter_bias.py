@@ -18,6 +18,7 @@ import math
 import numpy as np
 import pytest
 from scipy import constants
+from scipy.optimize import least_squares
 from scipy.signal import fftconvolve
 from test_refraction import D0_M, N_AIR, N_GROUP, N_PHASE, SX, SY, analytic_pulses
 
@@ -167,3 +168,31 @@ def test_attenuation_from_the_column_inverts_gordons_bridge(c):
     kd = min(0.2 * c + 0.04, c)
     assert kd < k < c  # the column decays slower than c with a wide field
     assert attenuation_from_column(k, tan_half, 425.0) == pytest.approx(c, rel=2e-3)
+
+
+def test_posterior_correction_is_where_a_gaussian_fit_centres_the_echo():
+    # the depth posteriors fit a symmetric Gaussian of free width: on a skewed echo its centre
+    # is neither the detector's peak nor the mean delay; reference: scipy's least squares on
+    # the brute-force echo, shot-noise weights, 16 sample phases
+    dt = 1.0e-9
+    det = _water_model(sample_interval_s=dt).detector()
+    for w, tau in [(0.5, 0.3 * SIGMA_S), (0.6, 1.0 * SIGMA_S), (0.8, 3.0 * SIGMA_S)]:
+        x, f = _brute_filtered(w, tau, SIGMA_S, 1e-12)
+        centres = []
+        for phase in (np.arange(16) + 0.5) / 16:
+            t = (np.arange(-10, 30) + phase) * dt
+            y = np.interp(t, x, f)
+            y /= y.max()
+            wt = 1.0 / np.sqrt(y + 1e-3)
+            u = t / SIGMA_S  # fitted in units of sigma
+
+            def resid(p, u=u, y=y, wt=wt):
+                return (p[0] * np.exp(-0.5 * ((u - p[1]) / p[2]) ** 2) - y) * wt
+
+            fit = least_squares(resid, [1.0, 0.0, 1.0], xtol=1e-12, ftol=1e-12)
+            centres.append(fit.x[1] * SIGMA_S)
+        got = float(peak_shift(w, tau, SIGMA_S, det, estimator="gaussian_fit"))
+        detector = float(peak_shift(w, tau, SIGMA_S, det))
+        assert got == pytest.approx(np.mean(centres), rel=0.05, abs=0.01 * SIGMA_S)
+        if tau > SIGMA_S:  # long tails: the fit is pulled later than the detector's peak
+            assert got > 1.1 * detector
