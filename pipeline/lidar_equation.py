@@ -196,7 +196,7 @@ def column_log_photons_per_m(scene, altitude_m: float, z_m):
     water = scene.water
     z = np.asarray(z_m, dtype=float)
     t0 = 1.0 - _fresnel_r0(scene)
-    beta = water.backscatter_180_per_m_sr
+    beta = water.beta_180_per_m_sr(scene.system.wavelength_nm)
     log_beta = math.log(beta) if beta > 0 else -math.inf
     return (
         math.fsum(common.values())

@@ -20,8 +20,13 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.parallel import Executor
-from pipeline.process.context import ProcessingContext, processing_context
+from pipeline.process.context import (
+    ProcessingContext,
+    processing_context,
+    with_measured_attenuation,
+)
 from pipeline.process.returns import DetectedReturns
 from pipeline.stages import Plan, StageClock
 from pipeline.survey_chunks import ChunkJob, run_chunk
@@ -268,6 +273,19 @@ def run_survey(
 
     ctx = processing_context(scene)
     sim = simulate_detections(scene, plan, ctx, clock, log, progress, executor)
+    if sim.no_bottom is not None:
+        # the forward-scattering correction at the water the survey's columns measured
+        ret = sim.returns
+        r_air = SPEED_OF_LIGHT_M_S * ret.t_surface_s[ret.has_surface]
+        r_air = r_air / (2.0 * ctx.instrument.air_index)
+        if r_air.size:
+            ctx = with_measured_attenuation(
+                ctx, sim.no_bottom.get("column_decay_per_m"), float(np.median(r_air))
+            )
+    fs = ctx.refraction.forward_scatter
+    if fs is not None:
+        where = ctx.sources["process.forward_scatter.beam_attenuation_per_m"]
+        log(f"  forward-scattering correction at c = {fs.beam_attenuation_per_m:.3f}/m ({where})")
     ps, fr = scene.process, scene.frame
     with clock.stage("process"):
         processed = process_detections(sim.returns, ctx, ps.classify, water_column=False)

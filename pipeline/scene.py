@@ -30,6 +30,10 @@ from pipeline.simulate.scanner import ScannerSettings
 from pipeline.simulate.trace_settings import TraceSettings
 from pipeline.simulate.trajectory import AttitudeSettings, FlightSettings
 from pipeline.simulate.world import FrameSettings, SeabedSettings, WaterSurfaceSettings
+from pipeline.water_optics import (
+    default_backscatter_180_per_m_sr,
+    default_diffuse_attenuation_per_m,
+)
 
 __all__ = [
     "SceneInfo",
@@ -96,8 +100,27 @@ class WaterSettings:
     phase_index: float = setting(1.3415, ge=1.0, le=2.0, doc="bends rays (Snell)")
     group_index: float = setting(1.3638, ge=1.0, le=2.0, doc="sets the pulse's travel time")
     extinction_per_m: float = setting(ge=0.0, le=100.0, doc="beam attenuation c = a + b")
-    backscatter_180_per_m_sr: float = setting(
-        0.0, ge=0.0, le=10.0, doc="volume scattering function at 180 degrees"
+    backscatter_180_per_m_sr: float | None = setting(
+        None,
+        ge=0.0,
+        le=10.0,
+        doc="volume scattering function at 180 degrees; None: from c and the albedo through "
+        "Petzold's phase function (pipeline.water_optics)",
+    )
+    # 0.55: b/c of Petzold's (1972) coastal station (b = 0.219, c = 0.398 1/m at 530 nm)
+    single_scattering_albedo: float = setting(
+        0.55,
+        ge=0.0,
+        le=1.0,
+        doc="b / c: sets the scattering of the default beta(180) and of "
+        "the forward-scattering delay",
+    )
+    diffuse_attenuation_per_m: float | None = setting(
+        None,
+        ge=0.0,
+        le=100.0,
+        doc="diffuse attenuation K_d (<= c), the wide-field limit of the lidar attenuation; "
+        "None: min(0.2 c + 0.04, c)",
     )
     wind_speed_m_s: float = setting(
         0.0, ge=0.0, le=40.0, doc="wind at 12.5 m; sets Cox-Munk slopes and whitecaps"
@@ -115,11 +138,38 @@ class WaterSettings:
     )
 
     @property
+    def scattering_per_m(self) -> float:
+        """Scattering coefficient ``b = omega_0 c``."""
+        return self.single_scattering_albedo * self.extinction_per_m
+
+    @property
+    def kd_per_m(self) -> float:
+        """K_d: the scene's, or ``min(0.2 c + 0.04, c)`` (:mod:`pipeline.water_optics`)."""
+        if self.diffuse_attenuation_per_m is not None:
+            return self.diffuse_attenuation_per_m
+        return default_diffuse_attenuation_per_m(self.extinction_per_m)
+
+    def beta_180_per_m_sr(self, wavelength_nm: float) -> float:
+        """beta(180): the scene's, or from ``c`` and the albedo via the named phase functions."""
+        if self.backscatter_180_per_m_sr is not None:
+            return self.backscatter_180_per_m_sr
+        return default_backscatter_180_per_m_sr(
+            self.extinction_per_m, self.single_scattering_albedo, wavelength_nm
+        )
+
+    @property
     def has_layer(self) -> bool:
         """True when the scene has a scattering layer (``layer_depth_m > 0``)."""
         return self.layer_depth_m > 0.0
 
     def __post_init__(self) -> None:
+        kd = self.diffuse_attenuation_per_m
+        if kd is not None and kd > self.extinction_per_m:
+            raise SceneError(
+                f"`water.diffuse_attenuation_per_m` must be <= `water.extinction_per_m` = "
+                f"{self.extinction_per_m} (the lidar attenuation runs from c down to K_d); "
+                f"got {kd}."
+            )
         d, t, b = self.layer_depth_m, self.layer_thickness_m, self.layer_backscatter_per_m_sr
         if d > 0.0 and b <= 0.0:
             raise SceneError(

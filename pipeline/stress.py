@@ -225,8 +225,16 @@ _FAR = (
 CASES: tuple[StressCase, ...] = (
     StressCase(
         "baseline",
-        "the base scene: water 2-6 m deep and land",
-        expect=("class:40", "class:41", "class:45", "class:2", "grid_cells:5"),
+        "the base scene: water 0.5-18 m deep and land",
+        expect=("class:40", "class:41", "class:2", "grid_cells:5"),
+    ),
+    StressCase(
+        "penetration_edge",
+        "the base scene in c = 0.25 /m water: the bottom fades out along the line, the pulses"
+        " past it get class-45 limits (in the base's c = 0.15 /m every bottom is found since"
+        " the lidar attenuation follows the field of view, issue 12)",
+        overrides=(("water.extinction_per_m", 0.25),),
+        expect=("class:40", "class:45", "class:2"),
     ),
     StressCase(
         "grazing",

@@ -23,10 +23,17 @@ from typing import Any
 from pipeline import optics
 from pipeline.errors import SceneError
 from pipeline.process.refraction import RefractionSettings
+from pipeline.process.scatter_bias import attenuation_from_column, bias_model
 from pipeline.process.surface_fit import SurfaceFitSettings
 from pipeline.uncertainty.tpu import TpuSettings
 
-__all__ = ["Instrument", "ProcessingContext", "instrument", "processing_context"]
+__all__ = [
+    "Instrument",
+    "ProcessingContext",
+    "instrument",
+    "processing_context",
+    "with_measured_attenuation",
+]
 
 #: ``process.tpu`` keys taken over from the scene's instrument description when left unset:
 #: key -> (dotted scene key, function of the scene giving the value).
@@ -139,6 +146,9 @@ class ProcessingContext:
         The receiver, its response and its gate.
     sources : dict of str to str
         For each resolved key, ``"user"`` or the scene key or model it came from.
+    user_attenuation : bool
+        The user set ``process.forward_scatter.beam_attenuation_per_m`` (a measured one
+        does not replace it).
     """
 
     tpu: TpuSettings
@@ -146,6 +156,7 @@ class ProcessingContext:
     refraction: RefractionSettings
     instrument: Instrument
     sources: dict[str, str]
+    user_attenuation: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         """Values and sources, JSON-ready (the manifest's ``processing_context``)."""
@@ -206,16 +217,64 @@ def processing_context(scene) -> ProcessingContext:
     phase, group = ps.assumed_phase_index, ps.assumed_group_index
     sources["process.assumed_phase_index"] = "user" if phase is not None else model
     sources["process.assumed_group_index"] = "user" if group is not None else model
+    inst = instrument(scene, fit.air_index)
+    fs = ps.forward_scatter
+    fov = fs.receiver_fov_mrad
+    sources["process.forward_scatter.receiver_fov_mrad"] = (
+        "user" if fov is not None else "scanner.receiver_fov_mrad"
+    )
+    att = fs.beam_attenuation_per_m
+    sources["process.forward_scatter.beam_attenuation_per_m"] = (
+        "user" if att is not None else "process.forward_scatter.fallback_attenuation_per_m"
+    )
     refr = RefractionSettings(
         phase_index=float(phase if phase is not None else optics.water_phase_index(*water)),
         group_index=float(group if group is not None else optics.water_group_index(*water)),
         position_sigma_h_m=tpu.position_sigma_h_m,
         position_sigma_v_m=tpu.position_sigma_v_m,
+        forward_scatter=bias_model(
+            fs,
+            fov_mrad=float(fov if fov is not None else scene.scanner.receiver_fov_mrad),
+            system_fwhm_s=inst.system_fwhm_s,
+            sample_interval_s=0.0 if inst.photon_counting else inst.sample_interval_s,
+            trend_fwhm=ps.detect.trend_fwhm,
+            wavelength_nm=tpu.wavelength_nm,
+            attenuation_per_m=att if att is not None else fs.fallback_attenuation_per_m,
+        ),
     )
     return ProcessingContext(
         tpu=tpu,
         surface_fit=fit,
         refraction=refr,
-        instrument=instrument(scene, fit.air_index),
+        instrument=inst,
         sources=sources,
+        user_attenuation=att is not None,
     )
+
+
+def with_measured_attenuation(
+    ctx: ProcessingContext, column_decay_per_m: float | None, r_air_m: float
+) -> ProcessingContext:
+    """The context with the forward-scattering correction at the measured water's ``c``.
+
+    Only when the user gave no ``process.forward_scatter.beam_attenuation_per_m`` (theirs wins)
+    and the survey measured its column decay (``column_decay_per_m``, the median lidar decay
+    of the columns without a bottom, :mod:`pipeline.process.no_bottom`); ``c`` is the one
+    whose lidar decay at the median slant air range ``r_air_m`` matches it
+    (:func:`~pipeline.process.scatter_bias.attenuation_from_column`).
+    """
+    fs = ctx.refraction.forward_scatter
+    if fs is None or ctx.user_attenuation or column_decay_per_m is None:
+        return ctx
+    if not (math.isfinite(column_decay_per_m) and column_decay_per_m > 0.0):
+        return ctx
+    c = attenuation_from_column(column_decay_per_m, fs.fov_half_tan, r_air_m)
+    sources = dict(ctx.sources)
+    sources["process.forward_scatter.beam_attenuation_per_m"] = (
+        f"measured column decay {column_decay_per_m:.4f}/m through Gordon's bridge "
+        f"(K_d = 0.2 c + 0.04) at {r_air_m:.0f} m air range"
+    )
+    refr = dataclasses.replace(
+        ctx.refraction, forward_scatter=dataclasses.replace(fs, beam_attenuation_per_m=c)
+    )
+    return dataclasses.replace(ctx, refraction=refr, sources=sources)

@@ -145,5 +145,11 @@ def no_bottom_limits(
         "bottoms_used": int(cat["t_b"].size),
         "pulses_with_limit": int(np.count_nonzero(t > 0.0)),
         "pulses_without_measurable_column": int(np.count_nonzero(cat["none"] & ~cat["ok"])),
+        # the lidar attenuation k of the measured columns: C ~ exp(-2 k L), L = c t / (2 n_g)
+        "column_decay_per_m": (
+            float(np.median(cat["alpha"][cat["ok"]])) * det.group_index / SPEED_OF_LIGHT_M_S
+            if np.any(cat["ok"])
+            else None
+        ),
     }
     return np.where(t > 0.0, t_surface_s + t, 0.0), summary

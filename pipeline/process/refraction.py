@@ -14,6 +14,8 @@ Geometry per pulse with a bottom return (measured origin ``o``, unit direction `
     ``L = (c t_b / 2 - n_air r_e) / n_g``, the bottom time less the air path to the fitted
     entry point.
 
+* ``L`` less the forward-scattering range bias the bottom echo carries
+  (:mod:`pipeline.process.scatter_bias`, when ``forward_scatter`` is set).
 * Seabed point ``B = E + t L``; ``depth_m`` is the height of the local water plane at ``B``'s
   horizontal position minus ``B_z`` (vertical, positive down).
 
@@ -40,6 +42,7 @@ from pipeline.config import setting
 from pipeline.optics import SPEED_OF_LIGHT_M_S, refract_direction
 from pipeline.process.classify import ClassifySettings, classify_points
 from pipeline.process.returns import DetectedReturns, PointFlag, Points, ReturnKind
+from pipeline.process.scatter_bias import ScatterBiasModel, range_bias_m
 from pipeline.process.surface_fit import SurfaceFitSettings, WaterSurface, fit_water_surface
 
 __all__ = [
@@ -64,6 +67,8 @@ class RefractionSettings:
     pointing_sigma_deg: float = setting(0.005, ge=0.0, le=10.0, doc="beam pointing sigma")
     timing_sigma_s: float = setting(1e-10, ge=0.0, doc="per-return timing sigma if not given")
     group_index_sigma: float = setting(0.0, ge=0.0, doc="group index sigma")
+    # resolved by pipeline.process.context (process.forward_scatter); None: no correction
+    forward_scatter: ScatterBiasModel | None = None
 
 
 @dataclass(frozen=True)
@@ -149,6 +154,8 @@ def seabed_points(
         if refr.any():
             t_dir[refr], _ = refract_direction(d[refr], nrm[refr], na, nw)
         length = np.where(refr, length, 0.0)
+        # the forward-scattering delay makes the detected bottom late (process/scatter_bias.py)
+        length = length - range_bias_m(st.forward_scatter, length, r_e, na, nw, ng)
         xyz = np.where(refr[:, None], entry + t_dir * length[:, None], straight)
         sig_dt = np.where(own, np.hypot(sig_ts, sig_tb), sig_tb)
     else:

@@ -10,6 +10,7 @@ from pipeline.process.datum import DatumSettings
 from pipeline.process.detect import DetectSettings
 from pipeline.process.detect_photons import PhotonDetectSettings
 from pipeline.process.detection_limit import NoBottomSettings
+from pipeline.process.scatter_bias import ForwardScatterSettings
 from pipeline.process.surface_fit import SurfaceFitSettings
 from pipeline.uncertainty.posterior_settings import PosteriorSettings
 from pipeline.uncertainty.tpu import TpuSettings
@@ -49,6 +50,9 @@ class ProcessSettings:
         "auto",
         choices=("auto", "on", "off"),
         doc="class 64 points of in-column returns; auto: when the scene has a scattering layer",
+    )
+    forward_scatter: ForwardScatterSettings = setting(
+        ForwardScatterSettings(), doc="forward-scattering range bias of bottoms, corrected"
     )
     tpu: TpuSettings = setting(
         TpuSettings(

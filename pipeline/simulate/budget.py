@@ -22,30 +22,36 @@ Returns
   wider than the beam so sub-ray sampling converges.
 * **Land** (LAND sub-rays): Lambertian, ``rho cos(t) / pi``, ``rho`` a Table 1 graybody power
   reflectance (desert sand by default), range ``R``.
-* **Bottom**: ``T_down T_up exp(-2 c L) (rho_b / pi) cos(t_b)`` times the refracted aperture term
-  (:mod:`.geometry`).
-* **Water column**: ``T_down T_up beta(180) ∫ exp(-2 c l) dOmega_w(l) dl``; ``T_up`` by
-  reciprocity at the entry facet (unpolarised T air→water at the same angle pair), because the
-  trace stage only gives ``T_up`` for bottom returns. NO_BOTTOM sub-rays scatter until the end
-  of the window.
+* **Bottom**: ``T_down T_up T_w^2 (rho_b / pi) cos(t_b)`` times the refracted aperture term
+  (:mod:`.geometry`), ``T_w = exp(-∫ k dl)`` with the lidar attenuation ``k`` between ``c`` and
+  ``K_d`` set by the receiver's field of view (Gordon 1982, :mod:`pipeline.water_optics`;
+  ``returns.lidar_attenuation = "beam"``: ``k = c``, the single-scattering equation).
+* **Water column**: ``T_down T_up beta(180) ∫ exp(-2 k l) dOmega_w(l) dl``, ``k`` at the
+  field-of-view radius where the sub-ray enters the water (the radius grows by
+  ``tan(fov/2) n_a / n_w`` per metre, a few % over a column); ``T_up`` by reciprocity at the
+  entry facet (unpolarised T air→water at the same angle pair), because the trace stage only
+  gives ``T_up`` for bottom returns. NO_BOTTOM sub-rays scatter until the end of the window.
+  ``beta(180)``: the scene's, or from ``c`` through a named phase function
+  (:mod:`pipeline.water_optics`).
 * **Scattering layer** (optional, ``water.layer_depth_m > 0``): a horizontal slab of thickness
   ``T`` centred ``layer_depth_m`` below the mean water level (``water_surface.level_m``) that adds
   ``beta_L`` to the volume backscatter at 180°. Each wet sub-ray crosses it along its refracted
   ray between the in-water paths ``l1`` (top, or the surface) and ``l2`` (bottom of the slab, or
   the seabed when that comes first: a layer below the seabed gives no echo); its echo is the
-  column integral over that segment, ``T_down T_up beta_L ∫_l1^l2 exp(-2 c l) dOmega_w(l) dl``
-  (same reciprocity ``T_up``), one Gaussian per sub-ray. Model choices: the layer's own
-  extinction is neglected (optically thin layer: the bottom and column below it are not
-  dimmed), and its echo's time shape is a Gaussian with the segment's mean and variance.
+  column integral over that segment, ``T_down T_up beta_L ∫_l1^l2 exp(-2 k l) dOmega_w(l) dl``
+  (same reciprocity ``T_up``, ``k`` the chunk's median column attenuation), one Gaussian per
+  sub-ray. Model choices: the layer's own extinction is neglected (optically thin layer: the
+  bottom and column below it are not dimmed), and its echo's time shape is a Gaussian with the
+  segment's mean and variance, shifted and widened by the forward-scattering delay.
 
 Time: echoes at ``2 n_air R / c0`` and ``+ 2 n_g L / c0`` (group index in water). Gaussian
-widths ``sigma^2 = sigma_pulse^2 + sigma_detector^2 (+ sigma_fs^2)``; forward-scattering
-stretching of the bottom echo (model choice, from the small-angle multiple-scattering path
-excess ``b <theta^2> L^2 / 4`` per way): ``sigma_fs = xi (c L) (2 n_g L / c0)`` with
-``xi = (b/c) <theta^2> / 4 ~ 0.01`` for ``b/c ~ 0.8`` and ``<theta^2> ~ 0.05 rad^2``; it keeps
-the echo symmetric (the real stretched echo is skewed late). The column of a pulse is one
-component: N-weighted mean start, decay rate ``2c + d ln(dOmega_w)/dl`` and duration. The
-layer echo's timing and integral: :mod:`pipeline.simulate.layer`.
+widths ``sigma^2 = sigma_pulse^2 + sigma_detector^2``. Forward scattering
+(:mod:`pipeline.forward_scatter`, ``returns.forward_scatter = "small_angle"``) splits each bottom
+echo into the undelayed pulse and a tail, the pulse convolved with an exponential delay (a column-
+shaped component of unbounded width), so the echo is skewed late and its centroid delayed by
+the mean two-way excess path ``n_g kappa_1 / c0``. The column of a pulse is one component:
+N-weighted mean start, decay rate ``2k + d ln(dOmega_w)/dl`` and duration. The layer echo's
+timing and integral: :mod:`pipeline.simulate.layer`.
 """
 
 from __future__ import annotations
@@ -60,15 +66,17 @@ from pipeline import lidar_equation as le
 from pipeline import optics
 from pipeline.config import setting
 from pipeline.constants import FWHM_TO_SIGMA
+from pipeline.forward_scatter import bottom_delay, water_tables
 from pipeline.simulate import paths as P
 from pipeline.simulate.geometry import (
     LOG_ZERO,
+    column_aggregate,
     log_aperture_factor,
     log_column_integral,
     safe_log,
-    virtual_source_slopes,
 )
 from pipeline.simulate.layer import LayerEcho, layer_echo
+from pipeline.water_optics import scattering_split, water_attenuation
 
 __all__ = [
     "ReturnSettings",
@@ -77,7 +85,6 @@ __all__ = [
     "surface_mean_square_slope",
     "log_surface_backscatter_per_sr",
     "land_power_reflectance",
-    "forward_scatter_sigma_s",
     "LayerEcho",
     "layer_echo",
     "return_budget",
@@ -103,8 +110,16 @@ class ReturnSettings:
     resolved_mean_square_slope: float = setting(
         0.0, ge=0.0, le=1.0, doc="slope variance the water-surface mesh already carries"
     )
-    forward_scatter_coefficient: float = setting(
-        0.01, ge=0.0, le=1.0, doc="xi of the bottom-echo stretching xi (c L)(2 n_g L / c0)"
+    forward_scatter: str = setting(
+        "small_angle",
+        choices=("small_angle", "none"),
+        doc="bottom-echo delay by forward scattering (pipeline.forward_scatter)",
+    )
+    lidar_attenuation: str = setting(
+        "fov",
+        choices=("fov", "beam"),
+        doc="decay of bottom and column: 'fov' between c and K_d by the field of view "
+        "(Gordon 1982), 'beam' c",
     )
     full_overlap_range_m: float = setting(
         0.0, ge=0.0, le=1e5, doc="G(R) = overlap_factor (R / R_full)^2 below this range"
@@ -159,12 +174,6 @@ def land_power_reflectance(settings: ReturnSettings) -> float:
     return float(optics.graybody_power_reflectance(amp))
 
 
-def forward_scatter_sigma_s(xi, extinction_per_m, water_path_m, group_index):
-    """Forward-scattering stretch ``xi (c L)(2 n_g L / c0)`` of the bottom echo, seconds."""
-    length = np.asarray(water_path_m, dtype=np.float64)
-    return xi * extinction_per_m * length * (2.0 * group_index * length / C0)
-
-
 @dataclass(frozen=True)
 class ReturnBudget:
     """Expected photoelectrons (log) and time shapes, shapes ``(n_pulses, n_sub)`` unless stated.
@@ -185,7 +194,10 @@ class ReturnBudget:
     t_surface_s, sigma_surface_s : float64
         Centre and Gaussian sigma of the surface or land echo, seconds.
     t_bottom_s, sigma_bottom_s : float64
-        Centre and sigma of the bottom echo (0 where there is none).
+        Centre and sigma of the bottom echo's undelayed pulse (0 where there is none).
+    bottom_tail_weight, bottom_tail_s : float64
+        Share ``w`` of the bottom echo delayed by forward scattering and the mean ``tau`` (s)
+        of its exponential delay (:mod:`pipeline.forward_scatter`); 0 where there is none.
     column_log_pe, column_start_s, column_width_s, column_rate_per_s, column_sigma_s : (n_pulses,)
         The pulse's water column as one truncated-exponential-plus-Gaussian component.
     background_rate_hz : (n_pulses,) float64
@@ -209,6 +221,8 @@ class ReturnBudget:
     sigma_surface_s: np.ndarray
     t_bottom_s: np.ndarray
     sigma_bottom_s: np.ndarray
+    bottom_tail_weight: np.ndarray
+    bottom_tail_s: np.ndarray
     column_log_pe: np.ndarray
     column_start_s: np.ndarray
     column_width_s: np.ndarray
@@ -282,15 +296,16 @@ def return_budget(paths, scene, detector, settings: ReturnSettings | None = None
     detector : DetectorSettings
         For the window (sample rate, length, pre-trigger) and the detector's timing spread.
     settings : ReturnSettings, optional
+        Model choices; default the scene's ``returns`` table.
 
     Returns
     -------
     ReturnBudget
     """
-    rs = settings or ReturnSettings()
+    rs = settings or scene.returns
     n_a = scene.atmosphere.refractive_index
     water = scene.water
-    n_w, n_g, c_w = water.phase_index, water.group_index, water.extinction_per_m
+    n_w, n_g = water.phase_index, water.group_index
     flags = np.asarray(paths.flags)
     n, k = flags.shape
     wet = (flags & (P.MISS | P.LAND)) == 0
@@ -318,12 +333,15 @@ def return_budget(paths, scene, detector, settings: ReturnSettings | None = None
         land, base + safe_log(rho_land / math.pi) + safe_log(cos_a) + inv_r2, LOG_ZERO
     )
 
+    log_t_bot, k_col, radius0, radius_rate = water_attenuation(
+        scene, rs.lidar_attenuation, r_air, length
+    )
     cos_b = np.cos(np.clip(paths.bottom_incidence_rad, 0.0, 0.5 * np.pi))
     log_bot = (
         base
         + safe_log(paths.transmittance_down)
         + safe_log(paths.transmittance_up)
-        + 2.0 * optics.log_transmittance(c_w, length)
+        + 2.0 * log_t_bot
         + safe_log(scene.seabed.reflectance / math.pi)
         + safe_log(cos_b)
         + log_aperture_factor(np.where(bottom, r_air, 1.0), length, cos_a, n_a, n_w)
@@ -338,8 +356,15 @@ def return_budget(paths, scene, detector, settings: ReturnSettings | None = None
     sig_sys2 = (scene.system.pulse_fwhm_s * FWHM_TO_SIGMA) ** 2 + (
         detector.impulse_response_fwhm_s * FWHM_TO_SIGMA
     ) ** 2
-    sig_fs = forward_scatter_sigma_s(rs.forward_scatter_coefficient, c_w, length, n_g)
-    sig_bot = np.where(bottom, np.sqrt(sig_sys2 + sig_fs**2), 0.0)
+    sig_bot = np.where(bottom, math.sqrt(sig_sys2), 0.0)
+    fs = rs.forward_scatter == "small_angle"
+    if fs:
+        b_p, b_w = scattering_split(scene)
+        delay = bottom_delay(length, radius0 + radius_rate * length, (b_p, b_w), water_tables())
+        tail_w = np.where(bottom, delay.tail_weight, 0.0)
+        tail_s = np.where(bottom, delay.tail_mean_m * n_g / C0, 0.0)
+    else:
+        tail_w = tail_s = np.zeros((n, k))
     sig_surf = np.full((n, k), math.sqrt(sig_sys2))
     t_first = np.min(np.where(hit, t_surf, np.inf), axis=1)
     t_first = np.where(np.isfinite(t_first), t_first, detector.pre_trigger_s)
@@ -355,16 +380,20 @@ def return_budget(paths, scene, detector, settings: ReturnSettings | None = None
     log_col = (
         base
         + 2.0 * safe_log(np.where(wet, t_entry, 0.0))  # T_down and T_up by reciprocity
-        + safe_log(water.backscatter_180_per_m_sr)
-        + log_column_integral(c_w, col_len, np.where(wet, r_air, 1.0), cos_a, n_a, n_w)
+        + safe_log(water.beta_180_per_m_sr(scene.system.wavelength_nm))
+        + log_column_integral(k_col, col_len, np.where(wet, r_air, 1.0), cos_a, n_a, n_w)
     )
     log_col = np.where(wet & (col_len > 0.0), np.maximum(log_col, LOG_ZERO), LOG_ZERO)
-    col = _column_aggregate(log_col, t_surf, col_len, r_air, cos_a, c_w, n_a, n_w, n_g, sig_sys2)
+    col = column_aggregate(log_col, t_surf, col_len, r_air, cos_a, k_col, n_a, n_w, n_g, sig_sys2)
 
     # scattering layer: only when the scene has one, so layer-free budgets stay as they were
     layer = {}
     if water.has_layer:
-        lay = layer_echo(paths, water, scene.water_surface.level_m, n_a)
+        k_lay = float(np.median(k_col[wet])) if wet.any() else water.extinction_per_m
+        lay_water = dataclasses.replace(
+            water, extinction_per_m=k_lay, diffuse_attenuation_per_m=None
+        )
+        lay = layer_echo(paths, lay_water, scene.water_surface.level_m, n_a)
         log_lay = (
             base
             + 2.0 * safe_log(np.where(lay.present, t_entry, 0.0))  # T_down, T_up (reciprocity)
@@ -372,14 +401,16 @@ def return_budget(paths, scene, detector, settings: ReturnSettings | None = None
             + lay.log_integral
         )
         to_time = 2.0 * n_g / C0
-        sig_fs_l = forward_scatter_sigma_s(
-            rs.forward_scatter_coefficient, c_w, lay.path_mean_m, n_g
-        )
+        d_mean = d_var = 0.0
+        if fs:  # the layer's photons are delayed like the bottom's, as a Gaussian shift
+            lay_r = radius0 + radius_rate * lay.path_mean_m
+            d = bottom_delay(lay.path_mean_m, lay_r, (b_p, b_w), water_tables())
+            d_mean, d_var = 0.5 * to_time * d.mean_m, (0.5 * to_time) ** 2 * d.var_m2
         layer = {
             "log_layer": np.where(lay.present, np.maximum(log_lay, LOG_ZERO), LOG_ZERO),
-            "t_layer_s": np.where(lay.present, t_surf + to_time * lay.path_mean_m, 0.0),
+            "t_layer_s": np.where(lay.present, t_surf + to_time * lay.path_mean_m + d_mean, 0.0),
             "sigma_layer_s": np.where(
-                lay.present, np.sqrt(sig_sys2 + to_time**2 * lay.path_var_m2 + sig_fs_l**2), 0.0
+                lay.present, np.sqrt(sig_sys2 + to_time**2 * lay.path_var_m2 + d_var), 0.0
             ),
         }
 
@@ -410,36 +441,9 @@ def return_budget(paths, scene, detector, settings: ReturnSettings | None = None
         sigma_surface_s=sig_surf,
         t_bottom_s=t_bot,
         sigma_bottom_s=sig_bot,
+        bottom_tail_weight=tail_w,
+        bottom_tail_s=tail_s,
         background_rate_hz=np.asarray(bg, dtype=np.float64),
         **col,
         **layer,
     )
-
-
-def _column_aggregate(log_col, t_surf, col_len, r_air, cos_a, c_w, n_a, n_w, n_g, sig_sys2):
-    """One column component per pulse: N-weighted start, duration, decay rate and blur."""
-    lmax = np.max(log_col, axis=1)
-    present = log_col > LOG_ZERO / 2
-    q = np.where(present, np.exp(log_col - lmax[:, None]), 0.0)  # relative: never overflows
-    qsum = q.sum(axis=1)
-    has = qsum > 0.0
-    wq = q / np.where(has, qsum, 1.0)[:, None]
-    log_total = np.where(has, lmax + np.log(np.where(has, qsum, 1.0)), LOG_ZERO)
-    start = (wq * t_surf).sum(axis=1)
-    spread2 = (wq * (t_surf - start[:, None]) ** 2).sum(axis=1)
-    to_time = 2.0 * n_g / C0  # seconds per metre of in-water path, two-way
-    width = (wq * col_len).sum(axis=1) * to_time
-    # decay per metre: 2c plus the slope of the aperture term at the mean scattering depth
-    s = 2.0 * c_w
-    mean_l = np.minimum(1.0 / s if s > 0 else np.inf, 0.5 * col_len)
-    k_t, k_s = virtual_source_slopes(cos_a, n_a, n_w)
-    r = np.where(present, r_air, 1.0)
-    gamma = np.where(present, k_t / (r + k_t * mean_l) + k_s / (r + k_s * mean_l), 0.0)
-    rate = (wq * (s + gamma)).sum(axis=1) / to_time
-    return {
-        "column_log_pe": log_total,
-        "column_start_s": start,
-        "column_width_s": width,
-        "column_rate_per_s": rate,
-        "column_sigma_s": np.sqrt(sig_sys2 + spread2),
-    }

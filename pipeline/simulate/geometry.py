@@ -33,6 +33,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import exp1
 
+from pipeline.optics import SPEED_OF_LIGHT_M_S as C0
+
 __all__ = [
     "LOG_ZERO",
     "safe_log",
@@ -40,6 +42,7 @@ __all__ = [
     "virtual_source_slopes",
     "log_aperture_factor",
     "log_column_integral",
+    "column_aggregate",
 ]
 
 #: ln of "no photons": finite, so sums and differences of log terms never give NaN. Every real
@@ -249,3 +252,37 @@ def log_column_integral(
         out[thin] = np.log(_thin(s[thin], length[thin], r[thin], k_t[thin], k_s[thin]))
     out[ok] += _log_prefactor(cos_a[ok], n_air, n_water)
     return np.maximum(out, LOG_ZERO).reshape(shape)
+
+
+def column_aggregate(log_col, t_surf, col_len, r_air, cos_a, k_col, n_a, n_w, n_g, sig_sys2):
+    """One column component per pulse: N-weighted start, duration, decay rate and blur.
+
+    ``log_col`` (n, k) are the sub-rays' ln expected column photoelectrons, ``k_col`` their
+    attenuation (1/m); returns the ``column_*`` fields of
+    :class:`~pipeline.simulate.budget.ReturnBudget`.
+    """
+    lmax = np.max(log_col, axis=1)
+    present = log_col > LOG_ZERO / 2
+    q = np.where(present, np.exp(log_col - lmax[:, None]), 0.0)  # relative: never overflows
+    qsum = q.sum(axis=1)
+    has = qsum > 0.0
+    wq = q / np.where(has, qsum, 1.0)[:, None]
+    log_total = np.where(has, lmax + np.log(np.where(has, qsum, 1.0)), LOG_ZERO)
+    start = (wq * t_surf).sum(axis=1)
+    spread2 = (wq * (t_surf - start[:, None]) ** 2).sum(axis=1)
+    to_time = 2.0 * n_g / C0  # seconds per metre of in-water path, two-way
+    width = (wq * col_len).sum(axis=1) * to_time
+    # decay per metre: 2k plus the slope of the aperture term at the mean scattering depth
+    s = 2.0 * np.asarray(k_col, dtype=np.float64)
+    mean_l = np.minimum(1.0 / np.where(s > 0, s, 1e-300), 0.5 * col_len)
+    k_t, k_s = virtual_source_slopes(cos_a, n_a, n_w)
+    r = np.where(present, r_air, 1.0)
+    gamma = np.where(present, k_t / (r + k_t * mean_l) + k_s / (r + k_s * mean_l), 0.0)
+    rate = (wq * (s + gamma)).sum(axis=1) / to_time
+    return {
+        "column_log_pe": log_total,
+        "column_start_s": start,
+        "column_width_s": width,
+        "column_rate_per_s": rate,
+        "column_sigma_s": np.sqrt(sig_sys2 + spread2),
+    }

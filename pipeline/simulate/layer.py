@@ -35,7 +35,7 @@ from pipeline.simulate.geometry import (
     virtual_source_slopes,
 )
 
-__all__ = ["LayerEcho", "layer_echo"]
+__all__ = ["LayerEcho", "layer_echo", "truncated_exponential_moments"]
 
 C0 = optics.SPEED_OF_LIGHT_M_S
 #: Gauss-Legendre rule on (0, 1) for the layer integral's expectation (see module Notes).
@@ -63,7 +63,7 @@ class LayerEcho:
     path_var_m2: np.ndarray
 
 
-def _truncated_exponential_moments(rate, width):
+def truncated_exponential_moments(rate, width):
     """Mean and variance of ``rate exp(-rate x)`` truncated to ``[0, width]``, no cancellation.
 
     With ``y = rate width``: mean ``width (1/y - e^-y / (1 - e^-y))`` and variance
@@ -136,7 +136,7 @@ def layer_echo(paths, water, level_m: float, n_air: float) -> LayerEcho:
     var_h = (w * (x - mean_h) ** 2).sum(axis=0) / wsum
     mean_0 = (_LAYER_W[:, None, None] * x).sum(axis=0)
     var_0 = (_LAYER_W[:, None, None] * (x - mean_0) ** 2).sum(axis=0)
-    exact_mean, exact_var = _truncated_exponential_moments(s, width)
+    exact_mean, exact_var = truncated_exponential_moments(s, width)
     mean_x = exact_mean + (mean_h - mean_0)
     var = exact_var + (var_h - var_0)
     # ∫_l1^l2 exp(-s l) dl = exp(-s l1) (1 - exp(-s w)) / s, and w itself when s = 0

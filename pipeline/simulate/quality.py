@@ -14,6 +14,8 @@ import numpy as np
 from pipeline.constants import FWHM_TO_SIGMA
 from pipeline.simulate import detector as D
 from pipeline.simulate import paths as P
+from pipeline.simulate.layer import truncated_exponential_moments
+from pipeline.simulate.photon import KIND_COLUMN
 from pipeline.simulate.shapes import column_cdf
 
 if TYPE_CHECKING:
@@ -32,15 +34,21 @@ def return_stats(comps: Components, ctype: np.ndarray, t, present=None):
     sel = ctype == t
     n_j = comps.expected[:, sel]
     tot = n_j.sum(axis=1)
+    # column-shaped components (delayed bottom tails): start + the exponential's moments
+    col_w = np.where(comps.kind[:, sel] == KIND_COLUMN, comps.width_s[:, sel], 0.0)
+    shift, extra = truncated_exponential_moments(comps.rate_per_s[:, sel], col_w)
+    centre = comps.centre_s[:, sel] + shift
+    var_j = comps.sigma_s[:, sel] ** 2 + extra
     if present is not None:
+        present = np.tile(present, (1, n_j.shape[1] // present.shape[1]))
         fallback = present / np.maximum(present.sum(axis=1, keepdims=True), 1)
         n_j = np.where((tot > 0)[:, None], n_j, fallback)
         tot_w = n_j.sum(axis=1)
     else:
         tot_w = tot
     w = n_j / np.where(tot_w > 0, tot_w, 1.0)[:, None]
-    mu = (w * comps.centre_s[:, sel]).sum(axis=1)
-    var = (w * (comps.sigma_s[:, sel] ** 2 + (comps.centre_s[:, sel] - mu[:, None]) ** 2)).sum(1)
+    mu = (w * centre).sum(axis=1)
+    var = (w * (var_j + (centre - mu[:, None]) ** 2)).sum(1)
     return tot, mu, np.sqrt(var)
 
 

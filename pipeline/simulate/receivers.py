@@ -70,16 +70,15 @@ def _width_groups(sigma_s, sel):
 
 
 def _add_column(out, comps, t0, dt, m):
-    """Add the water-column components (the last but one column) to ``out`` in place."""
-    col = int(np.flatnonzero(comps.kind[0] == KIND_COLUMN)[0])
-    p = np.flatnonzero(comps.expected[:, col] > 0.0)
-    if p.size == 0:
-        return
-    x0 = t0[p] - 0.5 * dt - comps.centre_s[p, col]
-    prob = column_bin_integrals(
-        x0, dt, m, comps.rate_per_s[p, col], comps.width_s[p, col], comps.sigma_s[p, col]
-    )
-    out[p] += comps.expected[p, col][:, None] * prob
+    """Add the column-shaped components (water column, delayed bottom tails) to ``out``."""
+    is_col = (comps.kind == KIND_COLUMN) & (comps.expected > 0.0)
+    for col in np.flatnonzero(is_col.any(axis=0)):
+        p = np.flatnonzero(is_col[:, col])
+        x0 = t0[p] - 0.5 * dt - comps.centre_s[p, col]
+        prob = column_bin_integrals(
+            x0, dt, m, comps.rate_per_s[p, col], comps.width_s[p, col], comps.sigma_s[p, col]
+        )
+        out[p] += comps.expected[p, col][:, None] * prob
 
 
 def expected_samples(comps: Components, t0_s: np.ndarray, dt: float, m: int) -> np.ndarray:
@@ -101,8 +100,7 @@ def expected_samples(comps: Components, t0_s: np.ndarray, dt: float, m: int) -> 
     gauss = (comps.expected > 0.0) & (comps.kind == KIND_GAUSS)
     for group in _width_groups(comps.sigma_s, gauss):
         _add_gauss(out, comps, group, t0_s, dt, m)
-    if np.any(comps.kind[0] == KIND_COLUMN):
-        _add_column(out, comps, t0_s, dt, m)
+    _add_column(out, comps, t0_s, dt, m)
     uni = np.where(comps.kind == KIND_UNIFORM, comps.expected, 0.0).sum(axis=1)
     out += (uni / m)[:, None]
     return out

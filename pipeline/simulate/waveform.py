@@ -151,12 +151,31 @@ def _exp(log_pe):
 RETURNS = ("surface", "land", "bottom", "layer", "column", "background")
 
 
+#: A delay tail shorter than this many pulse sigmas is a Gaussian with the tail's mean and
+#: variance (skewness below 0.02); longer ones are the pulse convolved with the exponential.
+TAIL_MIN_SIGMAS = 0.2
+#: The exponential tail is a column shape truncated at this many means (e^-40: untruncated).
+TAIL_SPAN_MEANS = 40.0
+
+
+def _bottom_tail(t_bottom_s, sigma_s, tau_s):
+    """(centre, sigma, kind, rate, width) of the delayed part of each bottom echo."""
+    long_ = tau_s >= TAIL_MIN_SIGMAS * sigma_s
+    kind = np.where(long_, KIND_COLUMN, KIND_GAUSS)
+    centre = np.where(long_, t_bottom_s, t_bottom_s + tau_s)
+    sigma = np.where(long_, sigma_s, np.sqrt(sigma_s**2 + tau_s**2))
+    safe = np.where(long_, tau_s, 1.0)
+    rate = np.where(long_, 1.0 / safe, 0.0)
+    width = np.where(long_, TAIL_SPAN_MEANS * safe, 0.0)
+    return centre, sigma, kind, rate, width
+
+
 def build_components(budget: ReturnBudget, include=RETURNS) -> tuple[Components, np.ndarray]:
     """Components ``(n_pulses, g n_sub + 2)`` of every pulse, and the type of each component.
 
-    ``g`` is 2 (surface-or-land and bottom Gaussians per sub-ray), or 3 when the budget has a
-    scattering layer (its Gaussians follow the bottom's). The column and the background stay
-    the last two components.
+    ``g`` is 3 (surface-or-land Gaussian, undelayed bottom Gaussian and delayed bottom tail per
+    sub-ray, :func:`_bottom_tail`), or 4 when the budget has a scattering layer (its Gaussians
+    follow the bottom's). The column and the background stay the last two components.
 
     Parameters
     ----------
@@ -176,35 +195,37 @@ def build_components(budget: ReturnBudget, include=RETURNS) -> tuple[Components,
     bottom = _exp(budget.log_bottom) * ("bottom" in include)
     column = _exp(budget.column_log_pe) * ("column" in include)
     bg = budget.background_rate_hz * budget.window_length_s * ("background" in include)
-    gauss_pe = [surf, bottom]
-    centres = [budget.t_surface_s, budget.t_bottom_s]
-    sigmas = [
-        budget.sigma_surface_s,
-        np.where(budget.sigma_bottom_s > 0, budget.sigma_bottom_s, 1.0),
-    ]
-    types = [np.zeros(k), np.ones(k)]
+    sig_b = np.where(budget.sigma_bottom_s > 0, budget.sigma_bottom_s, 1.0)
+    w = budget.bottom_tail_weight
+    tail = _bottom_tail(budget.t_bottom_s, sig_b, budget.bottom_tail_s)
+    gauss_pe = [surf, bottom * (1.0 - w), bottom * w]
+    centres = [budget.t_surface_s, budget.t_bottom_s, tail[0]]
+    sigmas = [budget.sigma_surface_s, sig_b, tail[1]]
+    types = [np.zeros(k), np.ones(k), np.ones(k)]
+    kinds = [np.full((n, k), KIND_GAUSS), np.full((n, k), KIND_GAUSS), tail[2]]
+    rates = [np.zeros((n, k)), np.zeros((n, k)), tail[3]]
+    widths = [np.zeros((n, k)), np.zeros((n, k)), tail[4]]
     if budget.has_layer:
         gauss_pe.append(_exp(budget.log_layer) * ("layer" in include))
         centres.append(budget.t_layer_s)
         sigmas.append(np.where(budget.sigma_layer_s > 0, budget.sigma_layer_s, 1.0))
         types.append(np.full(k, TYPES.index("layer")))
-    g = len(gauss_pe) * k
-    expected = np.concatenate([*gauss_pe, column[:, None], bg[:, None]], axis=1)
-    kind = np.r_[np.full(g, KIND_GAUSS), KIND_COLUMN, KIND_UNIFORM].astype(np.int8)
+        kinds.append(np.full((n, k), KIND_GAUSS))
+        rates.append(np.zeros((n, k)))
+        widths.append(np.zeros((n, k)))
     zeros = np.zeros((n, 1))
+    expected = np.concatenate([*gauss_pe, column[:, None], bg[:, None]], axis=1)
+    kind = np.concatenate([*kinds, zeros + KIND_COLUMN, zeros + KIND_UNIFORM], axis=1)
     comps = Components(
         expected=expected,
-        kind=np.broadcast_to(kind, (n, g + 2)),
+        kind=kind.astype(np.int8),
         centre_s=np.concatenate(
             [*centres, budget.column_start_s[:, None], budget.window_start_s[:, None]], axis=1
         ),
         sigma_s=np.concatenate([*sigmas, budget.column_sigma_s[:, None], zeros + 1.0], axis=1),
-        rate_per_s=np.concatenate(
-            [np.zeros((n, g)), budget.column_rate_per_s[:, None], zeros], axis=1
-        ),
+        rate_per_s=np.concatenate([*rates, budget.column_rate_per_s[:, None], zeros], axis=1),
         width_s=np.concatenate(
-            [np.zeros((n, g)), budget.column_width_s[:, None], zeros + budget.window_length_s],
-            axis=1,
+            [*widths, budget.column_width_s[:, None], zeros + budget.window_length_s], axis=1
         ),
     )
     ctype = np.r_[np.concatenate(types), 2, 3].astype(np.int64)

@@ -11,6 +11,7 @@ Cost: see ``benchmarks/RESULTS_posterior.md`` (a few tenths of a second per puls
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 from dataclasses import dataclass
@@ -204,6 +205,11 @@ def seabed_posteriors(
     """
     st = settings or PosteriorSettings()
     rst = refraction_settings or RefractionSettings()
+    if rst.forward_scatter is not None:
+        # the posterior's symmetric echo model centres a skewed echo where a Gaussian fit
+        # does, not where the detector does: its own forward-scattering correction
+        fs = dataclasses.replace(rst.forward_scatter, estimator="gaussian_fit")
+        rst = dataclasses.replace(rst, forward_scatter=fs)
     y = np.asarray(samples, dtype=np.float64)
     t0 = np.asarray(t0_s, dtype=np.float64)
     n = len(returns)

@@ -103,13 +103,17 @@ def monte_carlo_points(
             range_to_entry_m=np.where(water, r, inp.surf.range_to_entry_m),
             normal=np.where(w, nrm, inp.surf.normal),
         )
-        dt_, ds_ = rng.standard_normal(2)
+        dt_, ds_, dfs = rng.standard_normal(3)
         (tp, tg), (sp, sg) = deriv["temperature"], deriv["salinity"]
         dtemp, dsal = st.temperature_sigma_c * dt_, st.salinity_sigma_psu * ds_
+        fs = rst.forward_scatter
+        if fs is not None:  # the correction wrong by its relative sigma, survey-wide
+            fs = dataclasses.replace(fs, scale=fs.scale * (1.0 + fs.relative_sigma * dfs))
         r_set = dataclasses.replace(
             rst,
             phase_index=rst.phase_index + tp * dtemp + sp * dsal,
             group_index=rst.group_index + tg * dtemp + sg * dsal,
+            forward_scatter=fs,
         )
         p = seabed_points(ret, surf, r_set)
         out[k, :, :3] = p.xyz_m

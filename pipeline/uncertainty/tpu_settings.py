@@ -39,6 +39,7 @@ CORRELATED_TERMS = (
     "surface_tilt_y",
     "temperature",
     "salinity",
+    "forward_scatter",
 )
 #: The terms of the return timing (the part the detector's noise sets).
 TIMING_TERMS = ("timing_surface", "timing_bottom")

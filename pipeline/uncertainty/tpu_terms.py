@@ -226,6 +226,23 @@ def _footprint(inp: _Inputs, xyz: np.ndarray, st: TpuSettings) -> np.ndarray:
     return gamma * (r_air + in_water / inp.rst.phase_index) / 4.0
 
 
+def _forward_scatter_term(inp: _Inputs, n: int) -> np.ndarray:
+    """The forward-scattering correction wrong by its ``relative_sigma`` (n, 4).
+
+    One water for the whole survey, so a correlated term; zeros without a correction.
+    """
+    fs = inp.rst.forward_scatter
+    if n == 0 or fs is None or fs.relative_sigma == 0.0:
+        return np.zeros((n, 4))
+    h = 0.01
+
+    def scaled(sign):
+        model = dataclasses.replace(fs, scale=fs.scale * (1.0 + sign * h))
+        return _xyzd(inp, rst=dataclasses.replace(inp.rst, forward_scatter=model))
+
+    return _at_measured((scaled(1.0) - scaled(-1.0)) / (2.0 * h) * fs.relative_sigma, inp.grad)
+
+
 def _terms(inp: _Inputs, st: TpuSettings, names=None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """The nominal points ``(n, 4)`` and the one-sigma term rows ``(n, 4)`` asked for."""
     n = len(inp.row)
@@ -261,6 +278,8 @@ def _terms(inp: _Inputs, st: TpuSettings, names=None) -> tuple[np.ndarray, dict[
             return _xyzd(inp, rst=r)
 
         terms[name] = _at_measured((shifted(1.0) - shifted(-1.0)) / (2.0 * h) * sig, inp.grad)
+    if "forward_scatter" in want:
+        terms["forward_scatter"] = _forward_scatter_term(inp, n)
     # rigid motions of the whole measured scene (exact): a rotation w about the origin keeps
     # the distance from the point to its (rotated) plane, N . (E - B); the depth is that over
     # N_z, so it changes by -depth (w x N)_z / N_z

@@ -78,13 +78,12 @@ def test_nadir_layer_echo_equals_hand_lidar_equation(bottom_m, layer_m, thick_m,
     # 1e-6: the brief's bound for the budget terms; the 6-node rule is exact to ~1e-12 here
     assert sums["layer"][0] == pytest.approx(ref, rel=1e-6)
     assert b.totals()["layer"][0] == pytest.approx(ref, rel=1e-6)
-    # timing: the echo's mean path at the group speed; width: pulse, detector, the slab's
-    # spread of paths and the forward-scattering stretch at the mean path
+    # timing: the echo's mean path at the group speed; width: pulse, detector and the slab's
+    # spread of paths (the frozen test scene has no forward-scattering delay)
     to_time = 2 * w.group_index / C_LIGHT
     assert b.t_layer_s[0, 0] - b.t_surface_s[0, 0] == pytest.approx(to_time * mean, rel=1e-9)
     sig2 = (sysm.pulse_fwhm_s * SIGMA_PER_FWHM) ** 2 + (1e-9 * SIGMA_PER_FWHM) ** 2
-    fs = scene.returns.forward_scatter_coefficient * c * mean * to_time * mean
-    assert b.sigma_layer_s[0, 0] ** 2 == pytest.approx(sig2 + to_time**2 * var + fs**2, rel=1e-9)
+    assert b.sigma_layer_s[0, 0] ** 2 == pytest.approx(sig2 + to_time**2 * var, rel=1e-9)
 
 
 def test_layer_echo_sums_over_slant_subrays():
@@ -128,7 +127,8 @@ def test_layer_only_adds_components():
     c0, t0 = W.build_components(plain)
     c1, t1 = W.build_components(layered)
     keep = t1 != W.TYPES.index("layer")
-    assert t0.size == 4 and t1.size == 5 and np.array_equal(t1[keep], t0)
+    # per sub-ray: surface, undelayed bottom, delayed bottom tail (+ layer); column, background
+    assert t0.size == 5 and t1.size == 6 and np.array_equal(t1[keep], t0)
     for f in dataclasses.fields(c0):
         assert np.array_equal(getattr(c1, f.name)[:, keep], getattr(c0, f.name)), f.name
     # the layer below the 2 m seabed gives nothing; the others are in the layer

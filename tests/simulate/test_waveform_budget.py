@@ -274,19 +274,6 @@ def test_budget_does_not_modify_paths():
     assert all(np.array_equal(before[k], v) for k, v in vars(paths).items())
 
 
-def test_forward_scatter_widens_but_keeps_bottom_energy():
-    scene = clean_scene(extinction_per_m=0.2, backscatter_180_per_m_sr=0.0)
-    paths = flat_paths(1, altitude_m=300.0, depth_m=20.0, air_index=1.0)
-    wide = ReturnSettings(forward_scatter_coefficient=0.05)
-    b0, s0 = _sums(paths, scene, rs=ReturnSettings(forward_scatter_coefficient=0.0))
-    b1, s1 = _sums(paths, scene, rs=wide)
-    assert b1.sigma_bottom_s[0, 0] > 3 * b0.sigma_bottom_s[0, 0]
-    sig_fs = 0.05 * 0.2 * 20.0 * (2 * scene.water.group_index * 20.0 / C_LIGHT)
-    assert b1.sigma_bottom_s[0, 0] ** 2 == pytest.approx(b0.sigma_bottom_s[0, 0] ** 2 + sig_fs**2)
-    # 1e-6: the stretched echo still lies inside the 1.2 us window (8.5 sigma)
-    assert s1["bottom"][0] == pytest.approx(s0["bottom"][0], rel=1e-6)
-
-
 def test_noisy_bottom_energy_fit_recovers_2k():
     # the same law measured on digitised, noisy waveforms: bottom energy = sum of
     # (samples - baseline) / G around the bottom echo (no column, no sun: nothing else there)

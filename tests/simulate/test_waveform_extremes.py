@@ -79,10 +79,19 @@ CASES = {
 }
 
 
+#: the frozen scene's single-scattering physics, and the field-of-view attenuation with the
+#: forward-scattering delay (issue 12)
+PHYSICS = {
+    "single": {},
+    "fov_delay": {"returns": {"lidar_attenuation": "fov", "forward_scatter": "small_angle"}},
+}
+
+
+@pytest.mark.parametrize("physics", list(PHYSICS))
 @pytest.mark.parametrize("name", list(CASES))
-def test_extreme_case_is_finite_and_flagged(name):
+def test_extreme_case_is_finite_and_flagged(name, physics):
     sections, kw, transform, det_kw, required = CASES[name]
-    scene = make_scene(**sections)
+    scene = make_scene(**sections, **PHYSICS[physics])
     args = {"altitude_m": 300.0, "depth_m": 8.0}
     args.update(kw)
     paths = flat_paths(4, n_sub=1, **args)

@@ -34,15 +34,23 @@ def make_scene(**sections):
     return parse_scene(data)
 
 
-def clean_scene(**water):
-    """Flat calm-ish water, no sun, air index 1 (for comparisons with nadir_budget)."""
+def clean_scene(returns=None, **water):
+    """Flat calm-ish water, no sun, air index 1 (for comparisons with nadir_budget).
+
+    The single-scattering lidar equation of the reference document: beam attenuation ``c`` and
+    no forward-scattering delay, unless ``returns`` says otherwise (the field-of-view attenuation
+    and the delay have their own tests against independent references).
+    """
     w = {"extinction_per_m": 0.15, "backscatter_180_per_m_sr": 2e-3, "wind_speed_m_s": 5.0}
     w.update(water)
+    rs = {"lidar_attenuation": "beam", "forward_scatter": "none"}
+    rs.update(returns or {})
     return make_scene(
         atmosphere={"extinction_per_m": 1.5e-4, "refractive_index": 1.0},
         water=w,
         background={"solar_irradiance_w_m2_nm": 0.0},
         system={"dark_count_rate_hz": 0.0},
+        returns=rs,
     )
 
 
