@@ -44,9 +44,18 @@ from scipy import special, stats
 from pipeline import optics
 from pipeline.config import setting
 from pipeline.process.detect import WaveformDetections, flank_trend
+from pipeline.process.photon_livetime import (
+    bin_live_fraction,
+    dead_height_m,
+    event_live_fraction,
+)
 from pipeline.process.returns import DetectorFlag
 
 __all__ = ["PhotonDetectSettings", "detect_photon_events"]
+
+#: live share of a bin's shot-channels from which its counts measure the rate: below it the
+#: dead time after a strong echo has blinded most shots, and an empty bin shows no dip
+MEASURED_LIVE_FRACTION = 0.5
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -156,6 +165,7 @@ def detect_photon_events(
     settings: PhotonDetectSettings | None = None,
     pulse_id: np.ndarray | None = None,
     n_channels: int = 1,
+    dead_time_s: float = 0.0,
 ) -> WaveformDetections:
     """Surface and bottom per shot from photon events accumulated along track.
 
@@ -175,6 +185,11 @@ def detect_photon_events(
         split into chunks (of whole windows) gives the same windows as one piece.
     n_channels : int
         Detector channels per beam (the datasheet's): each records one event per dead time.
+    dead_time_s : float
+        Dead time per channel (the datasheet's). Histograms and centroids are live-time
+        corrected (:mod:`pipeline.process.photon_livetime`): each event counts ``1 / L``, ``L``
+        the window's share of channels live at its height, and the significance of a box
+        compares its recorded counts with the expected rate times the box's live share.
 
     Returns
     -------
@@ -210,7 +225,13 @@ def detect_photon_events(
     k0 = int(k_abs.min()) - pad
     nb = int(k_abs.max()) + pad - k0 + 1
     b = k_abs - k0
-    hist = np.bincount(ev_win * nb + b, minlength=n_win * nb).reshape(n_win, nb).astype(float)
+    # live-time (Coates) correction: recorded counts over the live share of the shot-channels
+    shots_w = np.bincount(window, minlength=n_win)
+    tau_h = dead_height_m(dead_time_s, n_air, direction[shot, 2])
+    w_ev = 1.0 / event_live_fraction(ev_win, z, tau_h, shots_w, n_channels)
+    live = bin_live_fraction(ev_win, z, tau_h, k0 * s.bin_m, s.bin_m, nb, shots_w, n_channels)
+    raw = np.bincount(ev_win * nb + b, minlength=n_win * nb).reshape(n_win, nb).astype(float)
+    hist = np.bincount(ev_win * nb + b, weights=w_ev, minlength=n_win * nb).reshape(n_win, nb)
     bg = _background(hist)
     # the look-elsewhere count of each window: the bins of its own range gate (its events'
     # span, as the background's), not the chunk's histogram
@@ -220,18 +241,27 @@ def detect_photon_events(
     rows = np.arange(n_win)
     col = np.arange(nb)[None, :]
     # counts of a return spread over neighbouring bins: test the sum over the centroid window
-    csum = np.concatenate([np.zeros((n_win, 1)), np.cumsum(hist, axis=1)], axis=1)
+    # (corrected counts, recorded counts, live share): the recorded counts of a box are Poisson
+    # of the rate times its live share, so significances use those two
+    csum = [
+        np.concatenate([np.zeros((n_win, 1)), np.cumsum(a, axis=1)], axis=1)
+        for a in (hist, raw, live)
+    ]
 
-    def box_sum(lo, hi):
-        """Counts in bins ``[lo, hi]`` per window and bin (clipped to the histogram)."""
+    def box_sum(lo, hi, which=0):
+        """Sums over bins ``[lo, hi]`` per window and bin (clipped to the histogram)."""
         lo, hi = np.clip(lo, 0, nb), np.clip(hi + 1, 0, nb)
-        return np.take_along_axis(csum, hi, axis=1) - np.take_along_axis(
-            csum, np.minimum(lo, hi), axis=1
+        cs = csum[which]
+        return np.take_along_axis(cs, hi, axis=1) - np.take_along_axis(
+            cs, np.minimum(lo, hi), axis=1
         )
 
     full = np.broadcast_to(col, (n_win, nb))
     box = box_sum(full - cb, full + cb)
-    sig_box = _significance(box, bg_safe[:, None] * (2 * cb + 1), n_searched)
+    box_live = box_sum(full - cb, full + cb, 2)
+    sig_box = _significance(
+        box_sum(full - cb, full + cb, 1), bg_safe[:, None] * box_live, n_searched
+    )
     # Surface: the FIRST significant return from above (the highest bin), not the strongest:
     # at 532 nm a shallow seabed can return more photons than the water surface.
     top = np.where(sig_box >= s.threshold_sigma, col, -1).max(axis=1)
@@ -258,38 +288,56 @@ def detect_photon_events(
     # the water-column return decays smoothly below the surface: a bottom must stand out of
     # its local level (the larger mean of the flanking bins, the surface box left out), not
     # only of the background
+    # bins the dead time left (nearly) blind hold no measurement: not a level, not a dip
+    measured = live >= MEASURED_LIVE_FRACTION
     local = np.maximum(
-        flank_trend(hist, gap=cb + 1, length=s.trend_bins, valid=span & (col < s_lo[:, None])),
+        flank_trend(
+            hist, gap=cb + 1, length=s.trend_bins, valid=span & measured & (col < s_lo[:, None])
+        ),
         bg_safe[:, None],
     )
     # the candidate's box stops short of the surface box, so the surface tail is not counted
     hi_b = np.minimum(full + cb, s_lo[:, None] - 1)
-    box_b = box_sum(full - cb, hi_b)
-    n_b = np.maximum(hi_b - (full - cb) + 1, 1)
+    box_b = box_sum(full - cb, hi_b, 1)
+    n_b = np.maximum(box_sum(full - cb, hi_b, 2), 1e-9)  # live bins of the box
     # ... and it must stand out of the emptiest bin between its box and the surface: the
-    # falling tail of the surface echo has no such dip and so never passes as a bottom
-    upper = np.where(col < i_s[:, None], hist, np.inf)
+    # falling tail of the surface echo has no such dip and so never passes as a bottom. Only
+    # measured bins count: after a saturated surface the dead time empties the next bins, and
+    # the water column resuming below them is no second echo. With no measured bin between,
+    # the candidate cannot be told from the surface: it is no bottom.
+    # The dip's level is a 3-bin mean (of the measured bins): one bin's Poisson low in the
+    # column is no dip.
+    cm = np.concatenate([np.zeros((n_win, 1)), np.cumsum(hist * measured, axis=1)], axis=1)
+    cn = np.concatenate([np.zeros((n_win, 1)), np.cumsum(measured, axis=1)], axis=1)
+    lo3, hi3 = np.clip(col - 1, 0, nb), np.clip(col + 2, 0, nb)
+    n3 = cn[:, hi3[0]] - cn[:, lo3[0]]
+    mean3 = (cm[:, hi3[0]] - cm[:, lo3[0]]) / np.maximum(n3, 1)
+    upper = np.where((col < i_s[:, None]) & measured, mean3, np.inf)
     suffix_min = np.minimum.accumulate(upper[:, ::-1], axis=1)[:, ::-1]
     suffix_min = np.concatenate([suffix_min, np.full((n_win, 1), np.inf)], axis=1)
     valley_min = np.take_along_axis(suffix_min, np.clip(hi_b + 1, 0, nb), axis=1)
-    local = np.maximum(local, np.where(np.isfinite(valley_min), valley_min, 0.0))
-    sig_all = _significance(box_b, local * n_b, n_searched)
+    local = np.maximum(local, valley_min)
+    told = np.isfinite(local)
+    sig_all = np.where(
+        told, _significance(box_b, np.where(told, local, 1.0) * n_b, n_searched), 0.0
+    )
     i_b = np.argmax(np.where(below, sig_all, -np.inf), axis=1)
     sig_s = np.where(has_s, sig_box[rows, i_s], 0.0)
     sig_b = np.where(has_s & below[rows, i_b], sig_all[rows, i_b], 0.0)
     has_b = has_s & (sig_b >= s.threshold_sigma)
     # the centroids of surface and bottom stop at the emptiest bin between them
     between = (col > i_b[:, None]) & (col < i_s[:, None])
-    valley = np.where(has_b, np.argmin(np.where(between, hist, np.inf), axis=1), -1)
+    valley = np.where(has_b, np.argmin(np.where(between & measured, hist, np.inf), axis=1), -1)
     s_box = (np.maximum(i_s - cb, valley + 1), i_s + cb)
     b_box = (i_b - cb, np.minimum(i_b + cb, np.where(has_b, valley - 1, nb)))
 
     def centroid(i_peak, box):
         lo, hi = box[0][ev_win], box[1][ev_win]
         near = (b >= lo) & (b <= hi)
+        # live-time corrected weights (the recorded echo is cut short by the dead time);
         # subtract the background's share, spread uniformly over the centroid bins
-        w = np.bincount(ev_win[near], minlength=n_win).astype(float)
-        zsum = np.bincount(ev_win[near], weights=z[near], minlength=n_win)
+        w = np.bincount(ev_win[near], weights=w_ev[near], minlength=n_win)
+        zsum = np.bincount(ev_win[near], weights=(w_ev * z)[near], minlength=n_win)
         nbins = np.maximum(box[1] - box[0] + 1, 1)
         # heights from absolute bin numbers (integers: exact, whatever the chunk's k0)
         centre = (2 * k0 + box[0] + box[1] + 1) * (0.5 * s.bin_m)
