@@ -44,10 +44,13 @@ from scipy import special, stats
 from pipeline import optics
 from pipeline.config import setting
 from pipeline.process.detect import WaveformDetections, flank_trend
+from pipeline.process.detection_limit import NoBottomSettings
+from pipeline.process.photon_limit import photon_detection_limit
 from pipeline.process.photon_livetime import (
     bin_live_fraction,
     dead_height_m,
     event_live_fraction,
+    surface_pileup_pe,
 )
 from pipeline.process.returns import DetectorFlag
 
@@ -138,24 +141,6 @@ def _background(hist: np.ndarray) -> np.ndarray:
     return np.maximum(trimmed, np.where(empty > 0, rate, 0.0))
 
 
-def _surface_pileup(shot, window, b, ev_win, s_box, n, n_win, n_channels):
-    """Surface photoelectrons per shot and channel of each window, from its pile-up.
-
-    A channel records at most one event per dead time, so of an echo shorter than it each
-    shot-channel keeps only whether it fired: with ``λ`` photoelectrons per channel, a shot
-    (``N`` channels) has an event in the surface box with probability ``1 − exp(−N λ)``.
-    Inverted on the window's share ``p`` of such shots (capped at ``1 − 1/(2 S)`` of ``S``
-    shots, where ``λ`` stops being measurable): ``λ = −ln(1 − p) / N``. Background events in
-    the box count too (a few per cent at most: the box spans a few ns).
-    """
-    in_box = (b >= s_box[0][ev_win]) & (b <= s_box[1][ev_win])
-    hit = np.bincount(shot[in_box], minlength=n) > 0
-    shots = np.maximum(np.bincount(window, minlength=n_win), 1)
-    p = np.bincount(window[hit], minlength=n_win) / shots
-    p = np.minimum(p, 1.0 - 0.5 / shots)
-    return -np.log1p(-p) / max(int(n_channels), 1)
-
-
 def detect_photon_events(
     offsets: np.ndarray,
     times_s: np.ndarray,
@@ -166,6 +151,8 @@ def detect_photon_events(
     pulse_id: np.ndarray | None = None,
     n_channels: int = 1,
     dead_time_s: float = 0.0,
+    no_bottom: NoBottomSettings | None = None,
+    group_index: float | None = None,
 ) -> WaveformDetections:
     """Surface and bottom per shot from photon events accumulated along track.
 
@@ -190,6 +177,12 @@ def detect_photon_events(
         corrected (:mod:`pipeline.process.photon_livetime`): each event counts ``1 / L``, ``L``
         the window's share of channels live at its height, and the significance of a box
         compares its recorded counts with the expected rate times the box's live share.
+    no_bottom : NoBottomSettings, optional
+        With ``group_index`` (the water's, processing's assumption): each window's detection
+        limit (:mod:`pipeline.process.photon_limit`). A window without a bottom then states
+        "no bottom" down to it (``t_no_bottom_s``), and a bottom found deeper than it, under
+        twice the threshold, is flagged BEYOND_DETECTION_LIMIT (a bottom of the assumed
+        reflectance would not be seen there: it cannot be told from an upward fluctuation).
 
     Returns
     -------
@@ -353,10 +346,34 @@ def detect_photon_events(
     # surface echo's tail alone makes the boxes overlapping it significant).
     weak_below = (sig_box < s.threshold_sigma) & (col < i_s[:, None])
     i_lim = np.where(weak_below, col, -1).max(axis=1) + 1
+    # the detection limit (a bottom of the assumed reflectance seen down to it), where the
+    # window's column is measurable; it replaces the column's extent for class 45
+    i_det = np.full(n_win, -1, dtype=np.int64)
+    if no_bottom is not None and group_index is not None:
+        i_det = photon_detection_limit(
+            hist,
+            box,
+            bg,
+            span & measured & (col < (s_lo - cb)[:, None]),
+            n_searched,
+            # the column fit leaves a bottom's box (and its flanks) out
+            ~has_b[:, None] | (np.abs(col - i_b[:, None]) > 2 * cb),
+            half_box=cb,
+            bin_m=s.bin_m,
+            n_air=n_air,
+            group_index=group_index,
+            bottom_reflectance=no_bottom.bottom_reflectance,
+            backscatter_180_per_m_sr=no_bottom.backscatter_180_per_m_sr,
+            threshold_sigma=s.threshold_sigma,
+            min_column_snr=no_bottom.min_column_snr,
+        )
+    has_det = has_s & (i_det >= 0)
+    beyond = has_b & has_det & (i_b < i_det) & (sig_b < 2 * s.threshold_sigma)
+    i_lim = np.where(has_det, i_det, i_lim)
     has_lim = has_s & ~has_b & (i_lim < s_lo - cb)
     z_lim = (k0 + i_lim + 0.5) * s.bin_m
     z_s, amp_s = centroid(i_s, s_box)
-    lam_s = _surface_pileup(shot, window, b, ev_win, s_box, n, n_win, n_channels)
+    lam_s = surface_pileup_pe(shot, window, b, ev_win, s_box, n, n_win, n_channels)
     z_b, amp_b = centroid(i_b, b_box)
     # per shot: time at which its own measured beam reaches the window's detected heights
     dz = direction[:, 2]
@@ -373,6 +390,7 @@ def detect_photon_events(
     flags = np.zeros(n, dtype=np.uint16)
     flags[hs & (sig_s[window] < 2 * s.threshold_sigma)] |= np.uint16(DetectorFlag.LOW_SNR)
     flags[hs & (lam_s >= s.saturation_pe)[window]] |= np.uint16(DetectorFlag.SATURATED)
+    flags[hb & beyond[window]] |= np.uint16(DetectorFlag.BEYOND_DETECTION_LIMIT)
     zero = np.zeros(n)
     return WaveformDetections(
         has_surface=hs,

@@ -27,7 +27,13 @@ import numpy as np
 
 from pipeline import optics
 
-__all__ = ["dead_height_m", "event_live_fraction", "bin_live_fraction", "MIN_LIVE_FRACTION"]
+__all__ = [
+    "dead_height_m",
+    "event_live_fraction",
+    "bin_live_fraction",
+    "surface_pileup_pe",
+    "MIN_LIVE_FRACTION",
+]
 
 #: live share below which a rate is not estimated (its correction would be 1 / 0): the
 #: corrected counts are capped at this many times the recorded ones
@@ -131,3 +137,21 @@ def bin_live_fraction(ev_win, z_m, tau_h_m, z0_m, bin_m, n_bins, shots_per_windo
             )
     n_live = np.maximum(shots_per_window, 1)[:, None] * max(int(n_channels), 1)
     return np.maximum(1.0 - dead.reshape(n_win, n_bins) / n_live, MIN_LIVE_FRACTION)
+
+
+def surface_pileup_pe(shot, window, b, ev_win, s_box, n, n_win, n_channels):
+    """Surface photoelectrons per shot and channel of each window, from its pile-up.
+
+    A channel records at most one event per dead time, so of an echo shorter than it each
+    shot-channel keeps only whether it fired: with ``λ`` photoelectrons per channel, a shot
+    (``N`` channels) has an event in the surface box with probability ``1 − exp(−N λ)``.
+    Inverted on the window's share ``p`` of such shots (capped at ``1 − 1/(2 S)`` of ``S``
+    shots, where ``λ`` stops being measurable): ``λ = −ln(1 − p) / N``. Background events in
+    the box count too (a few per cent at most: the box spans a few ns).
+    """
+    in_box = (b >= s_box[0][ev_win]) & (b <= s_box[1][ev_win])
+    hit = np.bincount(shot[in_box], minlength=n) > 0
+    shots = np.maximum(np.bincount(window, minlength=n_win), 1)
+    p = np.bincount(window[hit], minlength=n_win) / shots
+    p = np.minimum(p, 1.0 - 0.5 / shots)
+    return -np.log1p(-p) / max(int(n_channels), 1)
