@@ -28,6 +28,10 @@ of ``shots_per_window`` consecutive shots:
 3. **Sub-bin height**: the background-subtracted centroid of the events within ±``centroid_bins``
    of the peak bin; with a bottom, surface and bottom centroids stop short of the emptiest bin
    between them.
+Dead time: every count is live-time corrected first (:mod:`pipeline.process.photon_livetime`),
+and the bins the dead time left blind are neither a level nor a dip. A window's detection limit
+(:mod:`pipeline.process.photon_limit`) places its class-45 point and flags bottoms past it.
+
 4. Back to **per-shot times**: each shot of the window gets the time at which its own measured
    beam reaches the detected heights (``t = 2 n_air r / c``), so refraction correction then runs
    exactly as for full waveforms.
