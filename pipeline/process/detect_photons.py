@@ -183,8 +183,9 @@ def detect_photon_events(
         compares its recorded counts with the expected rate times the box's live share.
     no_bottom : NoBottomSettings, optional
         With ``group_index`` (the water's, processing's assumption): each window's detection
-        limit (:mod:`pipeline.process.photon_limit`). A window without a bottom then states
-        "no bottom" down to it (``t_no_bottom_s``), and a bottom found deeper than it, under
+        limit (:mod:`pipeline.process.photon_limit`, ``t_detection_limit_s``). A window without
+        a bottom states "no bottom" (``t_no_bottom_s``) down to the shallower of it and the
+        column's extent, and a bottom found deeper than it, under
         twice the threshold, is flagged BEYOND_DETECTION_LIMIT (a bottom of the assumed
         reflectance would not be seen there: it cannot be told from an upward fluctuation).
 
@@ -351,7 +352,10 @@ def detect_photon_events(
     weak_below = (sig_box < s.threshold_sigma) & (col < i_s[:, None])
     i_lim = np.where(weak_below, col, -1).max(axis=1) + 1
     # the detection limit (a bottom of the assumed reflectance seen down to it), where the
-    # window's column is measurable; it replaces the column's extent for class 45
+    # window's column is measurable. Class 45 takes the shallower of it and the column's
+    # extent: the limit rests on assumed ρ and β_π and on a column decay that forward scatter
+    # makes slower than a bottom's, so alone it can claim "no bottom" over a bottom too dim
+    # to see
     i_det = np.full(n_win, -1, dtype=np.int64)
     if no_bottom is not None and group_index is not None:
         i_det = photon_detection_limit(
@@ -373,7 +377,7 @@ def detect_photon_events(
         )
     has_det = has_s & (i_det >= 0)
     beyond = has_b & has_det & (i_b < i_det) & (sig_b < 2 * s.threshold_sigma)
-    i_lim = np.where(has_det, i_det, i_lim)
+    i_lim = np.where(has_det, np.maximum(i_det, i_lim), i_lim)
     has_lim = has_s & ~has_b & (i_lim < s_lo - cb)
     z_lim = (k0 + i_lim + 0.5) * s.bin_m
     z_s, amp_s = centroid(i_s, s_box)
@@ -389,6 +393,8 @@ def detect_photon_events(
     hb = has_b[window] & hs & (t_b > t_s)
     t_lim = (origin_m[:, 2] - z_lim[window]) * scale
     t_lim = np.where(has_lim[window] & hs & ~hb & (t_lim > t_s), t_lim, 0.0)
+    t_det = (origin_m[:, 2] - (k0 + i_det[window] + 0.5) * s.bin_m) * scale
+    t_det = np.where(has_det[window] & hs & (t_det > t_s), t_det, 0.0)
     conf_s = 1.0 - np.exp(-0.5 * (np.maximum(sig_s, 0) / s.threshold_sigma) ** 4)
     conf_b = 1.0 - np.exp(-0.5 * (np.maximum(sig_b, 0) / s.threshold_sigma) ** 4)
     flags = np.zeros(n, dtype=np.uint16)
@@ -408,4 +414,5 @@ def detect_photon_events(
         noise_sigma=np.sqrt(bg_safe)[window],
         flags=flags,
         t_no_bottom_s=t_lim,
+        t_detection_limit_s=t_det,
     )

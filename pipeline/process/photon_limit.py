@@ -31,7 +31,9 @@ import math
 import numpy as np
 from scipy import special
 
-__all__ = ["photon_detection_limit"]
+from pipeline.optics import SPEED_OF_LIGHT_M_S
+
+__all__ = ["photon_detection_limit", "photon_limit_summary"]
 
 
 def _poisson_threshold(q: np.ndarray, mu: np.ndarray) -> np.ndarray:
@@ -134,3 +136,44 @@ def photon_detection_limit(
     limit = np.where(first_bad >= 0, first_bad + 1.0, lowest)
     ok = fit & np.isfinite(limit) & below.any(axis=1)
     return np.where(ok, limit, -1).astype(np.int64)
+
+
+def photon_limit_summary(
+    t_limit_s: np.ndarray,
+    t_surface_s: np.ndarray,
+    flags: np.ndarray,
+    has_bottom: np.ndarray,
+    group_index: float,
+    beyond_bit: int,
+) -> dict[str, float | int | None]:
+    """The survey's photon detection limits, flat (the evaluation's ``no_bottom``).
+
+    Parameters
+    ----------
+    t_limit_s, t_surface_s : (n_shots,) float
+        Each shot's detection-limit and surface times (0 where none).
+    flags : (n_shots,) uint16
+        Detector flags.
+    has_bottom : (n_shots,) bool
+    group_index : float
+        Processing's group index of water.
+    beyond_bit : int
+        The BEYOND_DETECTION_LIMIT flag.
+
+    Returns
+    -------
+    dict
+        Shots with a limit, the 5th / 50th / 95th percentiles of its in-water path below the
+        surface along the beam (m; ``c (t_lim - t_s) / (2 n_g)``), and the bottoms flagged past it.
+    """
+    ok = t_limit_s > 0
+    path = (t_limit_s - t_surface_s)[ok] * SPEED_OF_LIGHT_M_S / (2.0 * group_index)
+    pct = np.percentile(path, [5, 50, 95]) if path.size else [None] * 3
+    beyond = has_bottom & ((flags & np.uint16(beyond_bit)) != 0)
+    return {
+        "photon_shots_with_detection_limit": int(ok.sum()),
+        "photon_detection_limit_path_m_p05": None if pct[0] is None else float(pct[0]),
+        "photon_detection_limit_path_m_median": None if pct[1] is None else float(pct[1]),
+        "photon_detection_limit_path_m_p95": None if pct[2] is None else float(pct[2]),
+        "photon_bottoms_beyond_detection_limit": int(beyond.sum()),
+    }

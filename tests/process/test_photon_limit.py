@@ -54,18 +54,20 @@ def _expected_limit_m(n, lam_col, col_m, lam_bg, nb: NoBottomSettings, s: Photon
     return h[np.argmax(r * col < k_star - mu)]
 
 
-def test_no_bottom_limit_is_the_depth_a_bottom_would_sink_under_the_threshold():
+def test_detection_limit_is_the_depth_a_bottom_would_sink_under_the_threshold():
     s, nb = PhotonDetectSettings(), NoBottomSettings()
     lam_col, col_m, lam_bg = 2.0, 2.0, 2.0
     offsets, times, o, d = _events(10_000, lam_col, col_m, lam_bg, seed=4)
     det = detect_photon_events(offsets, times, o, d, N_AIR, s, no_bottom=nb, group_index=N_G)
     assert not det.has_bottom.any()
-    limit_m = (det.t_no_bottom_s - det.t_surface_s) * C / (2 * N_AIR)
+    limit_m = (det.t_detection_limit_s - det.t_surface_s) * C / (2 * N_AIR)
     expected = _expected_limit_m(s.shots_per_window, lam_col, col_m, lam_bg, nb, s)
     assert 10.0 < expected < 16.0  # far below where the column itself is seen (~5 m)
     # 50 windows; each fits its column over ~5 m and extrapolates it: the median within 0.5 m
-    assert (det.t_no_bottom_s > 0).all()
+    assert (det.t_detection_limit_s > 0).all()
     assert abs(np.median(limit_m) - expected) < 0.5
+    # class 45 claims no more than the limit (and no more than the column shows)
+    assert (det.t_no_bottom_s > 0).all() and (det.t_no_bottom_s <= det.t_detection_limit_s).all()
 
 
 def test_a_weak_bottom_past_the_limit_is_flagged_a_strong_one_is_not():
