@@ -197,6 +197,19 @@ def simulate_detections(
     bar.close()
     returns = _returns(parts)
     no_bottom = None
+    if not job.waveform:
+        from pipeline.process.photon_limit import photon_limit_summary
+        from pipeline.process.returns import DetectorFlag
+
+        no_bottom = photon_limit_summary(
+            np.concatenate([p["t_detection_limit_s"] for p in parts]),
+            returns.t_surface_s,
+            returns.flags,
+            returns.has_bottom,
+            ctx.refraction.group_index,
+            int(DetectorFlag.BEYOND_DETECTION_LIMIT),
+        )
+        log(f"  photon detection limits: {no_bottom}")
     if nb_inputs:
         from pipeline.process.no_bottom import no_bottom_limits
 

@@ -195,5 +195,10 @@ def _photon_chunk(job: ChunkJob, clock: StageClock, paths, pulses):
             pulse_id=pulses.pulse_id,
             # the detector's channels per beam (its datasheet): one event each per dead time
             n_channels=scene.detector.n_channels,
+            # and its dead time (the datasheet's): the live-time correction of the histograms
+            dead_time_s=scene.detector.dead_time_s,
+            # the detection limit's assumptions (class 45), as the full-waveform one's
+            no_bottom=scene.process.no_bottom,
+            group_index=job.ctx.refraction.group_index,
         )
     return found, ev.flags

@@ -20,7 +20,8 @@ Rules (:func:`classify_points`), first match wins
 Bottom returns (``ReturnKind.BOTTOM``):
 
 1. ``GRAZING`` (no valid water entry) -> 1 unclassified.
-2. Any detector flag of ``unreliable_detector_flags`` (default MERGED, CLIPPED_MERGED:
+2. Any detector flag of ``unreliable_detector_flags`` (default MERGED, CLIPPED_MERGED,
+   BEYOND_DETECTION_LIMIT:
    the bottom time is not trustworthy; a SATURATED pulse's clipped echoes are timed from their
    plateau's edges, or given no bottom, by :mod:`pipeline.process.detect_clipped`), or the
    pulse's own surface return is an outlier of the local fit (``surface_outlier_unreliable``:
@@ -127,7 +128,7 @@ class ClassifySettings:
         False, doc="a bottom whose pulse's own surface return is an outlier stays unclassified"
     )
     unreliable_detector_flags: tuple[str, ...] = setting(
-        ("MERGED", "CLIPPED_MERGED"),
+        ("MERGED", "CLIPPED_MERGED", "BEYOND_DETECTION_LIMIT"),
         doc="detector flags that leave a bottom point unclassified (SATURATED alone does not: "
         "the detectors time clipped echoes from their edges or report no bottom)",
     )

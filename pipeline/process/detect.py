@@ -110,7 +110,8 @@ class WaveformDetections:
     return (``has_column`` ...) is optional: left out (None), it is filled with "none found".
     ``t_no_bottom_s`` (a pulse without a bottom: the time down to which none is established, 0
     where unknown) is the photon detector's; the full-waveform one comes from
-    :mod:`pipeline.process.no_bottom`.
+    :mod:`pipeline.process.no_bottom`. ``t_detection_limit_s`` (photon counting: the time of the
+    window's detection limit, :mod:`pipeline.process.photon_limit`; 0 where none) is reported.
     """
 
     has_surface: np.ndarray
@@ -128,6 +129,7 @@ class WaveformDetections:
     column_amplitude: np.ndarray | None = None
     column_confidence: np.ndarray | None = None
     t_no_bottom_s: np.ndarray | None = None
+    t_detection_limit_s: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         # detectors without column returns (photon counting) leave them out; concatenating
@@ -135,7 +137,13 @@ class WaveformDetections:
         n = np.shape(self.has_surface)[0]
         if self.has_column is None:
             object.__setattr__(self, "has_column", np.zeros(n, dtype=bool))
-        for name in ("t_column_s", "column_amplitude", "column_confidence", "t_no_bottom_s"):
+        for name in (
+            "t_column_s",
+            "column_amplitude",
+            "column_confidence",
+            "t_no_bottom_s",
+            "t_detection_limit_s",
+        ):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, np.zeros(n))
 

@@ -28,6 +28,10 @@ of ``shots_per_window`` consecutive shots:
 3. **Sub-bin height**: the background-subtracted centroid of the events within ±``centroid_bins``
    of the peak bin; with a bottom, surface and bottom centroids stop short of the emptiest bin
    between them.
+Dead time: every count is live-time corrected first (:mod:`pipeline.process.photon_livetime`),
+and the bins the dead time left blind are neither a level nor a dip. A window's detection limit
+(:mod:`pipeline.process.photon_limit`) places its class-45 point and flags bottoms past it.
+
 4. Back to **per-shot times**: each shot of the window gets the time at which its own measured
    beam reaches the detected heights (``t = 2 n_air r / c``), so refraction correction then runs
    exactly as for full waveforms.
@@ -44,9 +48,21 @@ from scipy import special, stats
 from pipeline import optics
 from pipeline.config import setting
 from pipeline.process.detect import WaveformDetections, flank_trend
+from pipeline.process.detection_limit import NoBottomSettings
+from pipeline.process.photon_limit import photon_detection_limit
+from pipeline.process.photon_livetime import (
+    bin_live_fraction,
+    dead_height_m,
+    event_live_fraction,
+    surface_pileup_pe,
+)
 from pipeline.process.returns import DetectorFlag
 
 __all__ = ["PhotonDetectSettings", "detect_photon_events"]
+
+#: live share of a bin's shot-channels from which its counts measure the rate: below it the
+#: dead time after a strong echo has blinded most shots, and an empty bin shows no dip
+MEASURED_LIVE_FRACTION = 0.5
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -129,24 +145,6 @@ def _background(hist: np.ndarray) -> np.ndarray:
     return np.maximum(trimmed, np.where(empty > 0, rate, 0.0))
 
 
-def _surface_pileup(shot, window, b, ev_win, s_box, n, n_win, n_channels):
-    """Surface photoelectrons per shot and channel of each window, from its pile-up.
-
-    A channel records at most one event per dead time, so of an echo shorter than it each
-    shot-channel keeps only whether it fired: with ``λ`` photoelectrons per channel, a shot
-    (``N`` channels) has an event in the surface box with probability ``1 − exp(−N λ)``.
-    Inverted on the window's share ``p`` of such shots (capped at ``1 − 1/(2 S)`` of ``S``
-    shots, where ``λ`` stops being measurable): ``λ = −ln(1 − p) / N``. Background events in
-    the box count too (a few per cent at most: the box spans a few ns).
-    """
-    in_box = (b >= s_box[0][ev_win]) & (b <= s_box[1][ev_win])
-    hit = np.bincount(shot[in_box], minlength=n) > 0
-    shots = np.maximum(np.bincount(window, minlength=n_win), 1)
-    p = np.bincount(window[hit], minlength=n_win) / shots
-    p = np.minimum(p, 1.0 - 0.5 / shots)
-    return -np.log1p(-p) / max(int(n_channels), 1)
-
-
 def detect_photon_events(
     offsets: np.ndarray,
     times_s: np.ndarray,
@@ -156,6 +154,9 @@ def detect_photon_events(
     settings: PhotonDetectSettings | None = None,
     pulse_id: np.ndarray | None = None,
     n_channels: int = 1,
+    dead_time_s: float = 0.0,
+    no_bottom: NoBottomSettings | None = None,
+    group_index: float | None = None,
 ) -> WaveformDetections:
     """Surface and bottom per shot from photon events accumulated along track.
 
@@ -175,6 +176,18 @@ def detect_photon_events(
         split into chunks (of whole windows) gives the same windows as one piece.
     n_channels : int
         Detector channels per beam (the datasheet's): each records one event per dead time.
+    dead_time_s : float
+        Dead time per channel (the datasheet's). Histograms and centroids are live-time
+        corrected (:mod:`pipeline.process.photon_livetime`): each event counts ``1 / L``, ``L``
+        the window's share of channels live at its height, and the significance of a box
+        compares its recorded counts with the expected rate times the box's live share.
+    no_bottom : NoBottomSettings, optional
+        With ``group_index`` (the water's, processing's assumption): each window's detection
+        limit (:mod:`pipeline.process.photon_limit`, ``t_detection_limit_s``). A window without
+        a bottom states "no bottom" (``t_no_bottom_s``) down to the shallower of it and the
+        column's extent, and a bottom found deeper than it, under
+        twice the threshold, is flagged BEYOND_DETECTION_LIMIT (a bottom of the assumed
+        reflectance would not be seen there: it cannot be told from an upward fluctuation).
 
     Returns
     -------
@@ -210,7 +223,13 @@ def detect_photon_events(
     k0 = int(k_abs.min()) - pad
     nb = int(k_abs.max()) + pad - k0 + 1
     b = k_abs - k0
-    hist = np.bincount(ev_win * nb + b, minlength=n_win * nb).reshape(n_win, nb).astype(float)
+    # live-time (Coates) correction: recorded counts over the live share of the shot-channels
+    shots_w = np.bincount(window, minlength=n_win)
+    tau_h = dead_height_m(dead_time_s, n_air, direction[shot, 2])
+    w_ev = 1.0 / event_live_fraction(ev_win, z, tau_h, shots_w, n_channels)
+    live = bin_live_fraction(ev_win, z, tau_h, k0 * s.bin_m, s.bin_m, nb, shots_w, n_channels)
+    raw = np.bincount(ev_win * nb + b, minlength=n_win * nb).reshape(n_win, nb).astype(float)
+    hist = np.bincount(ev_win * nb + b, weights=w_ev, minlength=n_win * nb).reshape(n_win, nb)
     bg = _background(hist)
     # the look-elsewhere count of each window: the bins of its own range gate (its events'
     # span, as the background's), not the chunk's histogram
@@ -220,18 +239,27 @@ def detect_photon_events(
     rows = np.arange(n_win)
     col = np.arange(nb)[None, :]
     # counts of a return spread over neighbouring bins: test the sum over the centroid window
-    csum = np.concatenate([np.zeros((n_win, 1)), np.cumsum(hist, axis=1)], axis=1)
+    # (corrected counts, recorded counts, live share): the recorded counts of a box are Poisson
+    # of the rate times its live share, so significances use those two
+    csum = [
+        np.concatenate([np.zeros((n_win, 1)), np.cumsum(a, axis=1)], axis=1)
+        for a in (hist, raw, live)
+    ]
 
-    def box_sum(lo, hi):
-        """Counts in bins ``[lo, hi]`` per window and bin (clipped to the histogram)."""
+    def box_sum(lo, hi, which=0):
+        """Sums over bins ``[lo, hi]`` per window and bin (clipped to the histogram)."""
         lo, hi = np.clip(lo, 0, nb), np.clip(hi + 1, 0, nb)
-        return np.take_along_axis(csum, hi, axis=1) - np.take_along_axis(
-            csum, np.minimum(lo, hi), axis=1
+        cs = csum[which]
+        return np.take_along_axis(cs, hi, axis=1) - np.take_along_axis(
+            cs, np.minimum(lo, hi), axis=1
         )
 
     full = np.broadcast_to(col, (n_win, nb))
     box = box_sum(full - cb, full + cb)
-    sig_box = _significance(box, bg_safe[:, None] * (2 * cb + 1), n_searched)
+    box_live = box_sum(full - cb, full + cb, 2)
+    sig_box = _significance(
+        box_sum(full - cb, full + cb, 1), bg_safe[:, None] * box_live, n_searched
+    )
     # Surface: the FIRST significant return from above (the highest bin), not the strongest:
     # at 532 nm a shallow seabed can return more photons than the water surface.
     top = np.where(sig_box >= s.threshold_sigma, col, -1).max(axis=1)
@@ -258,38 +286,56 @@ def detect_photon_events(
     # the water-column return decays smoothly below the surface: a bottom must stand out of
     # its local level (the larger mean of the flanking bins, the surface box left out), not
     # only of the background
+    # bins the dead time left (nearly) blind hold no measurement: not a level, not a dip
+    measured = live >= MEASURED_LIVE_FRACTION
     local = np.maximum(
-        flank_trend(hist, gap=cb + 1, length=s.trend_bins, valid=span & (col < s_lo[:, None])),
+        flank_trend(
+            hist, gap=cb + 1, length=s.trend_bins, valid=span & measured & (col < s_lo[:, None])
+        ),
         bg_safe[:, None],
     )
     # the candidate's box stops short of the surface box, so the surface tail is not counted
     hi_b = np.minimum(full + cb, s_lo[:, None] - 1)
-    box_b = box_sum(full - cb, hi_b)
-    n_b = np.maximum(hi_b - (full - cb) + 1, 1)
+    box_b = box_sum(full - cb, hi_b, 1)
+    n_b = np.maximum(box_sum(full - cb, hi_b, 2), 1e-9)  # live bins of the box
     # ... and it must stand out of the emptiest bin between its box and the surface: the
-    # falling tail of the surface echo has no such dip and so never passes as a bottom
-    upper = np.where(col < i_s[:, None], hist, np.inf)
+    # falling tail of the surface echo has no such dip and so never passes as a bottom. Only
+    # measured bins count: after a saturated surface the dead time empties the next bins, and
+    # the water column resuming below them is no second echo. With no measured bin between,
+    # the candidate cannot be told from the surface: it is no bottom.
+    # The dip's level is a 3-bin mean (of the measured bins): one bin's Poisson low in the
+    # column is no dip.
+    cm = np.concatenate([np.zeros((n_win, 1)), np.cumsum(hist * measured, axis=1)], axis=1)
+    cn = np.concatenate([np.zeros((n_win, 1)), np.cumsum(measured, axis=1)], axis=1)
+    lo3, hi3 = np.clip(col - 1, 0, nb), np.clip(col + 2, 0, nb)
+    n3 = cn[:, hi3[0]] - cn[:, lo3[0]]
+    mean3 = (cm[:, hi3[0]] - cm[:, lo3[0]]) / np.maximum(n3, 1)
+    upper = np.where((col < i_s[:, None]) & measured, mean3, np.inf)
     suffix_min = np.minimum.accumulate(upper[:, ::-1], axis=1)[:, ::-1]
     suffix_min = np.concatenate([suffix_min, np.full((n_win, 1), np.inf)], axis=1)
     valley_min = np.take_along_axis(suffix_min, np.clip(hi_b + 1, 0, nb), axis=1)
-    local = np.maximum(local, np.where(np.isfinite(valley_min), valley_min, 0.0))
-    sig_all = _significance(box_b, local * n_b, n_searched)
+    local = np.maximum(local, valley_min)
+    told = np.isfinite(local)
+    sig_all = np.where(
+        told, _significance(box_b, np.where(told, local, 1.0) * n_b, n_searched), 0.0
+    )
     i_b = np.argmax(np.where(below, sig_all, -np.inf), axis=1)
     sig_s = np.where(has_s, sig_box[rows, i_s], 0.0)
     sig_b = np.where(has_s & below[rows, i_b], sig_all[rows, i_b], 0.0)
     has_b = has_s & (sig_b >= s.threshold_sigma)
     # the centroids of surface and bottom stop at the emptiest bin between them
     between = (col > i_b[:, None]) & (col < i_s[:, None])
-    valley = np.where(has_b, np.argmin(np.where(between, hist, np.inf), axis=1), -1)
+    valley = np.where(has_b, np.argmin(np.where(between & measured, hist, np.inf), axis=1), -1)
     s_box = (np.maximum(i_s - cb, valley + 1), i_s + cb)
     b_box = (i_b - cb, np.minimum(i_b + cb, np.where(has_b, valley - 1, nb)))
 
     def centroid(i_peak, box):
         lo, hi = box[0][ev_win], box[1][ev_win]
         near = (b >= lo) & (b <= hi)
+        # live-time corrected weights (the recorded echo is cut short by the dead time);
         # subtract the background's share, spread uniformly over the centroid bins
-        w = np.bincount(ev_win[near], minlength=n_win).astype(float)
-        zsum = np.bincount(ev_win[near], weights=z[near], minlength=n_win)
+        w = np.bincount(ev_win[near], weights=w_ev[near], minlength=n_win)
+        zsum = np.bincount(ev_win[near], weights=(w_ev * z)[near], minlength=n_win)
         nbins = np.maximum(box[1] - box[0] + 1, 1)
         # heights from absolute bin numbers (integers: exact, whatever the chunk's k0)
         centre = (2 * k0 + box[0] + box[1] + 1) * (0.5 * s.bin_m)
@@ -305,10 +351,37 @@ def detect_photon_events(
     # surface echo's tail alone makes the boxes overlapping it significant).
     weak_below = (sig_box < s.threshold_sigma) & (col < i_s[:, None])
     i_lim = np.where(weak_below, col, -1).max(axis=1) + 1
+    # the detection limit (a bottom of the assumed reflectance seen down to it), where the
+    # window's column is measurable. Class 45 takes the shallower of it and the column's
+    # extent: the limit rests on assumed ρ and β_π and on a column decay that forward scatter
+    # makes slower than a bottom's, so alone it can claim "no bottom" over a bottom too dim
+    # to see
+    i_det = np.full(n_win, -1, dtype=np.int64)
+    if no_bottom is not None and group_index is not None:
+        i_det = photon_detection_limit(
+            hist,
+            box,
+            bg,
+            span & measured & (col < (s_lo - cb)[:, None]),
+            n_searched,
+            # the column fit leaves a bottom's box (and its flanks) out
+            ~has_b[:, None] | (np.abs(col - i_b[:, None]) > 2 * cb),
+            half_box=cb,
+            bin_m=s.bin_m,
+            n_air=n_air,
+            group_index=group_index,
+            bottom_reflectance=no_bottom.bottom_reflectance,
+            backscatter_180_per_m_sr=no_bottom.backscatter_180_per_m_sr,
+            threshold_sigma=s.threshold_sigma,
+            min_column_snr=no_bottom.min_column_snr,
+        )
+    has_det = has_s & (i_det >= 0)
+    beyond = has_b & has_det & (i_b < i_det) & (sig_b < 2 * s.threshold_sigma)
+    i_lim = np.where(has_det, np.maximum(i_det, i_lim), i_lim)
     has_lim = has_s & ~has_b & (i_lim < s_lo - cb)
     z_lim = (k0 + i_lim + 0.5) * s.bin_m
     z_s, amp_s = centroid(i_s, s_box)
-    lam_s = _surface_pileup(shot, window, b, ev_win, s_box, n, n_win, n_channels)
+    lam_s = surface_pileup_pe(shot, window, b, ev_win, s_box, n, n_win, n_channels)
     z_b, amp_b = centroid(i_b, b_box)
     # per shot: time at which its own measured beam reaches the window's detected heights
     dz = direction[:, 2]
@@ -320,11 +393,14 @@ def detect_photon_events(
     hb = has_b[window] & hs & (t_b > t_s)
     t_lim = (origin_m[:, 2] - z_lim[window]) * scale
     t_lim = np.where(has_lim[window] & hs & ~hb & (t_lim > t_s), t_lim, 0.0)
+    t_det = (origin_m[:, 2] - (k0 + i_det[window] + 0.5) * s.bin_m) * scale
+    t_det = np.where(has_det[window] & hs & (t_det > t_s), t_det, 0.0)
     conf_s = 1.0 - np.exp(-0.5 * (np.maximum(sig_s, 0) / s.threshold_sigma) ** 4)
     conf_b = 1.0 - np.exp(-0.5 * (np.maximum(sig_b, 0) / s.threshold_sigma) ** 4)
     flags = np.zeros(n, dtype=np.uint16)
     flags[hs & (sig_s[window] < 2 * s.threshold_sigma)] |= np.uint16(DetectorFlag.LOW_SNR)
     flags[hs & (lam_s >= s.saturation_pe)[window]] |= np.uint16(DetectorFlag.SATURATED)
+    flags[hb & beyond[window]] |= np.uint16(DetectorFlag.BEYOND_DETECTION_LIMIT)
     zero = np.zeros(n)
     return WaveformDetections(
         has_surface=hs,
@@ -338,4 +414,5 @@ def detect_photon_events(
         noise_sigma=np.sqrt(bg_safe)[window],
         flags=flags,
         t_no_bottom_s=t_lim,
+        t_detection_limit_s=t_det,
     )

@@ -53,6 +53,10 @@ class DetectorFlag(enum.IntFlag):
     #: column and the bottom: the surface time is the plateau's leading edge, an early bound
     #: (not a timing reference), and the bottom is not measurable.
     CLIPPED_MERGED = 1 << 6
+    #: Photon counting: the bottom lies deeper than its window's detection limit (where a
+    #: bottom of the assumed reflectance would sink under the threshold) and is under twice the
+    #: threshold: it cannot be told from an upward fluctuation of the background or column.
+    BEYOND_DETECTION_LIMIT = 1 << 7
 
 
 class PointFlag(enum.IntFlag):

@@ -62,8 +62,9 @@ def extinction_depth_m(
 ) -> tuple[float, str]:
     """The scene's extinction depth and where it comes from (see the module docstring).
 
-    Only a full-waveform run's class-45 points sit at a detection limit; a photon-counting
-    run's sit at the end of its range gate, so it takes the planning value.
+    A photon-counting run takes the planning value: its class-45 points sit at its windows'
+    detection limits (:mod:`pipeline.process.photon_limit`) only since that limit was added,
+    and the suite keeps the planning value its baseline used, so figures stay comparable.
     """
     nb = np.asarray(nb_depth_m, dtype=np.float64)
     nb = nb[np.isfinite(nb) & (nb > 0)]

@@ -62,7 +62,8 @@ footprint              R   the return's centroid within the beam footprint: per 
 
 The attenuation does not enter the georeferencing (only the waveform's timing, which the
 posterior in :mod:`pipeline.uncertainty.posterior` covers). Systematic detector biases (a green
-surface return late in waves, the first-photon bias of a dead-time-limited photon counter, the
+surface return late in waves, the first-photon bias of a dead-time-limited photon counter (now
+corrected by the detector, :mod:`pipeline.process.photon_livetime`), the
 merged returns of the shallowest metre) are not uncertainties: they are not in the TPU
 (``benchmarks/RESULTS_tpu_calibration.md``).
 

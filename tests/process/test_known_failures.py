@@ -52,7 +52,9 @@ def photons(n_shots, dead_time_s, lam_surface=3.0, depth_m=5.0, h_m=300.0, seed=
     offsets = np.r_[0, np.cumsum(np.bincount(shot[keep], minlength=n_shots))]
     origin = np.column_stack([np.arange(n_shots) * 0.006, np.zeros(n_shots), np.full(n_shots, h_m)])
     down = np.tile([0.0, 0.0, -1.0], (n_shots, 1))
-    det = detect_photon_events(offsets, t[keep], origin, down, N_AIR, PhotonDetectSettings())
+    det = detect_photon_events(
+        offsets, t[keep], origin, down, N_AIR, PhotonDetectSettings(), dead_time_s=dead_time_s
+    )
     assert det.has_surface.all() and det.has_bottom.all()
     surface_err_s = float(np.mean(det.t_surface_s - t_s))
     depth_err_m = float(np.mean(det.t_bottom_s - det.t_surface_s) * C / (2 * N_G) - depth_m)
@@ -64,13 +66,9 @@ def test_photon_times_are_unbiased_without_dead_time():
     assert abs(surface_err_s) < 0.05e-9 and abs(depth_err_m) < 0.005  # -0.008 ns, +0.06 cm
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="first-photon bias: with a 1.6 ns dead time and 3 surface photons a shot the "
-    "surface is 0.31 ns early and the depth 2.9 cm too deep here (photon_profiler: 0.5 ns, "
-    "depths 2-6.5 cm too deep, TPU coverage 15.4 % / 31.9 %); no dead-time correction yet",
-)
 def test_photon_times_are_unbiased_with_dead_time():
+    # was a known failure (surface 0.31 ns early, depth 2.9 cm too deep): fixed by the
+    # detector's live-time correction (pipeline.process.photon_livetime)
     surface_err_s, depth_err_m = photons(2000, dead_time_s=1.6e-9)
     assert abs(surface_err_s) < 0.05e-9 and abs(depth_err_m) < 0.005
 
