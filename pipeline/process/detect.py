@@ -89,13 +89,14 @@ class DetectSettings:
         "(an exponentially modified Gaussian); False: a plain smoothed step",
     )
     surface_echo_sigma: float = setting(
-        20.0,
+        10.0,
         gt=0.0,
         doc="the surface step fit keeps its echo (Gaussian) term only where the echo's fitted "
         "amplitude stands this many (residual-based, so optimistic) standard errors above 0; "
         "else the column onset alone times the surface (calm water off nadir: no specular "
-        "echo). Set on the suite's tuning scenes: 5 left calm scenes 2-5 cm shallow, 50 made "
-        "a 7 m/s one 0.19 m deep",
+        "echo). Set on the suite's tuning scenes 20, 43, 60 (calm) and 24 (7 m/s): 5 left "
+        "the calm ones 2-5 cm shallow, 50 made scene 24 0.19 m deep, 20 dropped clear echoes "
+        "(SNR ~20) of the posterior tests' waveforms",
     )
     trend_fwhm: float = setting(
         8.0, ge=2.0, le=100.0, doc="running-median width (system FWHMs) of the column trend"

@@ -2,10 +2,8 @@
 
 Geometry per pulse with a bottom return (measured origin ``o``, unit direction ``d``)
 ---------------------------------------------------------------------------------
-* Entry point: the pulse's own surface point ``E = o + d c t_s / (2 n_air)`` where it has a
-  (non-outlier) surface return, else ``E = o + d r_e`` on the pulse's local water plane; the
-  plane's upward normal ``N`` either way (:func:`pipeline.process.surface_fit.
-  fit_water_surface`).
+* Entry point ``E = o + d r_e`` on the pulse's local water plane (upward normal ``N``), from
+  :func:`pipeline.process.surface_fit.fit_water_surface`.
 * Refracted direction ``t`` by the vector form of Snell's law with the water's *phase* index
   (:func:`pipeline.optics.refract_direction`, air index from the surface fit).
 * In-water one-way path along ``t`` at the *group* speed ``c / n_g``:
@@ -139,10 +137,6 @@ def seabed_points(
 
     entry, nrm, r_e = surface.entry_m[idx], surface.normal[idx], surface.range_to_entry_m[idx]
     own = returns.has_surface[idx] & ((flags & PointFlag.SURFACE_OUTLIER) == 0)
-    # the pulse entered the water where its own surface echo is, not where the beam meets the
-    # fitted plane: the in-water length below is timed from that echo, so it starts there (a
-    # wave a plane over 5 m smooths out put the entry off by the wave's height)
-    entry = np.where((own & water)[:, None], surface.surface_point_m[idx], entry)
     sig_tb = _timing_sigma(returns, idx, "bottom", st.timing_sigma_s)
     sig_ts = _timing_sigma(returns, idx, "surface", st.timing_sigma_s)
     if correct_refraction:

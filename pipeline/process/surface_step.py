@@ -210,7 +210,12 @@ def surface_step_fit(
     if echo_sigma is not None:
         best = np.argmin(sse2, axis=1)
         echo = snr[np.arange(n), best] >= echo_sigma
-        sse = np.where(echo[:, None], sse2, sse1)
+        # the onset alone only where it is whole in the waveform (a window cut by the record's
+        # start repeats its first sample, which an onset fits as a step at the edge) and has a
+        # minimum inside the candidates (at the first one it found no onset to time)
+        cut = (i_peak + offsets[0] < 0) | (i_peak + offsets[-1] > filt.shape[1] - 1)
+        inside = np.argmin(sse1, axis=1) > 0
+        sse = np.where((echo | cut | ~inside)[:, None], sse2, sse1)
     k = np.clip(np.argmin(sse, axis=1), 1, STEP_GRID.size - 2)
     rows = np.arange(n)
     s0, s1, s2 = sse[rows, k - 1], sse[rows, k], sse[rows, k + 1]

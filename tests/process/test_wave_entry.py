@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 from scipy import constants
 
 from pipeline.process.refraction import RefractionSettings, seabed_points
@@ -80,6 +81,14 @@ def test_troughs_deeper_than_the_band_are_water_and_their_bottoms_land_on_the_se
     assert np.max(np.abs(dz)) < 0.1, np.max(np.abs(dz))
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason="known failure (issue 13): the entry is on the fitted plane while the in-water "
+    "length is timed from the pulse's own echo. Entering at the own echo passes this test but "
+    "changes the TPU terms (surface height moves the depth, not the point; surface timing "
+    "moves the point by c dt (1/n_air - 1/n_g) / 2): the TPU model and its Monte Carlo check "
+    "must move with it",
+)
 def test_the_pulse_enters_where_its_own_surface_echo_is():
     # 8 m waves of 0.25 m amplitude: a plane over 5 m averages them out, and its entry point
     # is off the surface the pulse met by up to the amplitude; the in-water length is timed
