@@ -314,18 +314,22 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     sep = s.min_separation_fwhm * pulse_fwhm_s / dt_s
     fwhm_samples = pulse_fwhm_s / dt_s
     gap = max(2, math.ceil(1.5 * fwhm_samples))
+    t_echo_s = t_idx_s  # the start of the merged fit, which models the echo itself
     if s.surface_step:
         # the column's own decay, past the surface echo: the onset the surface sits on
         k_col = None
         if s.surface_onset_decay:
             k_col = column_decay(filt, i_s, start=math.ceil(sep) + gap, length=2 * math.ceil(sep))
-        t_idx_s = np.where(
-            has_s,
-            surface_step_fit(
-                filt, i_s, math.sqrt(2.0) * sigma_samples, k_col, echo_sigma=s.surface_echo_sigma
-            ),
-            t_idx_s,
+        t_fit, t_echo = surface_step_fit(
+            filt,
+            i_s,
+            math.sqrt(2.0) * sigma_samples,
+            k_col,
+            echo_sigma=s.surface_echo_sigma,
+            with_echo_time=True,
         )
+        t_idx_s = np.where(has_s, t_fit, t_idx_s)
+        t_echo_s = np.where(has_s, t_echo, t_echo_s)
     # a surface echo clipped at the top code: its filtered peak sits anywhere on the plateau;
     # the plateau's edges time it (one echo), or bound it (run on into the column: "merged")
     clip_s = clip_merged = np.zeros(n, dtype=bool)
@@ -408,7 +412,7 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     if s.fit_merged and merged.any():
         idx = np.flatnonzero(merged)
         good, ts, tb, a_s, a_b, snr_fit = merged_bottoms(
-            filt[idx], i_s[idx], t_idx_s[idx], sigma_samples, sep, gap, kernel, noise_f[idx],
+            filt[idx], i_s[idx], t_echo_s[idx], sigma_samples, sep, gap, kernel, noise_f[idx],
             shot_noise_counts, s.threshold_sigma,
         )  # fmt: skip
         sel = idx[good]

@@ -168,7 +168,8 @@ def surface_step_fit(
     sg: float,
     decay: np.ndarray | None = None,
     echo_sigma: float | None = None,
-) -> np.ndarray:
+    with_echo_time: bool = False,
+) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Surface time (fractional sample) of each waveform from the echo + column-onset fit.
 
     Parameters
@@ -185,11 +186,14 @@ def surface_step_fit(
         The surface echo (Gaussian) term is kept only where its fitted amplitude stands this
         many standard errors above 0; elsewhere the onset alone times the surface (an echo
         term free to sit on noise pulls a noisy onset late). None: always kept.
+    with_echo_time : bool
+        Also return the time of the fit with the echo term kept (a start for later fits that
+        model the echo, :func:`~pipeline.process.detect_merged.merged_bottoms`).
 
     Returns
     -------
-    (n,) ndarray
-        Fitted surface time, samples from the first.
+    (n,) ndarray, or two
+        Fitted surface time, samples from the first (and the echo-kept one).
     """
     filt = np.ascontiguousarray(filt, dtype=np.float64)
     i_peak = np.asarray(i_peak, dtype=np.int64)
@@ -216,6 +220,13 @@ def surface_step_fit(
         cut = (i_peak + offsets[0] < 0) | (i_peak + offsets[-1] > filt.shape[1] - 1)
         inside = np.argmin(sse1, axis=1) > 0
         sse = np.where((echo | cut | ~inside)[:, None], sse2, sse1)
+    t_sel = _refined(sse, i_peak)
+    return (t_sel, _refined(sse2, i_peak)) if with_echo_time else t_sel
+
+
+def _refined(sse: np.ndarray, i_peak: np.ndarray) -> np.ndarray:
+    """The best candidate of each row of ``sse``, refined by a parabola (fractional sample)."""
+    n = sse.shape[0]
     k = np.clip(np.argmin(sse, axis=1), 1, STEP_GRID.size - 2)
     rows = np.arange(n)
     s0, s1, s2 = sse[rows, k - 1], sse[rows, k], sse[rows, k + 1]
