@@ -13,7 +13,9 @@ Method
    have a return below the water level (water under them), and land if it is linked to
    candidates whose neighbourhood is mostly candidates and stands ``land_sea_sigmas`` sea
    sigmas (measured from the surface heights) above the level, or to a region of candidates
-   far wider than a crest region: a wave crest is water. A
+   far wider than a crest region: a wave crest is water, and so is a trough down to
+   ``max(below_margin_m, below_sea_sigmas * sigma_sea)`` below the level, or deeper with
+   a bottom return ``level_min_depth_m`` under it. A
    pulse without a surface return whose straight (air) bottom point is higher than the band
    is land. Points below the band are not water surface (flagged outliers). With no water
    level given, a survey whose detector measured the water column (no-bottom limits given)
@@ -61,6 +63,7 @@ from pipeline.process.surface_land import (
     land_surface_points,
     masked_median,
     no_water_seen,
+    sea_sigma_m,
 )
 from pipeline.process.surface_settings import SurfaceFitSettings
 
@@ -297,7 +300,14 @@ def fit_water_surface(
     land_s = np.zeros(n, dtype=bool)
     if has_s.any():
         land_s[has_s] = land_surface_points(ps[has_s, :2], res_s[has_s], water_below[has_s], st)[0]
-    low_s = has_s & (res_s <= -st.below_margin_m)
+    # a trough is water: the band below the level widens with the measured sea, as the land
+    # margin above it does (a 2.5 m Hs sea has troughs 1.5 m down; a fixed 1 m band dropped
+    # them, the pulses fell back to the mean plane and went 1-2 m deep)
+    below = st.below_margin_m
+    if has_s.any():
+        below = max(below, st.below_sea_sigmas * sea_sigma_m(res_s[has_s], st))
+    # and a surface point with a bottom well under it saw water below: it is the surface
+    low_s = has_s & (res_s <= -below) & ~wet
     water_s = has_s & ~land_s & ~low_s
     land_b = ~has_s & returns.has_bottom & (res_b >= st.land_margin_m)
     if no_water:

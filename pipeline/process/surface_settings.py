@@ -55,6 +55,12 @@ class SurfaceFitSettings:
         "region spans ~ a wavelength ~ 150 sigma)",
     )
     below_margin_m: float = setting(1.0, gt=0.0, doc="lower below the water level: not surface")
+    below_sea_sigmas: float = setting(
+        4.0,
+        ge=0.0,
+        doc="a trough reaches this many measured sea-height sigmas below the level: the "
+        "not-surface band starts at max(below_margin_m, this x sigma_sea)",
+    )
     water_level_hint_m: float | None = setting(
         None, doc="known water level (local z) to start from instead of the histogram mode"
     )
