@@ -247,7 +247,16 @@ class WaveField:
             mss1 = float(np.sum(k * k * psi * shape)) * dk2
             self.tail_factor = (self.cox_munk_mss - mss0) / mss1
             if self.tail_factor <= -1.0:
-                raise ValueError(f"mss calibration failed: tail factor {self.tail_factor:.3g}")
+                # no tail scaling helps: the waves below k_t alone hold more slope than Cox-Munk
+                # (PM slopes depend on k / k_p only: ~0.0099 below 20 k_p at any wind, while
+                # Cox-Munk is below that under ~1.35 m/s), so no field matches it at this wind
+                raise ValueError(
+                    f"mss calibration impossible at U12.5 = {self.u12_5_m_s:.3g} m/s: the "
+                    f"spectrum's waves below the tail (k < {TAIL_START_KP:g} k_p) already carry "
+                    f"a mean-square slope of {mss0 - mss1:.4g}, above Cox-Munk's "
+                    f"{self.cox_munk_mss:.4g}; use calibrate_mss=False (the published spectrum) "
+                    "at winds this low"
+                )
             psi = psi * (1.0 + self.tail_factor * shape)
         self.expected_m0_m2 = float(np.sum(psi)) * dk2
         self.expected_mss = float(np.sum(k * k * psi)) * dk2

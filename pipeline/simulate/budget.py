@@ -8,18 +8,9 @@ floor in turbid water (e^-3000) is as exact as a bright land echo. Common factor
 
 Returns
 -------
-* **Water surface**: quasi-specular reflection from wave facets (Kirchhoff geometric optics):
-  a facet sends light back to the receiver only when its normal points along the beam, at local
-  normal incidence, so with Fresnel ``R_F(0)`` and the isotropic Gaussian (Cox-Munk) slope
-  density ``p(tan t) = exp(-tan^2 t / s^2) / (pi s^2)`` the intensity per sr per incident watt is
-  ``(1 - W) R_F(0) sec^5(t) p(tan t) / 4`` (``sec^4`` from slope space to solid angle and the
-  quadrupled reflected cone, ``sec`` from the footprint's spread), with ``t`` the incidence angle
-  on the mesh normal, plus whitecaps ``W rho_foam cos(t) / pi`` (Lambertian). At nadir this is
-  :func:`pipeline.lidar_equation.surface_backscatter_per_sr`. Slope variance (model choice):
-  ``s^2 = max(s^2_CoxMunk(U) - s^2_resolved, 0.003)``: the mesh's own facets already carry
-  ``s^2_resolved`` (0 for flat water: the full Cox-Munk value); the floor 0.003 is Cox & Munk's
-  clean-sea value at zero wind, ripples no mesh resolves, which also keeps the specular lobe
-  wider than the beam so sub-ray sampling converges.
+* **Water surface**: quasi-specular glint of the wave facets in two scales (the traced slope at
+  the hit plus the unresolved Cox-Munk facets, in slope space) and Lambertian whitecaps:
+  :mod:`pipeline.simulate.glint`.
 * **Land** (LAND sub-rays): Lambertian, ``rho cos(t) / pi``, ``rho`` a Table 1 graybody power
   reflectance (desert sand by default), range ``R``.
 * **Bottom**: ``T_down T_up T_w^2 (rho_b / pi) cos(t_b)`` times the refracted aperture term
@@ -75,6 +66,11 @@ from pipeline.simulate.geometry import (
     log_column_integral,
     safe_log,
 )
+from pipeline.simulate.glint import (
+    MIN_MEAN_SQUARE_SLOPE,
+    log_surface_backscatter_per_sr,
+    surface_mean_square_slope,
+)
 from pipeline.simulate.layer import LayerEcho, layer_echo
 from pipeline.water_optics import scattering_split, water_attenuation
 
@@ -91,8 +87,6 @@ __all__ = [
 ]
 
 C0 = optics.SPEED_OF_LIGHT_M_S
-#: Cox & Munk (1954) clean-surface slope variance at zero wind: the unresolved floor.
-MIN_MEAN_SQUARE_SLOPE = le.COX_MUNK_INTERCEPT
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -124,47 +118,6 @@ class ReturnSettings:
     full_overlap_range_m: float = setting(
         0.0, ge=0.0, le=1e5, doc="G(R) = overlap_factor (R / R_full)^2 below this range"
     )
-
-
-def surface_mean_square_slope(wind_speed_m_s, resolved_mss=0.0):
-    """Unresolved slope variance ``max(s^2_CM(U) - resolved, 0.003)`` of the surface facets."""
-    full = le.cox_munk_mean_square_slope(wind_speed_m_s)
-    return np.maximum(full - resolved_mss, MIN_MEAN_SQUARE_SLOPE)
-
-
-def log_surface_backscatter_per_sr(cos_t, fresnel_r0, mss, whitecap):
-    """Log of the surface backscatter per sr per incident watt at incidence ``t`` (see module).
-
-    Parameters
-    ----------
-    cos_t : ndarray
-        Cosine of the incidence angle on the (mesh) surface normal.
-    fresnel_r0 : float
-        Fresnel reflectance at normal incidence.
-    mss : float
-        Slope variance ``s^2`` of the unresolved facets.
-    whitecap : float
-        Whitecap cover fraction ``W``.
-
-    Returns
-    -------
-    ndarray
-        ``ln[(1 - W) R0 sec^5 t exp(-tan^2 t / s^2) / (4 pi s^2) + W rho_foam cos t / pi]``.
-    """
-    cos_t = np.clip(np.asarray(cos_t, dtype=np.float64), 0.0, 1.0)
-    log_cos = safe_log(cos_t)
-    ok = cos_t > 1e-100  # tan^2 below 1e200: finite, and exp(-tan^2/s^2) is 0 anyway
-    tan2 = np.where(ok, (1.0 - cos_t**2) / np.where(ok, cos_t, 1.0) ** 2, 1e200)
-    glint = (
-        math.log(fresnel_r0 / (4.0 * math.pi * mss)) + math.log1p(-whitecap)
-        if whitecap < 1.0
-        else LOG_ZERO
-    )
-    log_glint = glint - 5.0 * log_cos - tan2 / mss
-    log_foam = (
-        math.log(whitecap * le.FOAM_REFLECTANCE / math.pi) + log_cos if whitecap > 0 else LOG_ZERO
-    )
-    return np.maximum(np.logaddexp(log_glint, log_foam), LOG_ZERO)
 
 
 def land_power_reflectance(settings: ReturnSettings) -> float:
@@ -326,7 +279,10 @@ def return_budget(paths, scene, detector, settings: ReturnSettings | None = None
     r0, _ = optics.fresnel_unpolarised(n_a, n_w, 0.0)
     mss = float(surface_mean_square_slope(water.wind_speed_m_s, rs.resolved_mean_square_slope))
     white = float(le.whitecap_fraction(water.wind_speed_m_s))
-    log_bs = log_surface_backscatter_per_sr(cos_a, float(r0), mss, white)
+    # the glint in slope space against the traced facet (wet sub-rays' normals are the water's)
+    up = np.array([0.0, 0.0, 1.0])
+    nrm = np.where(wet[..., None], np.asarray(paths.surface_normal), up)
+    log_bs = log_surface_backscatter_per_sr(paths.direction, nrm, float(r0), mss, white)
     log_surface = np.where(wet, base + log_bs + inv_r2, LOG_ZERO)
     rho_land = land_power_reflectance(rs)
     log_land = np.where(

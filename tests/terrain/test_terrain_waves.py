@@ -164,3 +164,22 @@ def test_bad_wave_arguments_raise(kwargs, message):
     args.update(kwargs)
     with pytest.raises(ValueError, match=message):
         WaveField(args.pop("wind_speed_m_s"), **args)
+
+
+@pytest.mark.parametrize("u12", [0.5, 1.0, 2.0])
+def test_low_wind_calibration_matches_cox_munk_or_says_why(u12):
+    """At 2 m/s the calibrated field holds Cox & Munk's (1954) s^2 = 0.003 + 5.12e-3 U12.5; at
+    0.5 and 1 m/s (0.0056, 0.0081) the PM waves below the tail alone hold ~0.0099, which no
+    tail scaling removes: a clear error, not a failed number."""
+    # a tile of one peak wavelength on 512 nodes: waves to 128 k_p, as the documented default
+    probe = {"extent": (0, 100, 0, 100), "spacing_m": 100 / 64, "calibrate_mss": False}
+    lp = WaveField(u12, rng=0, wind_height_m=12.5, **probe).peak_wavelength_m
+    kwargs = {"extent": (0, lp, 0, lp), "spacing_m": lp / 512, "rng": 0, "wind_height_m": 12.5}
+    cox_munk = 0.003 + 5.12e-3 * u12
+    if cox_munk > 0.0099:
+        sea = WaveField(u12, **kwargs)
+        assert sea.expected_mss == pytest.approx(cox_munk, rel=1e-9)
+        assert sea.mean_square_slope(0.0) == pytest.approx(cox_munk, rel=0.2)
+    else:
+        with pytest.raises(ValueError, match=r"impossible at U12.5 = .* above Cox-Munk"):
+            WaveField(u12, **kwargs)
