@@ -22,17 +22,21 @@ Sampling
 1. Start: the detector's estimate, moved to every pulse's posterior mode by batched damped
    Fisher scoring (:mod:`~pipeline.uncertainty.posterior_start`).
 2. Walkers: the mode plus a small ball of the Laplace covariance times ``init_scale``.
-3. :class:`emcee.EnsembleSampler` (``vectorize=True``) with the pulses of a batch side by side
-   in one walker vector: two emcee moves act on each pulse's block independently
+3. emcee's ensemble loop (the :class:`emcee.EnsembleSampler` step: a move drawn by weight from
+   one ``RandomState``, then proposed; written out in :func:`_run` without the sampler's
+   per-step bookkeeping, same chains) with the pulses of a batch side by side in one walker
+   vector: two emcee moves act on each pulse's block independently
    (:class:`BlockDEMove`, differential evolution, and :class:`BlockIndependenceMove`, an
    independence Metropolis–Hastings move from a Student-t fitted to the burn-in), each with
    its own accept/reject from the pulse's own log posterior (the ``blobs`` of
    :func:`log_prob_blocks`): every pulse is an exact MCMC of its own posterior, and the model
-   is evaluated once for all pulses and walkers. ``burn_steps`` are discarded (the
+   is evaluated once for all pulses and walkers, compiled row by row
+   (:mod:`~pipeline.uncertainty.waveform_kernel`). ``burn_steps`` are discarded (the
    independence proposal is adapted once, at their end, then fixed).
 4. Convergence, per pulse: production in chunks of ``chunk_steps`` until the chain is at
    least ``tau_factor`` (50) integrated autocorrelation times long (emcee's
-   ``integrated_time``, the largest over the parameters) or ``max_steps``; the mean
+   ``integrated_time`` for all pulses at once, :func:`integrated_time_blocks`; the largest
+   over the parameters) or ``max_steps``; the mean
    acceptance fraction must lie in ``acceptance_range`` (0.15, 0.8). Otherwise the pulse is
    flagged :attr:`PosteriorFlag.NOT_CONVERGED` / :attr:`PosteriorFlag.ACCEPTANCE` (its
    summaries are still given). Converged pulses leave the batch; the rest continue.
@@ -42,7 +46,8 @@ Seabed point
 The draws become 3-D seabed points with the processing's own refraction in
 :mod:`pipeline.uncertainty.seabed_posterior`.
 
-Cost: see ``benchmarks/RESULTS_posterior.md`` (a few tenths of a second per pulse).
+Cost: see ``benchmarks/RESULTS_posterior.md`` (tens of CPU milliseconds per pulse; the pulses
+whose chains do not converge run to ``max_steps`` and dominate).
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ with their Gaussian; first order, as the TPU). Without it the intervals held the
 ranging noise alone: about 1 cm, against a few cm of error from the terms above on sloping or
 wavy scenes (``benchmarks/RESULTS_posterior.md``).
 
-Cost: see ``benchmarks/RESULTS_posterior.md`` (a few tenths of a second per pulse).
+Cost: see ``benchmarks/RESULTS_posterior.md``.
 """
 
 from __future__ import annotations

@@ -8,8 +8,9 @@ bathymetric points are chosen, first in the cells that matter
 or a flagged point), then evenly among the rest, and their emcee posteriors are sampled and
 carried through refraction onto the seabed point
 (:func:`pipeline.uncertainty.seabed_posterior.seabed_posteriors`), marginalised over the TPU
-terms the waveform does not hold (:func:`nuisance_depth_sigma_m`). Cost: the budget times about
-0.3-0.5 s (about 15 min per km² at the default 2000/km²), linear in the area, bounded per km².
+terms the waveform does not hold (:func:`nuisance_depth_sigma_m`). Cost: the budget times
+about 0.1 CPU s (``benchmarks/RESULTS_posterior.md``; about 3 CPU min per km² at the default
+2000/km²), linear in the area, bounded per km².
 """
 
 from __future__ import annotations
