@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.evaluate import grid_errors_m, point_errors_m
+from pipeline.evaluate import _at, grid_errors_m, point_errors_m
 from pipeline.outputs.atomic import atomic_path
 from pipeline.process.classify import BATHYMETRIC_POINT, NO_BOTTOM_FOUND_AT
 
@@ -103,7 +103,10 @@ def _posterior_arrays(post, truth_depth_m) -> dict[str, np.ndarray]:
     p = post.posteriors
     started = (p.flags & np.uint16(PosteriorFlag.NO_START)) == 0
     xy = p.xyz_median_m[started]
-    out = {"post_true_depth_m": np.asarray(truth_depth_m(xy[:, 0], xy[:, 1]), dtype=np.float64)}
+    # over a moving sea, the depth below the surface each pulse saw (as the points and
+    # evaluation.json's posterior coverage): the time-0 sea is another surface
+    true_d = _at(truth_depth_m, xy[:, 0], xy[:, 1], np.asarray(p.pulse_id)[started])
+    out = {"post_true_depth_m": true_d}
     out.update({f"post_{k}_m": np.asarray(p.depth_m[k])[started] for k in keys})
     wave = getattr(p, "waveform_depth_m", None) or p.depth_m
     out.update({f"post_wave_{k}_m": np.asarray(wave[k])[started] for k in keys})
