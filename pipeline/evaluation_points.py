@@ -14,7 +14,9 @@ Arrays (``n`` rows per group; a group is empty when the run has none):
 * ``tpu_*`` - the class-40 points the TPU propagated: ``tpu_true_depth_m``, ``tpu_error_m``,
   ``tpu_sigma_depth_m`` (1 σ of the depth), ``tpu_group`` (photon window, else the row).
 * ``post_*`` - sampled depth posteriors with a start: ``post_true_depth_m``, ``post_median_m``,
-  ``post_lo68_m``, ``post_hi68_m``, ``post_lo95_m``, ``post_hi95_m``, ``post_converged``.
+  ``post_lo68_m``, ``post_hi68_m``, ``post_lo95_m``, ``post_hi95_m``, ``post_converged``; and
+  ``post_wave_*_m`` (same keys) the waveform posterior alone, before the TPU nuisances
+  (:mod:`pipeline.uncertainty.seabed_posterior`).
 * ``cell_*`` - non-empty grid cells: ``cell_x_m``, ``cell_y_m``, ``cell_depth_m`` (below the
   datum), ``cell_true_depth_m`` (below the true mean level), ``cell_error_m``, ``cell_count``.
 * ``nb_depth_m`` - measured depths of the class-45 (no-bottom-found-at) points: each is a
@@ -28,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.evaluate import grid_errors_m, point_errors_m
+from pipeline.evaluate import _at, grid_errors_m, point_errors_m
 from pipeline.outputs.atomic import atomic_path
 from pipeline.process.classify import BATHYMETRIC_POINT, NO_BOTTOM_FOUND_AT
 
@@ -92,6 +94,7 @@ def _posterior_arrays(post, truth_depth_m) -> dict[str, np.ndarray]:
     """The ``post_*`` arrays: the started posteriors and the truth at their median position."""
     keys = ("median", "lo68", "hi68", "lo95", "hi95")
     empty = {f"post_{k}_m": np.zeros(0) for k in ("true_depth", *keys)}
+    empty.update({f"post_wave_{k}_m": np.zeros(0) for k in keys})
     empty["post_converged"] = np.zeros(0, dtype=bool)
     if post is None or post.posteriors is None:
         return empty
@@ -100,8 +103,13 @@ def _posterior_arrays(post, truth_depth_m) -> dict[str, np.ndarray]:
     p = post.posteriors
     started = (p.flags & np.uint16(PosteriorFlag.NO_START)) == 0
     xy = p.xyz_median_m[started]
-    out = {"post_true_depth_m": np.asarray(truth_depth_m(xy[:, 0], xy[:, 1]), dtype=np.float64)}
+    # over a moving sea, the depth below the surface each pulse saw (as the points and
+    # evaluation.json's posterior coverage): the time-0 sea is another surface
+    true_d = _at(truth_depth_m, xy[:, 0], xy[:, 1], np.asarray(p.pulse_id)[started])
+    out = {"post_true_depth_m": true_d}
     out.update({f"post_{k}_m": np.asarray(p.depth_m[k])[started] for k in keys})
+    wave = getattr(p, "waveform_depth_m", None) or p.depth_m
+    out.update({f"post_wave_{k}_m": np.asarray(wave[k])[started] for k in keys})
     out["post_converged"] = np.asarray(p.converged)[started]
     return out
 

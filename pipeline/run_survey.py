@@ -349,7 +349,9 @@ def run_survey(
             )
             if post is not None and post.posteriors is not None:
                 p = post.posteriors
-                unc = with_posteriors(unc, grid, post.point_index, p.converged, p.depth_m["std"])
+                # the waveform's own sigma: the cells add the TPU's other terms themselves
+                std = p.depth_m["std"] if p.waveform_std_m is None else p.waveform_std_m
+                unc = with_posteriors(unc, grid, post.point_index, p.converged, std)
     with clock.stage("outputs"):
         from pipeline.outputs.las import write_points_laz
         from pipeline.outputs.netcdf import write_grid_nc

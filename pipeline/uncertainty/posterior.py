@@ -22,17 +22,21 @@ Sampling
 1. Start: the detector's estimate, moved to every pulse's posterior mode by batched damped
    Fisher scoring (:mod:`~pipeline.uncertainty.posterior_start`).
 2. Walkers: the mode plus a small ball of the Laplace covariance times ``init_scale``.
-3. :class:`emcee.EnsembleSampler` (``vectorize=True``) with the pulses of a batch side by side
-   in one walker vector: two emcee moves act on each pulse's block independently
+3. emcee's ensemble loop (the :class:`emcee.EnsembleSampler` step: a move drawn by weight from
+   one ``RandomState``, then proposed; written out in :func:`_run` without the sampler's
+   per-step bookkeeping, same chains) with the pulses of a batch side by side in one walker
+   vector: two emcee moves act on each pulse's block independently
    (:class:`BlockDEMove`, differential evolution, and :class:`BlockIndependenceMove`, an
    independence Metropolis–Hastings move from a Student-t fitted to the burn-in), each with
    its own accept/reject from the pulse's own log posterior (the ``blobs`` of
    :func:`log_prob_blocks`): every pulse is an exact MCMC of its own posterior, and the model
-   is evaluated once for all pulses and walkers. ``burn_steps`` are discarded (the
+   is evaluated once for all pulses and walkers, compiled row by row
+   (:mod:`~pipeline.uncertainty.waveform_kernel`). ``burn_steps`` are discarded (the
    independence proposal is adapted once, at their end, then fixed).
 4. Convergence, per pulse: production in chunks of ``chunk_steps`` until the chain is at
    least ``tau_factor`` (50) integrated autocorrelation times long (emcee's
-   ``integrated_time``, the largest over the parameters) or ``max_steps``; the mean
+   ``integrated_time`` for all pulses at once, :func:`integrated_time_blocks`; the largest
+   over the parameters) or ``max_steps``; the mean
    acceptance fraction must lie in ``acceptance_range`` (0.15, 0.8). Otherwise the pulse is
    flagged :attr:`PosteriorFlag.NOT_CONVERGED` / :attr:`PosteriorFlag.ACCEPTANCE` (its
    summaries are still given). Converged pulses leave the batch; the rest continue.
@@ -42,7 +46,8 @@ Seabed point
 The draws become 3-D seabed points with the processing's own refraction in
 :mod:`pipeline.uncertainty.seabed_posterior`.
 
-Cost: see ``benchmarks/RESULTS_posterior.md`` (a few tenths of a second per pulse).
+Cost: see ``benchmarks/RESULTS_posterior.md`` (tens of CPU milliseconds per pulse; the pulses
+whose chains do not converge run to ``max_steps`` and dominate).
 """
 
 from __future__ import annotations
@@ -244,18 +249,17 @@ def sample_batch(
         pos[:, active] = new_pos
         n_steps[active] += chunk
         acc_sum[active] += acc * chunk
-        done = []
         for k, i in enumerate(active):
             stored[i].append(chain[:, :, k])
-            if n_steps[i] < st.min_steps and n_steps[i] < st.max_steps:
-                continue
-            x = np.concatenate(stored[i], axis=0)
-            with np.errstate(invalid="ignore", divide="ignore"):  # a stuck chain: acf 0/0
-                t_i = st.thin * emcee.autocorr.integrated_time(x, tol=0)
-            tau[i] = np.where(np.isfinite(t_i), t_i, np.inf)
-            if n_steps[i] >= st.tau_factor * tau[i].max() or n_steps[i] >= st.max_steps:
-                done.append(i)
-        active = np.setdiff1d(active, done)
+        # the active pulses started together: their chains are equally long, checked at once
+        steps = int(n_steps[active[0]])
+        if steps < st.min_steps and steps < st.max_steps:
+            continue
+        x = np.stack([np.concatenate(stored[i], axis=0) for i in active], axis=2)
+        t_a = st.thin * integrated_time_blocks(x)
+        tau[active] = np.where(np.isfinite(t_a), t_a, np.inf)
+        done = (steps >= st.tau_factor * tau[active].max(axis=1)) | (steps >= st.max_steps)
+        active = active[~done]
     short = n_steps < st.tau_factor * tau.max(axis=1)
     flags[short] |= np.uint16(PosteriorFlag.NOT_CONVERGED)
     acc = acc_sum / np.maximum(n_steps, 1)
@@ -292,21 +296,64 @@ def _run(data: PulseBatch, pulses, pos, system, st, n_steps: int, thin: int, rng
     de = BlockDEMove(n_p, N_PARAMS)
     ind = BlockIndependenceMove(proposal[0], proposal[1], st.proposal_dof)
     w = st.independence_weight
-    moves = [(de, 1.0 - w), (ind, w)] if 0.0 < w < 1.0 else [ind] if w >= 1.0 else [de]
-    sampler = emcee.EnsembleSampler(
-        nw, n_p * N_PARAMS, log_prob_blocks, args=(sub, system), vectorize=True, moves=moves
-    )
-    sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
-    # each pulse's walkers are independent; the joint (9 P)-D check does not apply
-    state = sampler.run_mcmc(
-        pos.reshape(nw, n_p * N_PARAMS),
-        n_steps // thin,
-        thin_by=thin,
-        skip_initial_state_check=True,
-    )
-    chain = sampler.get_chain().reshape(-1, nw, n_p, N_PARAMS)
+    moves = [(de, 1.0 - w), (ind, w)] if 0.0 < w < 1.0 else [(ind if w >= 1.0 else de, 1.0)]
+    weights = np.array([m[1] for m in moves])
+    weights /= weights.sum()
+    # emcee's EnsembleSampler loop, without its per-step bookkeeping (it copied the generator
+    # state and split every walker's blobs in Python each step, which cost as much as the
+    # compiled model): the same generator, move choice and moves, so the same chains
+    rnd = np.random.RandomState(int(rng.integers(2**31)))
+
+    def evaluate(coords):
+        out = log_prob_blocks(coords, sub, system)
+        return out[:, 0], out[:, 1:]
+
+    model = emcee.model.Model(None, evaluate, map, rnd)
+    coords = pos.reshape(nw, n_p * N_PARAMS).copy()
+    state = emcee.State(coords, *evaluate(coords))
+    chain = np.empty((n_steps // thin, nw, n_p * N_PARAMS))
+    for k in range(chain.shape[0]):
+        for _ in range(thin):
+            move = moves[rnd.choice(len(moves), p=weights)][0]
+            state, _ = move.propose(model, state)
+        chain[k] = state.coords
+    chain = chain.reshape(-1, nw, n_p, N_PARAMS)
     acc = (de.accepted + ind.accepted) / max(de.proposed + ind.proposed, 1)
     return state.coords.reshape(nw, n_p, N_PARAMS), (chain, acc)
+
+
+def integrated_time_blocks(x: np.ndarray, c: float = 5.0) -> np.ndarray:
+    """Integrated autocorrelation times of many chains at once, as emcee estimates them.
+
+    :func:`emcee.autocorr.integrated_time` (``tol=0``) for every pulse and parameter in one
+    FFT along the steps: the normalised autocorrelation function of each walker's series,
+    averaged over the walkers, summed to ``taus = 2 cumsum(f) - 1`` and cut at Sokal's window
+    (the first lag ``M >= c taus[M]``). emcee loops over walkers and parameters in Python,
+    which cost more than the model once the model was compiled.
+
+    Parameters
+    ----------
+    x : (n_steps, n_walkers, P, 9) ndarray
+        Stored chains.
+    c : float
+        Sokal's window constant (emcee's default 5).
+
+    Returns
+    -------
+    (P, 9) ndarray
+        In stored steps; NaN where a series is constant (emcee gives NaN there too).
+    """
+    n_t = x.shape[0]
+    n_fft = 1 << max(int(n_t - 1).bit_length(), 0)  # emcee's next power of two
+    y = np.moveaxis(x - x.mean(axis=0), 0, -1).copy()  # steps last: contiguous transforms
+    f = np.fft.rfft(y, n=2 * n_fft, axis=-1)
+    acf = np.fft.irfft(f.real**2 + f.imag**2, n=2 * n_fft, axis=-1)[..., :n_t]
+    with np.errstate(invalid="ignore", divide="ignore"):  # a stuck chain: acf 0/0
+        acf = acf / acf[..., :1]
+    taus = 2.0 * np.cumsum(np.moveaxis(acf.mean(axis=0), -1, 0), axis=0) - 1.0  # (n_t, P, 9)
+    m = np.arange(n_t)[:, None, None] < c * taus
+    window = np.where(m.any(axis=0), np.argmin(m, axis=0), n_t - 1)
+    return np.take_along_axis(taus, window[None], axis=0)[0]
 
 
 _BATCH_FIELDS = ("samples", "valid", "cos_water", "lower", "upper", "t_last_s", "ln_k_prior")

@@ -118,7 +118,7 @@ class BlockIndependenceMove(emcee.moves.Move):
 
     def _log_g(self, x: np.ndarray) -> np.ndarray:
         """Log proposal density (n, n_blocks), up to a per-block constant (cancels)."""
-        z = np.einsum("pij,npj->npi", self.inv_chol, x - self.centre)
+        z = (self.inv_chol @ (x - self.centre)[..., None])[..., 0]
         d = self.centre.shape[1]
         return -0.5 * (self.dof + d) * np.log1p(np.sum(z * z, axis=2) / self.dof)
 
@@ -130,7 +130,7 @@ class BlockIndependenceMove(emcee.moves.Move):
         x = state.coords.reshape(nw, nb, b)
         z = rnd.randn(nw, nb, b)
         w = np.sqrt(self.dof / rnd.chisquare(self.dof, size=(nw, nb, 1)))
-        q = self.centre + np.einsum("pij,npj->npi", self.chol, z) * w
+        q = self.centre + (self.chol @ z[..., None])[..., 0] * w
         _, new_blobs = model.compute_log_prob_fn(q.reshape(nw, nb * b))
         new = np.reshape(new_blobs, (nw, nb))
         old = np.reshape(state.blobs, (nw, nb))

@@ -68,6 +68,10 @@ class PosteriorSettings:
     surface_width_ratio_bounds: tuple[float, float] = setting(
         (0.7, 3.0), gt=0.0, length=2, doc="log-uniform prior on surface echo / response width"
     )
+    marginalise_tpu: bool = setting(
+        True,
+        doc="seabed posterior: add the TPU's non-waveform depth terms as Gaussian nuisances",
+    )
     attenuation_prior: tuple[float, float] | None = setting(
         None,
         gt=0.0,

@@ -35,12 +35,10 @@ import numpy as np
 
 from pipeline.errors import NumericalError
 from pipeline.uncertainty.posterior_settings import PosteriorSettings
+from pipeline.uncertainty.waveform_kernel import log_post_rows
 from pipeline.uncertainty.waveform_model import (
     N_PARAMS,
     WaveformSystem,
-    expected_waveform,
-    in_water_delay_s,
-    log_likelihood,
     th_str,
 )
 
@@ -77,6 +75,11 @@ class PulseBatch:
 
     def __len__(self) -> int:
         return int(self.samples.shape[0])
+
+    @property
+    def n_valid(self) -> np.ndarray:
+        """(P,) int64: real samples per waveform (the valid ones lead each row)."""
+        return self.valid.sum(axis=1)
 
     @property
     def n_samples(self) -> int:
@@ -173,30 +176,35 @@ def make_pulse_batch(
     )
 
 
-def _rows_log_lik(th: np.ndarray, data: PulseBatch, pulse: np.ndarray, system) -> np.ndarray:
-    """Log posterior of parameter rows ``th`` (N, 9), row ``j`` for pulse ``pulse[j]``.
+def _rows_log_post(th: np.ndarray, data: PulseBatch, system) -> np.ndarray:
+    """Log posterior of walker rows ``th`` (N, 9), row ``k`` for pulse ``k % P``.
 
     ``-inf`` outside the prior box (flat inside, plus the optional normal prior on ``ln k``);
-    NaN raised as :class:`NumericalError`.
+    NaN raised as :class:`NumericalError`. Compiled
+    (:func:`~pipeline.uncertainty.waveform_kernel.log_post_rows`).
     """
     if np.isnan(th).any():
         raise NumericalError(f"`theta` holds NaN: {th_str(th[np.isnan(th).any(axis=1)][0])}")
-    lo, hi = data.lower[pulse], data.upper[pulse]
-    cw = data.cos_water[pulse]
-    t_b = th[:, 1] * 1e-9 + in_water_delay_s(th[:, 0], cw, system.group_index)
-    ok = np.all((th >= lo) & (th <= hi), axis=1) & (t_b <= data.t_last_s[pulse])
-    out = np.full(th.shape[0], -np.inf)
-    if ok.any():
-        p = pulse[ok]
-        mu = expected_waveform(th[ok], data.n_samples, system, cw[ok])
-        ll = log_likelihood(data.samples[p], mu, system, data.valid[p])
-        if np.isnan(ll).any() or np.isposinf(ll).any():
-            raise NumericalError(
-                f"log-likelihood is not finite at {th_str(th[ok][~np.isfinite(ll)][0])}"
-            )
-        mean, sig = data.ln_k_prior[p, 0], data.ln_k_prior[p, 1]
-        z = np.where(np.isfinite(sig), (th[ok, 5] - mean) / np.where(np.isfinite(sig), sig, 1.0), 0)
-        out[ok] = ll - 0.5 * z * z
+    out = log_post_rows(
+        np.ascontiguousarray(th),
+        data.samples,
+        data.n_valid,
+        data.cos_water,
+        np.column_stack([data.lower, data.upper, data.t_last_s]),
+        data.ln_k_prior,
+        (
+            system.sample_interval_s,
+            system.pulse_sigma_s,
+            system.group_index,
+            system.offset_counts,
+            system.poisson,
+            system.floor_variance,
+            system.excess_noise_factor * system.counts_per_photoelectron,
+        ),
+    )
+    if np.isnan(out).any() or np.isposinf(out).any():
+        bad = th[~(np.isfinite(out) | np.isneginf(out))][0]
+        raise NumericalError(f"log-likelihood is not finite at {th_str(bad)}")
     return out
 
 
@@ -221,7 +229,7 @@ def log_prob_blocks(theta: Any, data: PulseBatch, system: WaveformSystem) -> np.
     if th.shape[1] != N_PARAMS * p:
         raise ValueError(f"`theta` must have {N_PARAMS * p} columns; got {th.shape[1]}")
     rows = th.reshape(n * p, N_PARAMS)
-    blocks = _rows_log_lik(rows, data, np.tile(np.arange(p), n), system).reshape(n, p)
+    blocks = _rows_log_post(rows, data, system).reshape(n, p)
     return np.column_stack([np.sum(blocks, axis=1), blocks])
 
 

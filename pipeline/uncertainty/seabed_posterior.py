@@ -6,7 +6,20 @@ become round-trip times ``t0 + t_s`` and ``t0 + t_s + tau(depth)`` and go throug
 reported posterior is on the 3-D seabed point (and its depth below the fitted surface), with
 the processing's own refraction.
 
-Cost: see ``benchmarks/RESULTS_posterior.md`` (a few tenths of a second per pulse).
+Nuisances the waveform does not hold
+------------------------------------
+The waveform fixes the in-water range; the depth compared at the point's measured position
+also moves with what no waveform sees: the navigation and attitude errors (through the seabed
+slope), the wave facet's slope that bent the beam, the fitted plane's tilt, the wave height, the
+water indices. Those are the TPU's terms (:mod:`pipeline.uncertainty.tpu`) other than the two
+timing terms the posterior replaces; given their one-sigma depth changes
+(``nuisance_depth_sigma_m``), each draw gets an independent Gaussian nuisance of that sigma,
+i.e. the depth posterior is marginalised over them (the convolution of the waveform posterior
+with their Gaussian; first order, as the TPU). Without it the intervals held the waveform's
+ranging noise alone: about 1 cm, against a few cm of error from the terms above on sloping or
+wavy scenes (``benchmarks/RESULTS_posterior.md``).
+
+Cost: see ``benchmarks/RESULTS_posterior.md``.
 """
 
 from __future__ import annotations
@@ -99,6 +112,10 @@ class SeabedPosteriors:
     n_steps : (n,) int64
     flags : (n,) uint16
         :class:`PosteriorFlag` bits.
+    waveform_depth_m : dict of (n,) ndarray or None
+        The same summaries of the waveform posterior alone, before the nuisances; its
+        ``std`` (:attr:`waveform_std_m`) replaces the TPU's timing terms in the cells
+        (:func:`~pipeline.uncertainty.survey_uncertainty.with_posteriors`).
     theta_median : (n, 9) ndarray or None
         Per-parameter posterior median of the waveform model's parameters (zeros where
         NO_START): with ``cos_water`` it gives the posterior's fitted waveform
@@ -119,6 +136,12 @@ class SeabedPosteriors:
     flags: np.ndarray
     theta_median: np.ndarray | None = None
     cos_water: np.ndarray | None = None
+    waveform_depth_m: dict[str, np.ndarray] | None = None
+
+    @property
+    def waveform_std_m(self) -> np.ndarray | None:
+        """(n,) depth sigma of the waveform posterior alone (None if not recorded)."""
+        return None if self.waveform_depth_m is None else self.waveform_depth_m["std"]
 
     @property
     def converged(self) -> np.ndarray:
@@ -172,6 +195,7 @@ def seabed_posteriors(
     detect_settings: DetectSettings | None = None,
     detect_noise: tuple[int | None, float] | None = None,
     progress: bool = False,
+    nuisance_depth_sigma_m: Any = None,
 ) -> SeabedPosteriors:
     """Sample the depth posterior of pulses and carry it to the refracted seabed point.
 
@@ -198,6 +222,10 @@ def seabed_posteriors(
         The survey detector's, for the starts (see :func:`sample_batch`).
     progress : bool
         A progress bar over the batches (stderr): the stage takes minutes on a large budget.
+    nuisance_depth_sigma_m : (n_pulses,) array_like, optional
+        One-sigma depth change of the terms the waveform does not hold (see the module
+        docstring), rows aligned with ``returns``; each draw's depth gets an independent
+        Gaussian of it (seeded per batch). Default: none (the waveform posterior alone).
 
     Returns
     -------
@@ -219,6 +247,9 @@ def seabed_posteriors(
             f"one row per pulse of `returns` ({n})"
         )
     rows = np.arange(n) if rows is None else np.asarray(rows, dtype=np.int64)
+    nuis = np.zeros(n) if nuisance_depth_sigma_m is None else np.asarray(nuisance_depth_sigma_m)
+    if nuis.shape != (n,) or not np.all(np.isfinite(nuis) & (nuis >= 0.0)):
+        raise ValueError(f"`nuisance_depth_sigma_m` must be ({n},), finite and >= 0")
     cosw = water_cosine(returns.direction_meas, surface.normal, surface.air_index, rst.phase_index)
     m = len(rows)
     keys = ("median", "lo68", "hi68", "lo95", "hi95", "std")
@@ -226,10 +257,11 @@ def seabed_posteriors(
     xyz_med, xyz_std, sig_h = np.zeros((m, 3)), np.zeros((m, 3)), np.zeros(m)
     acc, tau_max = np.zeros(m), np.zeros(m)
     n_steps, flags = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.uint16)
-    theta_med = np.zeros((m, N_PARAMS))
+    theta_med, wave = np.zeros((m, N_PARAMS)), {k: np.zeros(m) for k in keys}
     bar = tqdm(total=m, unit="pulse", desc="posteriors", disable=not progress, file=sys.stderr)
     for b0 in range(0, m, st.batch_size):
         part = rows[b0 : b0 + st.batch_size]
+        rng = np.random.default_rng([seed, b0])  # the nuisance draws, apart from the chains
         chains = sample_batch(
             y[part],
             system,
@@ -251,7 +283,11 @@ def seabed_posteriors(
             pts = draws_to_seabed(
                 chains.draws[k], int(r), float(t0[r]), returns, surface, system, float(cosw[r]), rst
             )
-            summ = interval_summary(pts.depth_m)
+            for key, v in interval_summary(pts.depth_m).items():
+                wave[key][j] = v
+            # marginalised over the nuisances: every draw moved by its own Gaussian draw
+            d = pts.depth_m + nuis[r] * rng.standard_normal(pts.depth_m.shape)
+            summ = interval_summary(d)
             for key in keys:
                 depth[key][j] = summ[key]
             xyz_med[j] = np.median(pts.xyz_m, axis=0)
@@ -272,4 +308,5 @@ def seabed_posteriors(
         flags=flags,
         theta_median=theta_med,
         cos_water=cosw[rows],
+        waveform_depth_m=wave,
     )

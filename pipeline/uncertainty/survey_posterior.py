@@ -7,8 +7,10 @@ bathymetric points are chosen, first in the cells that matter
 (:func:`pipeline.uncertainty.cell_uncertainty.select_posterior_pulses`: the IHO order could flip,
 or a flagged point), then evenly among the rest, and their emcee posteriors are sampled and
 carried through refraction onto the seabed point
-(:func:`pipeline.uncertainty.seabed_posterior.seabed_posteriors`). Cost: the budget times about
-0.3-0.5 s (about 15 min per km² at the default 2000/km²), linear in the area, bounded per km².
+(:func:`pipeline.uncertainty.seabed_posterior.seabed_posteriors`), marginalised over the TPU
+terms the waveform does not hold (:func:`nuisance_depth_sigma_m`). Cost: the budget times
+about 0.1 CPU s (``benchmarks/RESULTS_posterior.md``; about 3 CPU min per km² at the default
+2000/km²), linear in the area, bounded per km².
 """
 
 from __future__ import annotations
@@ -31,9 +33,10 @@ from pipeline.uncertainty.posterior_selection import (
 )
 from pipeline.uncertainty.seabed_posterior import SeabedPosteriors, seabed_posteriors, take_surface
 from pipeline.uncertainty.survey_uncertainty import SurveyUncertainty
+from pipeline.uncertainty.tpu_settings import DEPTH, TIMING_TERMS
 from pipeline.uncertainty.waveform_model import WaveformSystem
 
-__all__ = ["SurveyPosteriors", "waveform_system", "survey_posteriors"]
+__all__ = ["SurveyPosteriors", "waveform_system", "survey_posteriors", "nuisance_depth_sigma_m"]
 
 
 @dataclass(frozen=True)
@@ -131,6 +134,9 @@ def survey_posteriors(
     rows = order[np.searchsorted(ret.pulse_id[order], pid)]
     korder = np.argsort(kept.pulse_id)
     krows = korder[np.searchsorted(kept.pulse_id[korder], pid)]
+    nuisance = np.zeros(len(rows))
+    if ps.posterior.marginalise_tpu:
+        nuisance = nuisance_depth_sigma_m(unc.tpu40.terms, sel)
     t0 = time.perf_counter()
     post: SeabedPosteriors = seabed_posteriors(
         kept.samples[krows].astype(np.float64),
@@ -144,5 +150,32 @@ def survey_posteriors(
         detect_settings=ps.detect,
         detect_noise=(ctx.instrument.noise_samples, ctx.instrument.shot_noise_counts),
         progress=progress,
+        nuisance_depth_sigma_m=nuisance,
     )
     return SurveyPosteriors(post, sel, time.perf_counter() - t0, n_column)
+
+
+def nuisance_depth_sigma_m(terms: dict[str, np.ndarray], index: np.ndarray) -> np.ndarray:
+    """One-sigma depth change of the TPU terms a waveform posterior does not hold.
+
+    Every term of :attr:`PointTpu.terms <pipeline.uncertainty.tpu.PointTpu>` but the two
+    timing terms (:data:`~pipeline.uncertainty.tpu_settings.TIMING_TERMS`, the waveform's own
+    ranging, which the posterior replaces), in quadrature, in the depth column (the depth
+    compared at the measured position: slope coupling included).
+
+    Parameters
+    ----------
+    terms : dict of (n, 4) ndarray
+        The TPU's one-sigma term rows (x, y, z, depth).
+    index : (k,) int
+        Rows wanted.
+
+    Returns
+    -------
+    (k,) ndarray
+    """
+    var = np.zeros(len(index))
+    for name, rows in terms.items():
+        if name not in TIMING_TERMS:
+            var += rows[index, DEPTH] ** 2
+    return np.sqrt(var)

@@ -392,23 +392,28 @@ def test_posterior_sigma_reaches_the_cramer_rao_bound_poisson():
     assert np.mean(chains.converged) >= 0.75
 
 
-def test_seabed_posterior_through_refraction():
-    """Flat water at z = 0, beams off nadir: the refracted posterior holds the analytic point."""
-    n_air, n_w = 1.000277, 1.3415
-    rng = np.random.default_rng(31)
-    n = 40  # enough surface returns for the local fits; 4 pulses are sampled
-    gx, gy = np.meshgrid(np.arange(8) * 1.5, np.arange(5) * 1.5)
+N_AIR, N_W = 1.000277, 1.3415
+
+
+def level_water_survey(rng, nx=8, ny=5):
+    """Pulses 300 m up, 0-15 deg off nadir, onto level water at z = 0 over 2-5 m depths.
+
+    Returns the detected returns (exact times), the fitted surface, the refraction settings,
+    the true seabed points, depths, in-water cosines and surface times.
+    """
+    n = nx * ny
+    gx, gy = np.meshgrid(np.arange(nx) * 1.5, np.arange(ny) * 1.5)
     ex = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(n)])
     inc = np.radians(rng.uniform(0.0, 15.0, n))
     az = rng.uniform(0, 2 * np.pi, n)
     d = np.column_stack([np.sin(inc) * np.sin(az), np.sin(inc) * np.cos(az), -np.cos(inc)])
     o = ex - d * (300.0 / np.cos(inc))[:, None]
-    sw = n_air * np.sin(inc) / n_w
+    sw = N_AIR * np.sin(inc) / N_W
     cw = np.sqrt(1.0 - sw**2)
     t_dir = np.column_stack([np.sin(az) * sw, np.cos(az) * sw, -cw])
     depth = rng.uniform(2.0, 5.0, n)
     bottom = ex + t_dir * (depth / cw)[:, None]
-    t_s = 2.0 * 300.0 / np.cos(inc) * n_air / C
+    t_s = 2.0 * 300.0 / np.cos(inc) * N_AIR / C
     t_b = t_s + in_water_delay_s(depth, cw, N_G)
     ret = DetectedReturns(
         pulse_id=np.arange(n),
@@ -422,9 +427,18 @@ def test_seabed_posterior_through_refraction():
         bottom_confidence=np.full(n, 0.9),
         flags=np.zeros(n, np.uint16),
     )
-    surface = fit_water_surface(ret, SurfaceFitSettings(air_index=n_air))
-    rst = RefractionSettings(phase_index=n_w, group_index=N_G)
-    np.testing.assert_allclose(water_cosine(d, surface.normal, n_air, n_w), cw, rtol=1e-9)
+    surface = fit_water_surface(ret, SurfaceFitSettings(air_index=N_AIR))
+    rst = RefractionSettings(phase_index=N_W, group_index=N_G)
+    return ret, surface, rst, bottom, depth, cw, t_s
+
+
+def test_seabed_posterior_through_refraction():
+    """Flat water at z = 0, beams off nadir: the refracted posterior holds the analytic point."""
+    rng = np.random.default_rng(31)
+    n = 40  # enough surface returns for the local fits; 4 pulses are sampled
+    ret, surface, rst, bottom, depth, cw, t_s = level_water_survey(rng)
+    d = ret.direction_meas
+    np.testing.assert_allclose(water_cosine(d, surface.normal, N_AIR, N_W), cw, rtol=1e-9)
     rows = np.array([0, 13, 22, 39])
     m = 90
     waves = np.zeros((n, m))
