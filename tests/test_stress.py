@@ -15,6 +15,10 @@ from pipeline.stress_support import to_toml
 def test_fast_subset_passes_or_fails_only_as_known(tmp_path):
     cases = select_cases(fast=True)
     assert len(cases) >= 20
+    # every case of the table passes today (saturation and all_land were known failures)
+    assert [c.name for c in CASES if c.known_failure] == []
+    # the 40 m/s sea is in the fast subset (small, frozen), its full versions in the full run
+    assert {"tir", "wind_40"} <= {c.name for c in cases}
     results = run_cases(cases, tmp_path, log=lambda _: None, cli_main=main)
     bad = [r.line() for r in results if r.status == "FAIL"]
     assert not bad, "\n".join(bad)
