@@ -85,3 +85,13 @@ def test_noise_and_abstention_checks_on_hand_made_outputs():
     assert CHECKS["max_error"](outputs([2, 2], None), "1.0") == ""
     assert CHECKS["max_error"](outputs([40], 0.4), "1.0") == ""
     assert "1.200 m off" in CHECKS["max_error"](outputs([40], 1.2), "1.0")
+
+
+def test_datum_source_check_on_hand_made_outputs():
+    from pipeline.stress_support import CHECKS, Outputs
+
+    def outputs(source):
+        return Outputs({"datum": {"source": source, "water_level_m": 0.1}}, None, {})
+
+    assert CHECKS["datum_source"](outputs("clipped_bound"), "clipped_bound") == ""
+    assert "'surface_mean'" in CHECKS["datum_source"](outputs("surface_mean"), "clipped_bound")
