@@ -276,6 +276,11 @@ def _datum_error(o: Outputs, arg: str) -> str:
     return f"grid datum {err:+.3f} m off the true mean water level" if abs(err) > float(arg) else ""
 
 
+def _datum_source(o: Outputs, arg: str) -> str:
+    src = o.evaluation["datum"].get("source")
+    return "" if src == arg else f"grid datum source {src!r}, expected {arg!r}"
+
+
 def _rmse(o: Outputs, arg: str) -> str:
     st = (o.evaluation.get("error") or {}).get("points") or {}
     rmse = st.get("rmse_m")
@@ -322,6 +327,7 @@ CHECKS: dict[str, Callable[[Outputs, str], str]] = {
     "world_offset": _world_offset,
     "grid_cells": _grid_cells,
     "datum_error": _datum_error,
+    "datum_source": _datum_source,
     "rmse": _rmse,
     "max_error": _max_error,
     "only_noise": _only_noise,

@@ -19,6 +19,12 @@ local-plane surface fit rejects crests under a steep sea (flagged LAND, class 1,
 0.10 m into the troughs. GNSS height errors common to the surface and seabed returns cancel in
 ``datum − z``, as they do in the points' ``depth_m``.
 
+A survey whose every surface return with water under it (a later return in its pulse) is
+clipped into its column (``CLIPPED_MERGED``: a pulse energy far above the digitiser's range;
+fewer than 3 unclipped ones) measured only early bounds of the surface,
+each within a sample or two of it (:mod:`pipeline.process.detect_clipped`): the datum is their
+gated mean, source ``"clipped_bound"``, at or above the true level.
+
 A survey with no surface return at all (zero photons, an all-ground scene) has nothing that
 measured the water level: its datum is ``process.datum.fallback_water_level_m`` (source
 ``"fallback"``), the level the surface fit also falls back to by default
@@ -72,7 +78,9 @@ class Datum:
     water_level_m : float
         Local z of the datum.
     source : str
-        ``"user"`` (``process.datum.water_level_m``), ``"surface_mean"``, or ``"fallback"``
+        ``"user"`` (``process.datum.water_level_m``), ``"surface_mean"``, ``"clipped_bound"``
+        (every surface return off land clipped into its column: the mean of their early
+        bounds, at or above the level) or ``"fallback"``
         (``process.datum.fallback_water_level_m``: no surface return in the survey).
     n_surface_points : int
         Surface returns the estimate used (0 for a user datum).
@@ -111,8 +119,18 @@ def survey_datum(points: Points, settings: DatumSettings | None = None) -> Datum
         return Datum(float(s.water_level_m), "user", 0)
     # a clipped surface merged with the column is only an early bound of the level
     bound = (points.detector_flags & np.uint16(DetectorFlag.CLIPPED_MERGED)) != 0
-    water = (points.kind == ReturnKind.SURFACE) & (points.classification != GROUND) & ~bound
-    z = points.xyz_m[water, 2]
+    surface = (points.kind == ReturnKind.SURFACE) & (points.classification != GROUND)
+    z = points.xyz_m[surface & ~bound, 2]
+    source = "surface_mean"
+    # water under an unclipped surface return: a later (bottom or column) return of its pulse
+    later = np.isin(points.kind, (ReturnKind.BOTTOM, ReturnKind.WATER_COLUMN))
+    wet = surface & ~bound & np.isin(points.pulse_id, points.pulse_id[later])
+    if np.count_nonzero(wet) < 3 and np.any(surface & bound):
+        # every water surface clipped into its column (what else is level is a beach face
+        # with nothing under it): the bounds are all that measured the water; the datum is
+        # their mean, at or above the level, and says so (as the surface fit's level:
+        # pipeline.process.surface_evidence.level_points)
+        z, source = points.xyz_m[surface & bound, 2], "clipped_bound"
     if z.size == 0:
         # nothing measured the water level (zero photons, all ground): the fallback, recorded
         # as such in evaluation.json, rather than no outputs at all
@@ -121,7 +139,7 @@ def survey_datum(points: Points, settings: DatumSettings | None = None) -> Datum
     mad_sigma = MAD_TO_SIGMA * np.median(np.abs(z - med))
     # a flat calm sea has MAD 0: then keep what sits at the median (to the mm)
     keep = np.abs(z - med) <= max(GATE_SIGMA * mad_sigma, 1e-3)
-    return Datum(float(np.mean(z[keep])), "surface_mean", int(np.count_nonzero(keep)))
+    return Datum(float(np.mean(z[keep])), source, int(np.count_nonzero(keep)))
 
 
 def depth_below_datum_m(z_m: np.ndarray, datum: Datum) -> np.ndarray:

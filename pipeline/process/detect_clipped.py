@@ -13,10 +13,19 @@ damped by the plateau's width, so a noisy edge sample moves it by ~σ²/(b − a
 error). That holds for ONE clipped echo. When the plateau runs on into the water column and
 the bottom (a bright column at low altitude or high pulse energy), the surface's trailing edge
 is hidden: its centre is not measurable (the leading edge alone leaves ``A``, and so the
-offset ``σ √(2 ln(A / top))``, free), nor is the bottom's. A plateau longer than
-``max_plateau_fwhm`` system FWHM is taken for that case: the pulse is flagged
-``CLIPPED_MERGED``, its surface time is the plateau's leading edge (an early bound) and no
-bottom is reported.
+offset ``σ √(2 ln(A / v_a))`` after the last sample below the plateau, free), nor is the
+bottom's. A plateau longer than ``max_plateau_fwhm`` system FWHM is taken for that case: the
+pulse is flagged ``CLIPPED_MERGED``, no bottom is reported, and its surface time is an early
+bound: the centre of the weakest Gaussian of σ through ``(a, v_a)`` that reaches the top code
+at the plateau's first sample ``a + 1``::
+
+    t_lead = a + 1/2 + σ² ln((top − baseline) / v_a)
+
+(the formula above with ``v_b`` = the top code above the baseline). A stronger echo through
+``(a, v_a)`` peaks later, so ``t_lead`` never follows the true centre; it is within one
+sample of it up to ``A ~ 10⁵ × v_a`` and loosens as ``√ln A`` beyond (σ = 0.77 samples). The
+old bound, the plateau's first sample minus 1/2, was 0.6-3.5 samples early over ``A = 10⁴ …
+10⁸`` counts (12 bits).
 """
 
 from __future__ import annotations
@@ -40,9 +49,9 @@ class ClippedEchoes:
         Saturated, and the plateau is one clipped echo: ``t_idx`` is its centre.
     merged : bool
         Saturated, and the plateau runs on past one echo (``max_plateau_fwhm``): ``t_idx`` is
-        its leading edge.
+        the earliest centre its leading edge allows (an early bound).
     t_idx : float
-        Sample index of the echo's centre (resolved) or of the plateau's leading edge.
+        Sample index of the echo's centre (resolved) or its early bound (merged).
     amplitude : float
         Resolved: the echo's amplitude ``A`` above the baseline; else the top code's.
     first, stop : int
@@ -78,6 +87,22 @@ def _plateau(y, first, stop, level, noise, sigma_samples, max_plateau_fwhm):
     fwhm_samples = sigma_samples * 2.0 * np.sqrt(2.0 * np.log(2.0))
     single = (stop - first <= max_plateau_fwhm * fwhm_samples) & (a >= 0) & (b < m)
     return t_c, log_amp, single
+
+
+def _leading_bound(y, first, top_code, baseline, noise, sigma_samples):
+    """Earliest centre of a Gaussian echo clipped from sample ``first`` on (module doc).
+
+    ``a = first − 1`` is the last sample below the top code; its value above ``baseline``
+    counts at least one noise σ (an edge lost in the noise bounds the rise no tighter).
+    """
+    n, m = y.shape
+    a = first - 1
+    rows = np.arange(n)
+    floor = np.maximum(noise, 1e-6)
+    v_a = np.where(a >= 0, y[rows, np.clip(a, 0, m - 1)] - baseline, floor)
+    v_a = np.maximum(v_a, floor)
+    v_top = np.maximum(top_code - baseline, v_a)
+    return a + 0.5 + sigma_samples**2 * (np.log(v_top) - np.log(v_a))
 
 
 def clipped_bottom(
@@ -178,9 +203,9 @@ def clipped_echoes(
     )
     resolved = saturated & single
     merged = saturated & ~single
-    # the leading edge: the echo crosses the top code between sample a and the plateau's
-    # first; the centre is later by σ √(2 ln(A / top)), A unknown
-    t_edge = first - 0.5
-    t_idx = np.where(resolved, t_c, np.where(merged, t_edge, 0.0))
+    # the leading edge: the weakest Gaussian through the last sample below the plateau that
+    # reaches the top code at its first sample; a stronger one (A unknown) peaks later
+    t_lead = _leading_bound(y, first, top_code, baseline, noise, sigma_samples)
+    t_idx = np.where(resolved, t_c, np.where(merged, t_lead, 0.0))
     amp = np.where(resolved, np.exp(np.minimum(log_amp, 700.0)), top_code - baseline)
     return ClippedEchoes(saturated, resolved, merged, t_idx, amp, first, stop)

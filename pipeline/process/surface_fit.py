@@ -20,8 +20,11 @@ Method
    is land. Points below the band are not water surface (flagged outliers). With no water
    level given, a survey whose detector measured the water column (no-bottom limits given)
    and where fewer than ``min_wet_pulses`` pulses show light from under their surface return
-   (a bottom, an in-column return, a measured column decay) has no evidence of water: every
-   return is land.
+   (a bottom, an in-column return, a measured column decay, a clipped plateau into the
+   column) has no evidence of water: if its surface returns also stand ``dry_level_margin_m``
+   above the expected level (``fallback_water_level_m``), every return is land
+   (:mod:`pipeline.process.surface_evidence`, which also lets clipped surface bounds set the
+   level when no unclipped return shows water).
 3. Local fit, batched: for each water pulse, the ``k_neighbours`` nearest water-surface points
    (horizontally, within ``radius_m``, from a ``scipy.spatial.cKDTree``) give the plane
    ``z = z_global(x, y) + a + b dx + c dy`` by weighted least squares on stacked 3x3 normal
@@ -57,12 +60,12 @@ from scipy.spatial import cKDTree
 
 from pipeline.constants import MAD_TO_SIGMA
 from pipeline.optics import SPEED_OF_LIGHT_M_S
-from pipeline.process.returns import DetectedReturns, DetectorFlag, PointFlag
+from pipeline.process.returns import DetectedReturns, PointFlag
+from pipeline.process.surface_evidence import clipped_into_column, level_points, no_water_seen
 from pipeline.process.surface_land import (
     global_plane,
     land_surface_points,
     masked_median,
-    no_water_seen,
     sea_sigma_m,
 )
 from pipeline.process.surface_settings import SurfaceFitSettings
@@ -271,16 +274,20 @@ def fit_water_surface(
     c = SPEED_OF_LIGHT_M_S
     ps = surface_points_m(returns, st.air_index)
     # a surface return clipped into the column's plateau is only an early bound of the
-    # surface (pipeline.process.detect_clipped): not a timing reference of the fit
-    has_s = returns.has_surface & ((returns.flags & np.uint16(DetectorFlag.CLIPPED_MERGED)) == 0)
+    # surface (pipeline.process.detect_clipped): not a timing reference of the fit; it sets
+    # the level only when nothing else shows water (pipeline.process.surface_evidence)
+    bound = clipped_into_column(returns)
+    has_s = returns.has_surface & ~bound
     flags = np.zeros(n, dtype=np.uint16)
 
     pb = o + d * (c * returns.t_bottom_s / (2.0 * st.air_index))[:, None]
     pc = o + d * (c * returns.t_column_s / (2.0 * st.air_index))[:, None]
     wet = returns.has_bottom & (ps[:, 2] - pb[:, 2] > st.level_min_depth_m)
-    no_water = no_water_seen(returns, wet, ps[:, 2] - pc[:, 2], st)
-    if has_s.sum() >= 3:
-        gplane, gsigma = global_plane(ps[has_s], st, wet[has_s])
+    lvl, lvl_wet = level_points(has_s, bound, wet)
+    level_m = float(np.median(ps[lvl, 2])) if lvl.any() else np.nan
+    no_water = no_water_seen(returns, wet, ps[:, 2] - pc[:, 2], level_m, st)
+    if lvl.sum() >= 3:
+        gplane, gsigma = global_plane(ps[lvl], st, lvl_wet[lvl])
     else:
         level = st.water_level_hint_m
         gplane = np.array([st.fallback_water_level_m if level is None else level, 0.0, 0.0])
@@ -292,14 +299,17 @@ def fit_water_surface(
 
     # land / water decision per pulse: a high surface point is land only with no water under
     # it, neighbours that are land candidates too, and a height above the measured sea
-    res_s = np.where(has_s, ps[:, 2] - zg(ps[:, 0], ps[:, 1]), 0.0)
+    res_s = np.where(lvl, ps[:, 2] - zg(ps[:, 0], ps[:, 1]), 0.0)
     res_b = pb[:, 2] - zg(pb[:, 0], pb[:, 1])
     water_below = (returns.has_bottom & (res_b < 0.0)) | (
         returns.has_column & (pc[:, 2] - zg(pc[:, 0], pc[:, 1]) < 0.0)
     )
     land_s = np.zeros(n, dtype=bool)
-    if has_s.any():
-        land_s[has_s] = land_surface_points(ps[has_s, :2], res_s[has_s], water_below[has_s], st)[0]
+    # clipped bounds that set the level are the sea the land stands above (water under them)
+    water_below |= bound & lvl
+    if lvl.any():
+        land_s[lvl] = land_surface_points(ps[lvl, :2], res_s[lvl], water_below[lvl], st)[0]
+    land_s &= has_s
     # a trough is water: the band below the level widens with the measured sea, as the land
     # margin above it does (a 2.5 m Hs sea has troughs 1.5 m down; a fixed 1 m band dropped
     # them, the pulses fell back to the mean plane and went 1-2 m deep)

@@ -57,37 +57,11 @@ __all__ = [
     "global_plane",
     "land_surface_points",
     "masked_median",
-    "no_water_seen",
     "sea_sigma_m",
 ]
 
 #: Largest sea sigma reported, in water bands (a band filled uniformly has no finite one).
 _MAX_SIGMA_BANDS = 100.0
-
-
-def no_water_seen(returns, wet: np.ndarray, column_below_m: np.ndarray, st) -> bool:
-    """No evidence of water: fewer than ``min_wet_pulses`` pulses show light from under it.
-
-    Land is opaque, so only water returns light from below its surface return: a bottom
-    (``wet``), an in-column return (``column_below_m`` > ``level_min_depth_m``), or a column
-    whose decay the detector measured (``t_no_bottom_s`` > 0). The absence of that light says
-    "no water" only from a detector that looked for the column (``returns.t_no_bottom_s``
-    given) and when no water level is known (``water_level_hint_m``); else False.
-
-    Parameters
-    ----------
-    returns : DetectedReturns
-    wet : (n,) bool
-        A bottom return ``level_min_depth_m`` below the pulse's surface return.
-    column_below_m : (n,) float
-        Height of the surface return above the pulse's in-column return (air range).
-    st : SurfaceFitSettings
-    """
-    if st.water_level_hint_m is not None or returns.t_no_bottom_s is None:
-        return False
-    lit = wet | (returns.has_column & (column_below_m > st.level_min_depth_m))
-    lit |= returns.t_no_bottom_s > 0.0
-    return int(np.count_nonzero(lit & returns.has_surface)) < st.min_wet_pulses
 
 
 def _plane_lstsq(x, y, z):

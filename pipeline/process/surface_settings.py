@@ -66,13 +66,21 @@ class SurfaceFitSettings:
     )
     level_bin_m: float = setting(0.25, gt=0.0, doc="histogram bin of the water-level search")
     min_wet_pulses: int = setting(
-        0,
+        3,
         ge=0,
         doc="pulses showing light under their surface return (a bottom or in-column return "
-        "level_min_depth_m below it, or a measured water column) needed to conclude there is "
-        "water; fewer, and no water_level_hint_m: every return is land. 0 (default): off, "
-        "since water whose bottom and column the detector cannot see (a small or sparse "
-        "survey) would read as land",
+        "level_min_depth_m below it, a measured water column, a clipped plateau into the "
+        "column) needed to conclude there is water; fewer, no water_level_hint_m, and surface "
+        "returns dry_level_margin_m above fallback_water_level_m: every return is land "
+        "(pipeline.process.surface_evidence). 0: off",
+    )
+    dry_level_margin_m: float = setting(
+        2.0,
+        ge=0.0,
+        le=1000.0,
+        doc="surface returns with no light under them are land only if their median height "
+        "is this far above fallback_water_level_m (lower: a calm sea's seabed echoes, the "
+        "surface unseen); the expected level's own uncertainty (tide, geoid)",
     )
     level_min_depth_m: float = setting(
         1.0,
@@ -86,7 +94,10 @@ class SurfaceFitSettings:
         0.25, ge=0.0, le=1000.0, doc="smaller neighbour spread across: flag ill-conditioned"
     )
     fallback_water_level_m: float = setting(
-        0.0, doc="water level used when there are fewer than 3 surface returns"
+        0.0,
+        doc="the water level processing expects (local z; the local frame's zero is the mean "
+        "water level): used when there are fewer than 3 surface returns, and by the all-land "
+        "rule (dry_level_margin_m)",
     )
     chunk_size: int = setting(131072, ge=1, doc="pulses per batched local fit")
     time_window_s: float | None = setting(

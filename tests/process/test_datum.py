@@ -131,3 +131,27 @@ def test_clipped_surfaces_merged_with_the_column_do_not_move_the_datum():
     clean = survey_datum(pts.select(np.setdiff1d(np.arange(len(cls)), surf)))
     datum = survey_datum(pts.replace(xyz_m=z, classification=cls, detector_flags=df))
     assert datum.water_level_m == pytest.approx(clean.water_level_m, abs=1e-9)
+
+
+def test_a_survey_whose_water_surfaces_are_all_clipped_takes_their_bound_and_says_so():
+    # every water pulse clipped into its column (1 J pulses): surface returns 0.15 m above the
+    # true level (the early bound), class 1, no bottom; a beach face between the level and
+    # 1 m up is timed and classed 41, with nothing under it. The datum is the bounds' mean,
+    # flagged "clipped_bound"; before the fix it was the beach face's mean (0.5 m, the land
+    # 6 m up at first, when the beach was classed 41 too)
+    from pipeline.process.returns import DetectorFlag
+
+    pts = _points(40)
+    surf = np.flatnonzero(pts.kind == 1)
+    z, cls, df = pts.xyz_m.copy(), pts.classification.copy(), pts.detector_flags.copy()
+    beach = surf[pts.xyz_m[surf, 0] < 10.0]
+    water = np.setdiff1d(surf, beach)
+    z[water, 2] = LEVEL_M + 0.15
+    cls[water] = 1
+    df[water] |= np.uint16(DetectorFlag.CLIPPED_MERGED | DetectorFlag.SATURATED)
+    z[beach, 2] = LEVEL_M + np.linspace(0.0, 1.0, beach.size)
+    # no bottom returns: the surface returns alone
+    sat = pts.replace(xyz_m=z, classification=cls, detector_flags=df).select(pts.kind == 1)
+    datum = survey_datum(sat)
+    assert datum.source == "clipped_bound"
+    assert datum.water_level_m == pytest.approx(LEVEL_M + 0.15, abs=1e-9)

@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 from scipy import constants
 
-from pipeline.process.returns import DetectedReturns, PointFlag
+from pipeline.process.returns import DetectedReturns, DetectorFlag, PointFlag
 from pipeline.process.surface_fit import SurfaceFitSettings, fit_water_surface
 
 C = constants.c
@@ -258,17 +258,56 @@ def test_wide_berm_below_the_wave_height_is_land():
 
 def test_level_land_with_no_light_under_it_is_land():
     # a flat field 5 m up, seen by a detector that looked for a water column under every
-    # surface return (no-bottom limits given) and found none, nor any bottom: no water
+    # surface return (no-bottom limits given) and found none, nor any bottom: no water, and
+    # 5 m above the level processing expects (0, fallback_water_level_m): land, by default.
+    # Before the fix (the rule off by default) the field was taken for the water level.
     o, d, r, *_ = tilted_returns(tilt_deg=0.0, z0=5.0)
     dry = dataclasses.replace(make_returns(o, d, r), t_no_bottom_s=np.zeros(len(o)))
-    fit = dataclasses.replace(FIT, min_wet_pulses=3)  # off by default
-    ws = fit_water_surface(dry, fit)
+    ws = fit_water_surface(dry, FIT)
     assert ws.is_land.all() and not ws.is_water.any()
     # control: the same returns, a column measured under each (2 m of water below them)
     wet = dataclasses.replace(dry, t_no_bottom_s=dry.t_surface_s + 2 * 2.0 * 1.34 / C)
-    ws = fit_water_surface(wet, fit)
+    ws = fit_water_surface(wet, FIT)
     assert ws.is_water.all()
     assert abs(ws.global_plane[0] - 5.0) < 1e-6
+
+
+def test_a_calm_sea_seen_only_through_its_seabed_echoes_stays_water():
+    # calm water returns no glint: the only echo of each pulse is the seabed, 4 m deep, seen
+    # 4 x 1.31 = 5.24 m below the water level (air range), nothing under it. No light under
+    # any return, as over land, but the echoes lie below the expected level, not above it:
+    # they stay water (as with the all-land rule off, which is what made this survey all land)
+    for z0 in (-5.24, 0.0, 1.9):  # 1.9 m: within dry_level_margin_m (2 m) of the level
+        o, d, r, *_ = tilted_returns(tilt_deg=0.0, z0=z0)
+        dry = dataclasses.replace(make_returns(o, d, r), t_no_bottom_s=np.zeros(len(o)))
+        ws = fit_water_surface(dry, FIT)
+        assert ws.is_water.all() and not ws.is_land.any(), z0
+    # a user who expects the water 4 m up makes the 5 m field water too
+    o, d, r, *_ = tilted_returns(tilt_deg=0.0, z0=5.0)
+    dry = dataclasses.replace(make_returns(o, d, r), t_no_bottom_s=np.zeros(len(o)))
+    ws = fit_water_surface(dry, dataclasses.replace(FIT, fallback_water_level_m=4.0))
+    assert ws.is_water.all()
+
+
+def test_clipped_water_sets_the_level_under_land_that_is_still_timed():
+    """Every water pulse saturated into one plateau from the surface to the bottom (1 J
+    pulses): its surface time is only an early bound, here 0.15 m high (one sample), flagged
+    CLIPPED_MERGED; no bottom. Land 6 m up (x < 0) clips on its own and is timed exactly.
+    The water level must be the water's (within the bound), the land land. Before the fix the
+    clipped pulses were left out of the level search, which then found the land: level 6 m,
+    the land taken for water."""
+    x, y, d = beams()
+    land = x < 0.0
+    z = np.where(land, 6.0, 0.0)
+    o, r = from_hits(np.column_stack([x, y, z]), d)
+    bound_m = 0.15  # the early bound's height above the true surface
+    r_meas = np.where(land, r, r - bound_m / -d[:, 2])
+    ret = make_returns(o, d, r_meas)
+    flags = np.where(land, 0, DetectorFlag.SATURATED | DetectorFlag.CLIPPED_MERGED)
+    ret = dataclasses.replace(ret, flags=flags.astype(np.uint16), t_no_bottom_s=np.zeros(len(o)))
+    ws = fit_water_surface(ret, FIT)
+    assert abs(ws.global_plane[0] - bound_m) < 0.02, ws.global_plane
+    assert ws.is_land[land].all() and ws.is_water[~land].all()
 
 
 def test_neighbours_are_taken_from_the_pulses_own_look():
