@@ -5,10 +5,12 @@ gradient under every bottom point (which couples the horizontal errors into the 
 at the measured position) is a local plane through the neighbouring bathymetric soundings
 (:func:`~pipeline.uncertainty.tpu.seabed_gradient`); the water plane's tilt uncertainty is the
 larger of the fit's and the one measured over the soundings
-(:func:`~pipeline.uncertainty.tpu.surface_tilt_sigma`). When the detector reports no per-return
-timing sigma, the timing terms are set from the scatter of successive soundings
-(:func:`~pipeline.uncertainty.tpu.pair_scatter`,
-:func:`~pipeline.uncertainty.tpu.timing_from_scatter`).
+(:func:`~pipeline.uncertainty.tpu.surface_tilt_sigma`). The timing terms are the detector's
+per-return sigmas (full waveform: the Cramér–Rao bound of each echo from its own waveform,
+:mod:`pipeline.process.detect_precision`), raised where the scatter of successive soundings
+shows more (:func:`~pipeline.uncertainty.tpu.pair_scatter`,
+:func:`~pipeline.uncertainty.tpu.timing_from_scatter`); without detector sigmas (photon
+counting) the scatter sets them.
 A photon-counting window's shots share one detection: they count as one sounding. Pulses the
 TPU cannot propagate are left out, flagged ``NO_TPU`` and counted.
 """
@@ -103,27 +105,30 @@ def survey_uncertainty(
     by_id = np.argsort(bottom_ids)
     rows40 = by_id[np.searchsorted(bottom_ids[by_id], points40.pulse_id)]
     tilt = surface_tilt_sigma(returns, processed.surface, bottom_xy, pool=rows40)
-    if returns.t_bottom_sigma_s is None:
-        # no timing sigma from the detector: from the scatter of successive soundings
-        scatter = pair_scatter(
-            xy40,
-            d40,
-            order=points40.pulse_id,
-            group=group,
-            query_xy_m=bottom_xy,
-            max_separation_m=st.pair_max_separation_m,
-            neighbours=st.scatter_neighbours,
-        )
-        returns = timing_from_scatter(
-            returns,
-            processed.surface,
-            refr,
-            st,
-            depth_scatter_m=scatter,
-            seabed_gradient=grad,
-            # a return lies in the recorded window: its timing sigma is at most a uniform one's
-            max_sigma_s=ins.window_s / math.sqrt(12.0),
-        )
+    # the measured random scatter of successive soundings: what the timing achieved. With the
+    # detector's own sigmas (a Cramér–Rao bound from each waveform, which no estimator beats
+    # and a merged, wave-spread or step-timed echo does not reach) it can only raise them;
+    # without, it sets them
+    scatter = pair_scatter(
+        xy40,
+        d40,
+        order=points40.pulse_id,
+        group=group,
+        query_xy_m=bottom_xy,
+        max_separation_m=st.pair_max_separation_m,
+        neighbours=st.scatter_neighbours,
+    )
+    returns = timing_from_scatter(
+        returns,
+        processed.surface,
+        refr,
+        st,
+        depth_scatter_m=scatter,
+        seabed_gradient=grad,
+        # a return lies in the recorded window: its timing sigma is at most a uniform one's
+        max_sigma_s=ins.window_s / math.sqrt(12.0),
+        raise_only=returns.t_bottom_sigma_s is not None,
+    )
     tpu = point_tpu(
         returns, processed.surface, refr, st, seabed_gradient=grad, surface_tilt_sigma_rad=tilt
     )
