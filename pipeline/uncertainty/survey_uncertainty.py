@@ -11,7 +11,9 @@ per-return sigmas (full waveform: the Cramér–Rao bound of each echo from its 
 shows more (:func:`~pipeline.uncertainty.tpu.pair_scatter`,
 :func:`~pipeline.uncertainty.tpu.timing_from_scatter`); without detector sigmas (photon
 counting) the scatter sets them.
-A photon-counting window's shots share one detection: they count as one sounding. Pulses the
+A photon-counting window's shots share one detection: they count as one sounding, and each
+shot carries the spread of the seabed under the window's shots
+(:mod:`pipeline.uncertainty.tpu_window`). Pulses the
 TPU cannot propagate are left out, flagged ``NO_TPU`` and counted.
 """
 
@@ -38,6 +40,11 @@ from pipeline.uncertainty.tpu import (
     seabed_gradient,
     surface_tilt_sigma,
     timing_from_scatter,
+)
+from pipeline.uncertainty.tpu_window import (
+    WINDOW_TERM,
+    window_footprint_sigma_m,
+    with_random_term,
 )
 
 __all__ = ["SurveyUncertainty", "survey_uncertainty", "with_tpu", "with_posteriors", "take_tpu"]
@@ -141,6 +148,14 @@ def survey_uncertainty(
     order = np.argsort(tpu.pulse_id)
     pos = order[np.searchsorted(tpu.pulse_id[order], points40.pulse_id)]
     tpu40 = take_tpu(tpu, pos)
+    if group is not None:
+        # one detection per photon window: the seabed's spread under the window's shots
+        bottom_rows = np.flatnonzero(returns.has_bottom)
+        g40 = grad[np.searchsorted(bottom_rows, tpu40.row)]
+        spread = window_footprint_sigma_m(
+            points40.xyz_m[:, :2], points40.pulse_id // ins.shots_per_window, g40
+        )
+        tpu40 = with_random_term(tpu40, WINDOW_TERM, spread, spread)
     cells = cell_uncertainty(grid, tpu40)
     return SurveyUncertainty(
         tpu40=tpu40,

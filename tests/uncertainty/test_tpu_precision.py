@@ -6,9 +6,15 @@ with bottom-time noise of a known sigma added here."""
 import dataclasses
 
 import numpy as np
+import pytest
 
 from pipeline.process.refraction import seabed_points
 from pipeline.uncertainty.tpu import pair_scatter, point_tpu, timing_from_scatter
+from pipeline.uncertainty.tpu_window import (
+    WINDOW_TERM,
+    window_footprint_sigma_m,
+    with_random_term,
+)
 from tests.uncertainty.test_tpu import RST, survey
 
 TRUE_DEPTH_M = 12.0
@@ -55,3 +61,39 @@ def test_a_detector_sigma_above_the_scatter_is_kept():
     # without raise_only the scatter replaces them (the photon-counting path)
     set_ = timing_from_scatter(ret, surf, RST, depth_scatter_m=scatter)
     assert np.median(set_.t_bottom_sigma_s) < 0.5 * 2e-9
+
+
+def test_photon_window_spread_over_a_slope_is_the_uniform_rms():
+    """Shots evenly spread along x over a window of length L above a plane of gradient g share
+    one depth (the window's, at its centre): each misses its own by g (x - x_mean), whose rms
+    over the window is g L / sqrt(12) (a uniform distribution)."""
+    n_win, per, length_m, g = 40, 200, 1.5, 0.2
+    x = np.concatenate([w * 3.0 + np.linspace(0, length_m, per) for w in range(n_win)])
+    y = np.zeros_like(x)
+    group = np.repeat(np.arange(n_win), per)
+    grad = np.tile([g, 0.0], (x.size, 1))
+    sigma = window_footprint_sigma_m(np.column_stack([x, y]), group, grad)
+    # per-shot spacing L / (per - 1): the discrete rms is g L sqrt((per + 1) / (12 (per - 1)))
+    expected = g * length_m * np.sqrt((per + 1) / (12.0 * (per - 1)))
+    np.testing.assert_allclose(sigma, expected, rtol=1e-9)
+    # the shots' errors, window depth minus each shot's true depth, are held at their rates
+    centre = np.repeat(x.reshape(n_win, per).mean(axis=1), per)
+    err = g * (centre - x)
+    z = np.abs(err) / sigma
+    assert np.mean(z <= 1.0) == pytest.approx(1 / np.sqrt(3), abs=0.01)  # uniform: 57.7 %
+    assert np.all(z <= np.sqrt(3) + 1e-9)
+
+
+def test_a_random_term_adds_in_quadrature():
+    ret, surf = survey(n_side=4)
+    tpu = point_tpu(ret, surf, RST)
+    extra = np.linspace(0.01, 0.1, len(tpu))
+    out = with_random_term(tpu, WINDOW_TERM, extra, 2 * extra)
+    np.testing.assert_allclose(out.sigma_v_m, np.hypot(tpu.sigma_v_m, extra))
+    np.testing.assert_allclose(out.sigma_depth_m, np.hypot(tpu.sigma_depth_m, 2 * extra))
+    np.testing.assert_allclose(
+        out.sigma_depth_random_m, np.hypot(tpu.sigma_depth_random_m, 2 * extra)
+    )
+    np.testing.assert_array_equal(out.sigma_depth_correlated_m, tpu.sigma_depth_correlated_m)
+    np.testing.assert_array_equal(out.sigma_h_m, tpu.sigma_h_m)
+    assert out.terms[WINDOW_TERM].shape == (len(tpu), 4)
