@@ -52,9 +52,11 @@ def echo_timing_sigma_samples(
         Noise variance of one raw sample under the echo without its own signal (counts²):
         electronic, and the shot noise of what it stands on.
     shot_noise_counts : float, optional
-        ``F G`` (excess-noise factor x counts per photoelectron): the echo's own shot noise
-        adds ``F G A`` at its peak ``A = a_f s_f / s_e``, taken over the echo (an upper
-        bound, as the noise of its peak).
+        ``F G`` (excess-noise factor x counts per photoelectron): the echo's own shot noise,
+        variance ``F G s(t)`` under it. For a Gaussian echo of peak ``A = a_f s_f / s_e``
+        in that noise alone the Fisher information on its time is ``A sqrt(2 pi) /
+        (F G s_e)``, that of white noise of variance ``F G A / (2 sqrt(2))``, which is what
+        it adds here (the timing is set on the echo's flanks, not at its peak).
 
     Returns
     -------
@@ -80,6 +82,7 @@ def echo_timing_sigma_samples(
     ok = amp_f > 0.0
     s_e = np.sqrt(np.maximum(w_f**2 - sp**2, sp**2))
     peak = np.maximum(amp_f, 0.0) * w_f / s_e
-    s_n = np.sqrt(np.asarray(noise_var, dtype=np.float64) + float(shot_noise_counts) * peak)
+    shot_var = float(shot_noise_counts) * peak / (2.0 * math.sqrt(2.0))
+    s_n = np.sqrt(np.asarray(noise_var, dtype=np.float64) + shot_var)
     gain = w_f**2 / (2.0 * math.pi**0.25 * sp**1.5)
     return np.where(ok, s_n / np.where(ok, amp_f, 1.0) * gain, np.inf)

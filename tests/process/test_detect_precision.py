@@ -70,3 +70,19 @@ def test_sigmas_are_zero_without_a_return():
     strong = detect_full_waveform(_echoes(50, 60e-9, 150e-9, 1.0, 50.0, seed=4), DT, FWHM)
     assert np.all(strong.t_surface_sigma_s[strong.has_surface] > 0.0)
     assert np.all(np.isfinite(strong.t_bottom_sigma_s))
+
+
+def test_shot_noise_term_is_the_fisher_information_of_a_poisson_echo():
+    """A Gaussian echo in signal-dependent noise of variance ``F G s(t)`` alone: the Fisher
+    information ``sum s'² / (F G s)`` by quadrature against the closed form's."""
+    s_p, amp, fg = 1.3, 400.0, 2.5
+
+    def s(t):
+        return amp * np.exp(-0.5 * (t / s_p) ** 2)
+
+    def ds(t):
+        return -t / s_p**2 * s(t)
+
+    info = integrate.quad(lambda t: ds(t) ** 2 / (fg * s(t)), -40, 40)[0]
+    got = echo_timing_sigma_samples([amp / math.sqrt(2.0)], [math.sqrt(2.0) * s_p], s_p, [0.0], fg)
+    assert got[0] == pytest.approx(1.0 / math.sqrt(info), rel=1e-6)
