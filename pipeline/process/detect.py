@@ -102,6 +102,9 @@ class DetectSettings:
     )
 
 
+_SIG = ("t_surface_sigma_s", "t_bottom_sigma_s")
+
+
 @dataclass(frozen=True)
 class WaveformDetections:
     """Detected returns per waveform, shapes ``(n_pulses,)``.
@@ -111,10 +114,8 @@ class WaveformDetections:
     return (``has_column`` ...) is optional: left out (None), it is filled with "none found".
     ``t_no_bottom_s`` (a pulse without a bottom: the time down to which none is established, 0
     where unknown) is the photon detector's; the full-waveform one comes from
-    :mod:`pipeline.process.no_bottom`. ``t_surface_sigma_s`` and ``t_bottom_sigma_s`` are the
-    full-waveform detector's timing sigma of each return from its own amplitude,
-    width and noise (:mod:`pipeline.process.detect_precision`; 0 where absent or not given:
-    the photon detector leaves them out).
+    :mod:`pipeline.process.no_bottom`. ``t_*_sigma_s``: each return's timing sigma from its
+    own waveform (:mod:`pipeline.process.detect_precision`; 0 if absent or not given).
     """
 
     has_surface: np.ndarray
@@ -141,14 +142,7 @@ class WaveformDetections:
         n = np.shape(self.has_surface)[0]
         if self.has_column is None:
             object.__setattr__(self, "has_column", np.zeros(n, dtype=bool))
-        for name in (
-            "t_column_s",
-            "column_amplitude",
-            "column_confidence",
-            "t_no_bottom_s",
-            "t_surface_sigma_s",
-            "t_bottom_sigma_s",
-        ):
+        for name in ("t_column_s", "column_amplitude", "column_confidence", "t_no_bottom_s", *_SIG):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, np.zeros(n))
 
@@ -407,14 +401,12 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
         )
         snr_b_local[sel] = snr_fit[good]
         has_b[sel] = True
-        # the fit is of two echoes of the system's width
-        width_s[sel] = width_b[sel] = math.sqrt(2.0) * sigma_samples
+        width_s[sel] = width_b[sel] = math.sqrt(2.0) * sigma_samples  # two system echoes
     snr_s = amp_s / noise_f
     snr_b = np.where(has_b, snr_b_local, amp_b / noise_f)
-    # each return's own timing precision from its amplitude, width and the raw noise under it
-    # (electronic, and shot noise of the trend and of the echo itself)
-    var_b = local_var[np.arange(n), i_b] / kernel_sq
+    # each return's timing sigma from its amplitude, width and the raw noise under it
     sig_ts = echo_timing_sigma_samples(amp_s, width_s, sigma_samples, noise**2, shot_noise_counts)
+    var_b = local_var[np.arange(n), i_b] / kernel_sq
     sig_tb = echo_timing_sigma_samples(amp_b, width_b, sigma_samples, var_b, shot_noise_counts)
     flags[has_s & (snr_s < 2 * s.threshold_sigma)] |= np.uint16(DetectorFlag.LOW_SNR)
     zero = np.zeros(n)
