@@ -249,6 +249,10 @@ def _returns(parts: list[dict[str, np.ndarray]]) -> DetectedReturns:
         flags=cat["flags"],
         surface_amplitude=cat["surface_amplitude"],
         bottom_amplitude=cat["bottom_amplitude"],
+        # the full-waveform detector's timing sigma of each return (photon counting: none, the
+        # TPU sets it from the scatter of the soundings)
+        t_surface_sigma_s=cat.get("t_surface_sigma_s"),
+        t_bottom_sigma_s=cat.get("t_bottom_sigma_s"),
         # in-column returns (full waveform only; photon detections leave them empty)
         **{k: cat[k] for k in DetectedReturns.COLUMN_FIELDS if k in cat},
         # the photon detector's no-bottom limits (full waveform: zeros, replaced by

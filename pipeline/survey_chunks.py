@@ -125,6 +125,8 @@ def run_chunk(job: ChunkJob, c: int) -> ChunkResult:
         "line_id": pulses.line_id,
         **{f.name: getattr(found, f.name) for f in dataclasses.fields(found)},
     }
+    if not job.waveform:  # the photon detector gives no per-return timing sigma
+        del part["t_surface_sigma_s"], part["t_bottom_sigma_s"]
     return ChunkResult(
         part=part,
         kept=kept,

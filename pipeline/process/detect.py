@@ -52,6 +52,7 @@ from pipeline.process.detect_clipped import clipped_bottom, clipped_echoes
 from pipeline.process.detect_merged import column_decay, fit_merged, merged_bottoms
 from pipeline.process.detect_near import column_excess
 from pipeline.process.detect_noise import difference_noise_sigma, window_baseline
+from pipeline.process.detect_precision import echo_timing_sigma_samples
 from pipeline.process.detect_timing import parabolic_peak
 from pipeline.process.returns import DetectorFlag
 from pipeline.process.surface_step import surface_step_fit
@@ -119,6 +120,9 @@ class DetectSettings:
     )
 
 
+_SIG = ("t_surface_sigma_s", "t_bottom_sigma_s")
+
+
 @dataclass(frozen=True)
 class WaveformDetections:
     """Detected returns per waveform, shapes ``(n_pulses,)``.
@@ -130,6 +134,8 @@ class WaveformDetections:
     where unknown) is the photon detector's; the full-waveform one comes from
     :mod:`pipeline.process.no_bottom`. ``t_detection_limit_s`` (photon counting: the time of the
     window's detection limit, :mod:`pipeline.process.photon_limit`; 0 where none) is reported.
+    ``t_*_sigma_s``: each return's timing sigma from its own waveform
+    (:mod:`pipeline.process.detect_precision`; 0 if absent or not given).
     """
 
     has_surface: np.ndarray
@@ -148,6 +154,8 @@ class WaveformDetections:
     column_confidence: np.ndarray | None = None
     t_no_bottom_s: np.ndarray | None = None
     t_detection_limit_s: np.ndarray | None = None
+    t_surface_sigma_s: np.ndarray | None = None
+    t_bottom_sigma_s: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         # detectors without column returns (photon counting) leave them out; concatenating
@@ -161,6 +169,7 @@ class WaveformDetections:
             "column_confidence",
             "t_no_bottom_s",
             "t_detection_limit_s",
+            *_SIG,
         ):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, np.zeros(n))
@@ -397,7 +406,7 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
         last = m - 1 - np.argmax(cand[:, ::-1], axis=1)
         pick = cand & (cols >= (last - sep)[:, None])
     i_b = np.where(has_b, np.argmax(np.where(pick, resid, -np.inf), axis=1), 0)
-    t_idx_b, _, _ = parabolic_peak(resid, i_b)
+    t_idx_b, _, width_b = parabolic_peak(resid, i_b)
     if top_code is not None and saturated.any():
         # a bottom clipped on a plateau of its own: timed from its edges, or no bottom
         on_top, t_clip = clipped_bottom(y, top_code, i_b, baseline, noise, sigma_samples, s)
@@ -432,8 +441,13 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
         )
         snr_b_local[sel] = snr_fit[good]
         has_b[sel] = True
+        width_s[sel] = width_b[sel] = math.sqrt(2.0) * sigma_samples  # two system echoes
     snr_s = amp_s / noise_f
     snr_b = np.where(has_b, snr_b_local, amp_b / noise_f)
+    # each return's timing sigma from its amplitude, width and the raw noise under it
+    sig_ts = echo_timing_sigma_samples(amp_s, width_s, sigma_samples, noise**2, shot_noise_counts)
+    var_b = local_var[np.arange(n), i_b] / kernel_sq
+    sig_tb = echo_timing_sigma_samples(amp_b, width_b, sigma_samples, var_b, shot_noise_counts)
     flags[has_s & (snr_s < 2 * s.threshold_sigma)] |= np.uint16(DetectorFlag.LOW_SNR)
     zero = np.zeros(n)
     rows = np.arange(n)
@@ -470,4 +484,6 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
         t_column_s=np.where(has_c, t_idx_c * dt_s, zero),
         column_amplitude=np.where(has_c, amp_c, zero),
         column_confidence=np.where(has_c, _confidence(snr_c, s.threshold_sigma), zero),
+        t_surface_sigma_s=np.where(has_s, sig_ts * dt_s, zero),
+        t_bottom_sigma_s=np.where(has_b, sig_tb * dt_s, zero),
     )

@@ -5,11 +5,15 @@ gradient under every bottom point (which couples the horizontal errors into the 
 at the measured position) is a local plane through the neighbouring bathymetric soundings
 (:func:`~pipeline.uncertainty.tpu.seabed_gradient`); the water plane's tilt uncertainty is the
 larger of the fit's and the one measured over the soundings
-(:func:`~pipeline.uncertainty.tpu.surface_tilt_sigma`). When the detector reports no per-return
-timing sigma, the timing terms are set from the scatter of successive soundings
-(:func:`~pipeline.uncertainty.tpu.pair_scatter`,
-:func:`~pipeline.uncertainty.tpu.timing_from_scatter`).
-A photon-counting window's shots share one detection: they count as one sounding. Pulses the
+(:func:`~pipeline.uncertainty.tpu.surface_tilt_sigma`). The timing terms are the detector's
+per-return sigmas (full waveform: the Cramér–Rao bound of each echo from its own waveform,
+:mod:`pipeline.process.detect_precision`), raised where the scatter of successive soundings
+shows more (:func:`~pipeline.uncertainty.tpu.pair_scatter`,
+:func:`~pipeline.uncertainty.tpu.timing_from_scatter`); without detector sigmas (photon
+counting) the scatter sets them.
+A photon-counting window's shots share one detection: they count as one sounding, and each
+shot carries the spread of the seabed under the window's shots
+(:mod:`pipeline.uncertainty.tpu_window`). Pulses the
 TPU cannot propagate are left out, flagged ``NO_TPU`` and counted.
 """
 
@@ -36,6 +40,11 @@ from pipeline.uncertainty.tpu import (
     seabed_gradient,
     surface_tilt_sigma,
     timing_from_scatter,
+)
+from pipeline.uncertainty.tpu_window import (
+    WINDOW_TERM,
+    window_footprint_sigma_m,
+    with_random_term,
 )
 
 __all__ = ["SurveyUncertainty", "survey_uncertainty", "with_tpu", "with_posteriors", "take_tpu"]
@@ -103,27 +112,30 @@ def survey_uncertainty(
     by_id = np.argsort(bottom_ids)
     rows40 = by_id[np.searchsorted(bottom_ids[by_id], points40.pulse_id)]
     tilt = surface_tilt_sigma(returns, processed.surface, bottom_xy, pool=rows40)
-    if returns.t_bottom_sigma_s is None:
-        # no timing sigma from the detector: from the scatter of successive soundings
-        scatter = pair_scatter(
-            xy40,
-            d40,
-            order=points40.pulse_id,
-            group=group,
-            query_xy_m=bottom_xy,
-            max_separation_m=st.pair_max_separation_m,
-            neighbours=st.scatter_neighbours,
-        )
-        returns = timing_from_scatter(
-            returns,
-            processed.surface,
-            refr,
-            st,
-            depth_scatter_m=scatter,
-            seabed_gradient=grad,
-            # a return lies in the recorded window: its timing sigma is at most a uniform one's
-            max_sigma_s=ins.window_s / math.sqrt(12.0),
-        )
+    # the measured random scatter of successive soundings: what the timing achieved. With the
+    # detector's own sigmas (a Cramér–Rao bound from each waveform, which no estimator beats
+    # and a merged, wave-spread or step-timed echo does not reach) it can only raise them;
+    # without, it sets them
+    scatter = pair_scatter(
+        xy40,
+        d40,
+        order=points40.pulse_id,
+        group=group,
+        query_xy_m=bottom_xy,
+        max_separation_m=st.pair_max_separation_m,
+        neighbours=st.scatter_neighbours,
+    )
+    returns = timing_from_scatter(
+        returns,
+        processed.surface,
+        refr,
+        st,
+        depth_scatter_m=scatter,
+        seabed_gradient=grad,
+        # a return lies in the recorded window: its timing sigma is at most a uniform one's
+        max_sigma_s=ins.window_s / math.sqrt(12.0),
+        raise_only=returns.t_bottom_sigma_s is not None,
+    )
     tpu = point_tpu(
         returns, processed.surface, refr, st, seabed_gradient=grad, surface_tilt_sigma_rad=tilt
     )
@@ -136,6 +148,14 @@ def survey_uncertainty(
     order = np.argsort(tpu.pulse_id)
     pos = order[np.searchsorted(tpu.pulse_id[order], points40.pulse_id)]
     tpu40 = take_tpu(tpu, pos)
+    if group is not None:
+        # one detection per photon window: the seabed's spread under the window's shots
+        bottom_rows = np.flatnonzero(returns.has_bottom)
+        g40 = grad[np.searchsorted(bottom_rows, tpu40.row)]
+        spread = window_footprint_sigma_m(
+            points40.xyz_m[:, :2], points40.pulse_id // ins.shots_per_window, g40
+        )
+        tpu40 = with_random_term(tpu40, WINDOW_TERM, spread, spread)
     cells = cell_uncertainty(grid, tpu40)
     return SurveyUncertainty(
         tpu40=tpu40,

@@ -40,12 +40,19 @@ surface fit tilt       C   tilt sigma of the fitted plane (``/ sqrt 2`` per axis
                            Depth: the plane's height at the sounding and the refraction.
 water temperature,     C   unknown water mass: both indices move together, with the
 salinity                   derivatives of Quan & Fry (1995) (:mod:`pipeline.optics`).
+forward scattering     C   the bottom echo late by a fraction of the in-water time
+                           (``forward_scatter_range_fraction``, off by default; Richter et al.
+                           2021: ~0.8 % in clear coastal water, a VQ-880-G-class Monte Carlo).
 timing (surface,       R   the detector's per-return sigma (``DetectedReturns.t_*_sigma_s``), or
-bottom)                    ``timing_sigma_s``; :func:`timing_sigma_s` gives it from the SNR;
-                           when the detector gives none, :func:`timing_from_scatter` sets it
-                           from the measured scatter of successive soundings
-                           (:func:`pair_scatter`), which holds each pulse's own noise and not
-                           what neighbours share.
+bottom)                    ``timing_sigma_s``; the full-waveform detector gives each echo's
+                           from its own amplitude, width and noise
+                           (:mod:`pipeline.process.detect_precision`: a wave-spread surface,
+                           the calm-water volume onset, a stretched bottom are timed worse than
+                           the system's Cramér–Rao bound :func:`timing_sigma_s`). The measured
+                           scatter of successive soundings (:func:`pair_scatter`), which holds
+                           each pulse's own noise and not what neighbours share, raises it
+                           where it shows more (:func:`timing_from_scatter`, ``raise_only``)
+                           or sets it when the detector gives none (photon counting).
 pointing jitter        R   per-pulse beam direction noise (scanner encoder), two axes.
 wave height            R   the local water surface off its fitted plane: the fit's residual
                            sigma in excess of its points' ranging noise (depth: as the fit
@@ -77,6 +84,10 @@ circular normal, ``sqrt((s_x^2 + s_y^2) / 2)``. The IHO 95 % values are ``1.96 s
 ``2.45 sigma_h``.
 :func:`monte_carlo_points` redraws every input and recomputes the points with
 :func:`~pipeline.process.refraction.seabed_points` (the check of the linearisation).
+A photon-counting window's shots share one detected depth: the survey adds the spread of the
+seabed plane under them as one more random term
+(:mod:`pipeline.uncertainty.tpu_window`, :func:`~pipeline.uncertainty.tpu_window.
+window_footprint_sigma_m`).
 Pulses the linearisation cannot hold (a timing sigma reaching the surface-bottom separation, a
 term not finite) are left out and counted, never fatal (:mod:`pipeline.uncertainty.tpu_screen`).
 """

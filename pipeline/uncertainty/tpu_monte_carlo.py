@@ -19,6 +19,7 @@ from pipeline.uncertainty.tpu_terms import (
     _perp_axes,
     _rotate,
     _xyzd,
+    forward_scatter_sigma_s,
 )
 
 
@@ -39,7 +40,8 @@ def monte_carlo_points(
     ``g . (dx, dy)``, its horizontal displacement over the seabed gradient; see
     :func:`point_tpu`). Each draw perturbs the navigation (the origin, the beam and the fitted
     planes moved and turned together: the rigid-motion model), the per-pulse jitter, times and
-    planes, and the water's temperature and salinity (both indices), then calls
+    planes, the water's temperature and salinity (both indices) and its forward-scattering delay
+    (one fraction of every in-water time), then calls
     :func:`~pipeline.process.refraction.seabed_points`; the footprint centroid offset is added
     last to x, y, z (it is not a georeferencing input; over a plane it leaves the depth).
     Full-size (not infinitesimal) perturbations: the check of :func:`point_tpu`'s
@@ -63,6 +65,7 @@ def monte_carlo_points(
     fp = _footprint(inp, nominal[:, :3], st)
     slope = math.tan(math.radians(st.seabed_slope_deg))
     pa, pb = _perp_axes(d0)
+    fs = forward_scatter_sigma_s(inp, st)
     for k in range(n_draws):
         g = rng.standard_normal((n, 16))
         # per-pulse: jitter, times, planes (fit and waves)
@@ -94,7 +97,8 @@ def monte_carlo_points(
             t_surface_s=np.where(
                 inp.ret.has_surface, inp.ret.t_surface_s + inp.sig_ts * g[:, 14], 0.0
             ),
-            t_bottom_s=inp.ret.t_bottom_s + inp.sig_tb * g[:, 15],
+            # forward scattering: one water, one fraction of every in-water time (correlated)
+            t_bottom_s=inp.ret.t_bottom_s + inp.sig_tb * g[:, 15] + fs * rng.standard_normal(),
         )
         w = water[:, None]
         surf = dataclasses.replace(

@@ -303,6 +303,7 @@ def timing_from_scatter(
     depth_scatter_m: Any,
     seabed_gradient: Any = None,
     max_sigma_s: float = math.inf,
+    raise_only: bool = False,
 ) -> DetectedReturns:
     """``returns`` with the per-return timing sigmas that the measured depth scatter implies.
 
@@ -331,6 +332,12 @@ def timing_from_scatter(
         As for :func:`point_tpu`.
     max_sigma_s : float, optional
         Upper bound of each sigma set from the scatter (default: none).
+    raise_only : bool, optional
+        Keep the detector's sigmas (``returns.t_*_sigma_s``) as a floor: each return's sigma
+        is the larger of its own and the one the scatter implies (the detector's are a
+        Cramér–Rao bound, which the timing achieved can only exceed). The scatter's excess is
+        then that over every random term, the detector's timing included, split between the
+        two returns as below and added in quadrature. Default: the scatter sets them.
     """
     st = settings or TpuSettings()
     rst = refraction_settings or RefractionSettings()
@@ -346,6 +353,11 @@ def timing_from_scatter(
     js = terms["timing_surface"][:, DEPTH] / unit
     jb = terms["timing_bottom"][:, DEPTH] / unit
     other = sum(terms[k][:, DEPTH] ** 2 for k in RANDOM_TERMS if k not in TIMING_TERMS)
+    prior_s = returns.t_surface_sigma_s
+    prior_b = returns.t_bottom_sigma_s
+    if raise_only and prior_b is not None:
+        ps = np.zeros(n) if prior_s is None else np.asarray(prior_s, np.float64)[inp.row]
+        other = other + (js * ps) ** 2 + (jb * np.asarray(prior_b, np.float64)[inp.row]) ** 2
     excess = np.maximum(np.nan_to_num(scatter) ** 2 - other, 0.0)
     ret = inp.ret
     hs = ret.has_surface
@@ -363,15 +375,25 @@ def timing_from_scatter(
     den = ws * js**2 + wb * jb**2
     c = np.where(den > 0, excess / np.where(den > 0, den, 1.0), 0.0)
     floor = 1e-15  # sigmas must be > 0 where a return exists
-    prior_s = returns.t_surface_sigma_s
-    prior_b = returns.t_bottom_sigma_s
     sig_s = np.where(returns.has_surface, st.timing_sigma_s, 0.0) if prior_s is None else prior_s
     sig_b = np.where(returns.has_bottom, st.timing_sigma_s, 0.0) if prior_b is None else prior_b
     sig_s, sig_b = np.array(sig_s, dtype=np.float64), np.array(sig_b, dtype=np.float64)
     use = np.isfinite(scatter)
     rows = inp.row[use]
-    sig_b[rows] = np.clip(np.sqrt(wb * c)[use], floor, max_sigma_s)
-    sig_s[rows] = np.where(hs[use], np.clip(np.sqrt(ws * c)[use], floor, max_sigma_s), 0.0)
+    if raise_only and prior_b is not None:
+        # in quadrature on the detector's own, where the scatter shows more (never above the
+        # window's bound once raised, never below the detector's)
+        more = use & (c > 0.0)
+        rows = inp.row[more]
+
+        def raised(own, w):
+            return np.maximum(np.minimum(np.hypot(own, np.sqrt(w * c)[more]), max_sigma_s), own)
+
+        sig_b[rows] = raised(sig_b[rows], wb)
+        sig_s[rows] = np.where(hs[more], raised(sig_s[rows], ws), 0.0)
+    else:
+        sig_b[rows] = np.clip(np.sqrt(wb * c)[use], floor, max_sigma_s)
+        sig_s[rows] = np.where(hs[use], np.clip(np.sqrt(ws * c)[use], floor, max_sigma_s), 0.0)
     sig_s = np.where(returns.has_surface, np.maximum(sig_s, floor), 0.0)
     sig_b = np.where(returns.has_bottom, np.maximum(sig_b, floor), 0.0)
     return dataclasses.replace(returns, t_surface_sigma_s=sig_s, t_bottom_sigma_s=sig_b)

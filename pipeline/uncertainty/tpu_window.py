@@ -1,0 +1,90 @@
+"""The seabed under a shared detection: the spread of depth over a photon window's footprint.
+
+A photon-counting window accumulates ``shots_per_window`` shots into one height histogram and
+detects one bottom for all of them (:mod:`pipeline.process.detect_photons`): every shot of the
+window reports that one depth at its own position. Over a sloping seabed the true depth under
+the shots differs by ``g . (p_i - p_mean)``, with ``g`` the seabed's depth gradient and
+``p_mean`` the window's mean position, so the window's depth misses each shot's by that much.
+The term (random: it averages over windows, not within one) is the rms of that spread over
+the window,
+
+    s_window = sqrt(mean_window((g . (p_i - p_mean))²))
+
+both in elevation and in depth (the shots share the water surface). Relief within the window
+that the local plane of ``g`` does not follow (roughness) is not in it: one depth per window
+cannot show it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from pipeline.uncertainty.tpu_settings import DEPTH, PointTpu, Z
+
+__all__ = ["WINDOW_TERM", "window_footprint_sigma_m", "with_random_term"]
+
+#: Name of the term in ``PointTpu.terms``.
+WINDOW_TERM = "window_footprint"
+
+
+def window_footprint_sigma_m(xy_m, group, gradient) -> np.ndarray:
+    """Rms depth spread of the seabed plane over each point's window, per point.
+
+    Parameters
+    ----------
+    xy_m : (n, 2) array_like
+        Positions of the points.
+    group : (n,) array_like of int
+        The window (shared detection) of each point.
+    gradient : (n, 2) array_like
+        Seabed depth gradient ``(d depth / dx, d depth / dy)`` at each point; NaN counts as
+        flat.
+
+    Returns
+    -------
+    (n,) float64
+        ``sqrt(mean over the window of (g . (p_i - p_mean))²)``, 0 for a window of one point.
+
+    Examples
+    --------
+    Two shots 2 m apart along x over a slope of 0.1: each is 0.1 m off the window's depth.
+
+    >>> window_footprint_sigma_m([[0.0, 0.0], [2.0, 0.0]], [7, 7], [[0.1, 0.0], [0.1, 0.0]])
+    array([0.1, 0.1])
+    """
+    xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+    g = np.nan_to_num(np.asarray(gradient, dtype=np.float64).reshape(-1, 2))
+    if xy.shape[0] == 0:
+        return np.zeros(0)
+    _, inv = np.unique(np.asarray(group).ravel(), return_inverse=True)
+    cnt = np.bincount(inv).astype(np.float64)
+    mean = np.column_stack([np.bincount(inv, weights=xy[:, k]) / cnt for k in range(2)])
+    spread = np.sum(g * (xy - mean[inv]), axis=1)
+    return np.sqrt(np.bincount(inv, weights=spread**2)[inv] / cnt[inv])
+
+
+def with_random_term(tpu: PointTpu, name: str, sigma_z_m, sigma_depth_m) -> PointTpu:
+    """``tpu`` with one more random term of the elevation and the depth (not horizontal).
+
+    The totals and their random parts take it in quadrature; ``terms[name]`` holds it.
+    """
+    sz = np.asarray(sigma_z_m, dtype=np.float64).ravel()
+    sd = np.asarray(sigma_depth_m, dtype=np.float64).ravel()
+    if sz.shape != (len(tpu),) or sd.shape != (len(tpu),):
+        raise ValueError(f"the term must have one value per point ({len(tpu)})")
+    term = np.zeros((len(tpu), 4))
+    term[:, Z], term[:, DEPTH] = sz, sd
+
+    def add(a, b):
+        return None if a is None else np.hypot(a, b)
+
+    return dataclasses.replace(
+        tpu,
+        terms={**tpu.terms, name: term},
+        sigma_v_m=add(tpu.sigma_v_m, sz),
+        sigma_v_random_m=add(tpu.sigma_v_random_m, sz),
+        sigma_depth_m=add(tpu.sigma_depth_m, sd),
+        sigma_depth_random_m=add(tpu.sigma_depth_random_m, sd),
+    )

@@ -1,0 +1,129 @@
+"""The TPU's timing terms when the detector gives per-return sigmas that the timing does not
+reach: the scatter of successive soundings raises them, never lowers them. Truth is analytic:
+flat water at z = 0 over a flat seabed 12 m deep (:func:`tests.uncertainty.test_tpu.survey`),
+with bottom-time noise of a known sigma added here."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from pipeline.process.refraction import seabed_points
+from pipeline.uncertainty.tpu import (
+    DEPTH,
+    TpuSettings,
+    monte_carlo_points,
+    pair_scatter,
+    point_tpu,
+    timing_from_scatter,
+)
+from pipeline.uncertainty.tpu_window import (
+    WINDOW_TERM,
+    window_footprint_sigma_m,
+    with_random_term,
+)
+from tests.uncertainty.test_tpu import RST, survey
+
+TRUE_DEPTH_M = 12.0
+
+
+def _noisy(sigma_b_s, detector_b_s, seed=7):
+    ret, surf = survey(n_side=36, seed=seed)
+    n = len(ret)
+    rng = np.random.default_rng(seed)
+    ret = dataclasses.replace(
+        ret,
+        t_bottom_s=ret.t_bottom_s + rng.normal(0.0, sigma_b_s, n),
+        # survey() puts 0.1 ns of noise on the surface times; the detector knows that one
+        t_surface_sigma_s=np.full(n, 1e-10),
+        t_bottom_sigma_s=np.full(n, detector_b_s),
+    )
+    pts = seabed_points(ret, surf, RST)
+    scatter = pair_scatter(pts.xyz_m[:, :2], pts.depth_m, order=ret.pulse_id)
+    return ret, surf, pts, scatter
+
+
+def test_scatter_raises_a_detector_sigma_the_timing_does_not_reach():
+    """The detector claims 0.02 ns on the bottom, the times scatter by 0.4 ns (~4.4 cm of
+    depth): the TPU intervals must hold the true depth at their nominal rates."""
+    ret, surf, pts, scatter = _noisy(4e-10, 2e-11)
+    err = pts.depth_m - TRUE_DEPTH_M
+    own = point_tpu(ret, surf, RST)
+    z_own = np.abs(err) / own.sigma_depth_m
+    assert np.mean(z_own <= 1.96) < 0.5  # the detector's sigma alone: far too small
+    raised = timing_from_scatter(ret, surf, RST, depth_scatter_m=scatter, raise_only=True)
+    tpu = point_tpu(raised, surf, RST)
+    z = np.abs(err) / tpu.sigma_depth_m
+    # 1296 points: the coverage is known to ~1.3 % (68 %) and ~0.6 % (95 %), the scatter
+    # estimate (64 pairs each) to ~9 %
+    assert 0.62 <= np.mean(z <= 1.0) <= 0.75
+    assert 0.92 <= np.mean(z <= 1.96) <= 0.975
+
+
+def test_a_detector_sigma_above_the_scatter_is_kept():
+    ret, surf, _, scatter = _noisy(1e-11, 2e-9)
+    out = timing_from_scatter(ret, surf, RST, depth_scatter_m=scatter, raise_only=True)
+    np.testing.assert_array_equal(out.t_bottom_sigma_s, ret.t_bottom_sigma_s)
+    np.testing.assert_array_equal(out.t_surface_sigma_s, ret.t_surface_sigma_s)
+    # without raise_only the scatter replaces them (the photon-counting path)
+    set_ = timing_from_scatter(ret, surf, RST, depth_scatter_m=scatter)
+    assert np.median(set_.t_bottom_sigma_s) < 0.5 * 2e-9
+
+
+def test_photon_window_spread_over_a_slope_is_the_uniform_rms():
+    """Shots evenly spread along x over a window of length L above a plane of gradient g share
+    one depth (the window's, at its centre): each misses its own by g (x - x_mean), whose rms
+    over the window is g L / sqrt(12) (a uniform distribution)."""
+    n_win, per, length_m, g = 40, 200, 1.5, 0.2
+    x = np.concatenate([w * 3.0 + np.linspace(0, length_m, per) for w in range(n_win)])
+    y = np.zeros_like(x)
+    group = np.repeat(np.arange(n_win), per)
+    grad = np.tile([g, 0.0], (x.size, 1))
+    sigma = window_footprint_sigma_m(np.column_stack([x, y]), group, grad)
+    # per-shot spacing L / (per - 1): the discrete rms is g L sqrt((per + 1) / (12 (per - 1)))
+    expected = g * length_m * np.sqrt((per + 1) / (12.0 * (per - 1)))
+    np.testing.assert_allclose(sigma, expected, rtol=1e-9)
+    # the shots' errors, window depth minus each shot's true depth, are held at their rates
+    centre = np.repeat(x.reshape(n_win, per).mean(axis=1), per)
+    err = g * (centre - x)
+    z = np.abs(err) / sigma
+    assert np.mean(z <= 1.0) == pytest.approx(1 / np.sqrt(3), abs=0.01)  # uniform: 57.7 %
+    assert np.all(z <= np.sqrt(3) + 1e-9)
+
+
+def test_a_random_term_adds_in_quadrature():
+    ret, surf = survey(n_side=4)
+    tpu = point_tpu(ret, surf, RST)
+    extra = np.linspace(0.01, 0.1, len(tpu))
+    out = with_random_term(tpu, WINDOW_TERM, extra, 2 * extra)
+    np.testing.assert_allclose(out.sigma_v_m, np.hypot(tpu.sigma_v_m, extra))
+    np.testing.assert_allclose(out.sigma_depth_m, np.hypot(tpu.sigma_depth_m, 2 * extra))
+    np.testing.assert_allclose(
+        out.sigma_depth_random_m, np.hypot(tpu.sigma_depth_random_m, 2 * extra)
+    )
+    np.testing.assert_array_equal(out.sigma_depth_correlated_m, tpu.sigma_depth_correlated_m)
+    np.testing.assert_array_equal(out.sigma_h_m, tpu.sigma_h_m)
+    assert out.terms[WINDOW_TERM].shape == (len(tpu), 4)
+
+
+def test_forward_scatter_term_is_the_published_fraction_of_the_depth():
+    """A range bias of a fraction f of the in-water range moves the depth by f times it:
+    at nadir over the 12 m seabed, f = 0.0046 / 5 (Richter et al. 2021 at 5 m) gives
+    0.0046 x 12 / 5 m, in depth and elevation alike, correlated, and the Monte Carlo agrees."""
+    ret, surf = survey(n_side=6)
+    f = 0.046 / 5.0
+    st = TpuSettings(forward_scatter_range_fraction=f)
+    tpu = point_tpu(ret, surf, RST, st)
+    term = tpu.terms["forward_scatter"]
+    assert abs(term[0, DEPTH]) == pytest.approx(f * TRUE_DEPTH_M, rel=1e-3)  # row 0: nadir
+    assert abs(term[0, 2]) == pytest.approx(f * TRUE_DEPTH_M, rel=1e-3)
+    # off nadir the in-water range is longer, the depth is still f x depth
+    np.testing.assert_allclose(np.abs(term[:, DEPTH]), f * TRUE_DEPTH_M, rtol=2e-3)
+    off = point_tpu(ret, surf, RST)
+    np.testing.assert_allclose(
+        tpu.sigma_depth_correlated_m, np.hypot(off.sigma_depth_correlated_m, term[:, DEPTH])
+    )
+    draws = monte_carlo_points(ret, surf, RST, st, n_draws=400, seed=3)
+    base = monte_carlo_points(ret, surf, RST, n_draws=400, seed=3)
+    extra = np.sqrt(np.maximum(draws[:, :, DEPTH].var(0) - base[:, :, DEPTH].var(0), 0.0))
+    assert np.median(extra) == pytest.approx(f * TRUE_DEPTH_M, rel=0.15)
