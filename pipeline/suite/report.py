@@ -126,7 +126,9 @@ def _detected_cell(cs: list[dict]) -> str:
 _WAYS = ("by_points", "by_grid", "by_class43")
 
 
-def _cube_band_table(pool: Pool, label: str, key: str, bands) -> list[str]:
+def _cube_band_table(
+    pool: Pool, label: str, key: str, bands, min_depth_m: float = -math.inf
+) -> list[str]:
     lines = _head(
         [
             "cube (m)",
@@ -136,7 +138,10 @@ def _cube_band_table(pool: Pool, label: str, key: str, bands) -> list[str]:
         ]
     )
     halves = [m["half"] for m in pool.meta]
-    shallow = [c for c in pool.cubes if c["depth_m"] < 0.8 * pool.meta[c["run"]]["d_ext_m"]]
+    # under water (the base at least min_depth_m deep) and shallower than 0.8 D_ext
+    shallow = [
+        c for c in pool.cubes if min_depth_m <= c["depth_m"] < 0.8 * pool.meta[c["run"]]["d_ext_m"]
+    ]
     for size in (0.5, 1.0, 2.0):
         for lo, hi in bands:
             cells = []
@@ -154,7 +159,9 @@ def _cube_band_table(pool: Pool, label: str, key: str, bands) -> list[str]:
 def cube_density_table(pool: Pool) -> list[str]:
     """Markdown lines: cube detection per size and sounding-density band, both halves."""
     bands = ((0.0, 0.25), (0.25, 0.5), (0.5, 1.0), (1.0, 2.0), (2.0, 4.0), (4.0, math.inf))
-    return _cube_band_table(pool, "density (soundings/m²)", "density_per_m2", bands)
+    # the floors' depth window: base at least 1 m deep (a cube on land or awash is no feature
+    # of the seabed survey)
+    return _cube_band_table(pool, "density (soundings/m²)", "density_per_m2", bands, 1.0)
 
 
 def cube_depth_table(pool: Pool) -> list[str]:
@@ -326,7 +333,7 @@ def write_markdown(
         "",
         *_coverage_table(strata),
         "",
-        "## Cube detection by sounding density (all depths shallower than 0.8 D_ext)",
+        "## Cube detection by sounding density (base 1 m deep to 0.8 D_ext)",
         "",
         "Per cube (`pipeline.evaluate_features`): detected when a sounding inside its footprint"
         " lies within half its side of its top, or the grid cell at its centre stands above its"
