@@ -8,9 +8,9 @@ truth; processing never reads the file.
 
 Arrays (``n`` rows per group; a group is empty when the run has none):
 
-* ``pt_*`` - every class-40 point: ``pt_x_m``, ``pt_y_m``, measured ``pt_depth_m`` (below the
-  fitted local surface), ``pt_true_depth_m`` and ``pt_error_m = measured - true`` (positive:
-  too deep), as ``evaluation.json``'s ``error.points``.
+* ``pt_*`` - every seabed point (class 40 and 43): ``pt_x_m``, ``pt_y_m``, measured
+  ``pt_depth_m`` (below the fitted local surface), ``pt_true_depth_m`` and
+  ``pt_error_m = measured - true`` (positive: too deep), as ``evaluation.json``'s ``error.points``.
 * ``tpu_*`` - the class-40 points the TPU propagated: ``tpu_true_depth_m``, ``tpu_error_m``,
   ``tpu_sigma_depth_m`` (1 σ of the depth), ``tpu_group`` (photon window, else the row).
 * ``post_*`` - sampled depth posteriors with a start: ``post_true_depth_m``, ``post_median_m``,
@@ -32,7 +32,7 @@ import numpy as np
 
 from pipeline.evaluate import _at, grid_errors_m, point_errors_m
 from pipeline.outputs.atomic import atomic_path
-from pipeline.process.classify import BATHYMETRIC_POINT, NO_BOTTOM_FOUND_AT
+from pipeline.process.classify import NO_BOTTOM_FOUND_AT, SEABED_CLASSES
 
 __all__ = ["point_arrays", "write_evaluation_points"]
 
@@ -57,7 +57,7 @@ def point_arrays(processed, grid, unc, post, truth_depth_m, grid_truth_depth_m, 
     dict of str to ndarray
     """
     pts = processed.points
-    p40 = pts.select(pts.classification == BATHYMETRIC_POINT)
+    p40 = pts.select(np.isin(pts.classification, SEABED_CLASSES))  # 40 and 43
     err, true_d = point_errors_m(p40, truth_depth_m=truth_depth_m)
     out = {
         "pt_x_m": p40.xyz_m[:, 0],

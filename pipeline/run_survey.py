@@ -327,6 +327,7 @@ def run_survey(
             origin_m=origin,
             crs=fr.crs,
             datum_m=datum.water_level_m,
+            statistic=ps.grid_statistic,
         )
         covered = area_coverage(
             processed.points.xyz_m[:, :2], scene.flight.area_m, ps.grid_resolution_m
@@ -341,6 +342,13 @@ def run_survey(
     with clock.stage("tpu"):
         unc = survey_uncertainty(sim.returns, processed, ctx, grid)
         processed = dataclasses.replace(processed, points=with_tpu(processed.points, unc))
+    with clock.stage("process"):
+        # class 43: seabed points standing above the local seabed by k sigma of their TPU
+        from pipeline.process.objects import classify_objects
+
+        pts, n_obj = classify_objects(processed.points, ps.objects)
+        processed = dataclasses.replace(processed, points=pts)
+    log(f"  submerged objects: {n_obj} seabed points stand above the local seabed (class 43)")
     post = None
     if plan.runs("posterior"):
         with clock.stage("posterior"):

@@ -12,7 +12,9 @@ from typing import Any
 import numpy as np
 
 from pipeline.evaluate import evaluate, tpu_coverage, water_column_report
+from pipeline.evaluate_features import features_report
 from pipeline.outputs.atomic import write_json
+from pipeline.process.classify import SEABED_CLASSES
 
 __all__ = ["evaluate_survey"]
 
@@ -73,6 +75,7 @@ def evaluate_survey(
         truth_depth_m=truth.depth_at_pulses_m,  # below the sea as each pulse saw it
         # grid: depth below the mean water level, as the grid's datum
         grid_truth_depth_m=grid_truth,
+        classes=SEABED_CLASSES,  # bathymetric points and submerged objects: every sounding
     ).to_dict()
     # the depth's sigma (below the measured surface, at the measured position) against the
     # true depth there; a photon-counting window's shots share one detection (one draw)
@@ -122,11 +125,34 @@ def evaluate_survey(
         "subray_flags": sim.subray_flags,
         "receiver_pulse_flags": sim.pulse_flags,
         "error": report,
+        # per IHO cube: detected by soundings on its top / a grid cell / class 43; the grid
+        # as seabed elevation against the true seabed
+        **features_report(
+            scene,
+            processed.points,
+            truth.depth_at_pulses_m,
+            grid,
+            grid_truth,
+            truth.seabed.height_m,
+        ),
         "stages": clock.to_dict(),
         "processing_context": ctx.to_dict(),
     }
     write_json(path, evaluation)
     _log_report(report, log)
+    ge = evaluation["grid_elevation"]
+    if ge["n"]:
+        log(
+            f"  grid as seabed elevation: n={ge['n']} bias {ge['bias_m']:+.3f} m"
+            f"  RMSE {ge['rmse_m']:.3f} m (cell z minus the true seabed at its centre)"
+        )
+    for c in evaluation["features"]["cubes"]:
+        log(
+            f"  cube {c['size_m']:g} m at ({c['x_m']:.1f}, {c['y_m']:.1f}), top"
+            f" {c['top_depth_m']:.1f} m, {c['density_per_m2']:.2f} soundings/m²:"
+            f" {c['points_on_top']} on top, grid {'shows' if c['grid_shows'] else 'no'},"
+            f" class 43 {c['object_points']}: {'DETECTED' if c['detected'] else 'not detected'}"
+        )
     log(
         f"  grid datum: water level {datum.water_level_m:+.3f} m ({datum.source}, "
         f"{datum.n_surface_points} surface points); true mean level {true_level_m:+.3f} m"

@@ -63,6 +63,43 @@ def test_draws_cover_the_conditions():
     assert any(d.depth_centre_m > 4.5 / d.attenuation_per_m for d in ds)  # past extinction
 
 
+def test_cubes_lie_under_the_scan_on_reachable_seabed():
+    """Each cube is under the nominal scan pattern, on seabed a survey reaches where the plane
+    allows. Worked out here from the scene's keys: a Palmer scan's footprints lie on a circle
+    of radius R = H tan 20 deg about the aircraft at (0, y), y along the line [0, L]; the
+    oscillating scan sweeps |x| <= R; a profiler's track is x = 0. The plane's depth at
+    (x, y) is d0 + tan(slope) (x sin(aspect) + y cos(aspect)).
+
+    Before: cubes were drawn uniformly over the swath's square, inside the Palmer circle that a
+    line shorter than its diameter never scans, and on land or past extinction."""
+    seeds = range(0, 200)
+    reachable = on_scan = 0
+    n_allowed = n_palmer = 0
+    for s in seeds:
+        d = draw(s)
+        r = d.altitude_m * math.tan(math.radians(20.0))
+        g = math.tan(math.radians(d.slope_deg))
+        lo, hi = 1.0, 0.8 * 4.5 / d.attenuation_per_m
+        for x, y, _ in d.cubes:
+            assert abs(x) <= r + 1e-9
+            if d.scanner == "palmer":
+                n_palmer += 1
+                ys = np.linspace(0.0, d.line_length_m, 2001)
+                on_scan += np.min(np.abs(np.hypot(x, y - ys) - r)) <= 1.0
+            elif d.scanner == "profiler":
+                assert x == 0.0
+            depth = d.depth_centre_m + g * (x if d.aspect_deg == 90.0 else y)
+            # where the plane is 1.5 m deep inside the swath (slope across it), the cube is in
+            # the floors' depth window (its drawn depth, 1.5 m to half of 4.5/c, or the swath's
+            # edge on the way there)
+            if d.aspect_deg == 90.0 and g > 1e-3 and d.scanner != "profiler":
+                if -0.9 * r <= (1.5 - d.depth_centre_m) / g <= 0.9 * r:
+                    n_allowed += 1
+                    reachable += lo <= depth < hi
+    assert n_palmer > 50 and on_scan == n_palmer
+    assert n_allowed > 30 and reachable == n_allowed
+
+
 def test_split_is_fixed_and_disjoint():
     tuning, held = set(suite_seeds(50, "tuning")), set(suite_seeds(50, "heldout"))
     assert not tuning & held

@@ -7,7 +7,8 @@ Variables, on dimensions ``(y, x)`` (row 0 north, as in ``grid.tif``):
 * ``crs``: the grid-mapping variable (CF §5.6): pyproj's CF attributes of the horizontal CRS
   (``grid_mapping_name`` and its parameters, ``crs_wkt``) and ``spatial_ref`` (the same WKT,
   what GDAL reads). Every data variable names it in ``grid_mapping``.
-* ``depth``: mean depth of the cell, ``units = "m"``, ``positive = "down"``, ``standard_name =
+* ``depth``: depth of the cell (by default the median of its points, ``Grid.statistic``),
+  ``units = "m"``, ``positive = "down"``, ``standard_name =
   "sea_floor_depth_below_sea_surface"``. Why this name: the grid's datum is the survey's mean
   water level (:mod:`pipeline.process.datum`), the water surface averaged over the waves *at
   survey time*, tide included: CF's ``..._below_mean_sea_level`` is a level averaged over the
@@ -105,8 +106,8 @@ def write_grid_nc(path: str | Path, grid: Grid, cells: CellUncertainty | None = 
             dims,
             f32("depth_m"),
             {
-                "long_name": "mean depth of the cell's bathymetric points",
-                "cell_methods": "area: mean",
+                "long_name": f"{grid.statistic} depth of the cell's bathymetric points",
+                "cell_methods": f"area: {grid.statistic}",
                 "ancillary_variables": "tvu95 thu95 iho_order count spread",
                 **depth_attrs,
             },

@@ -2,11 +2,12 @@
 
 Layout
 ------
-Six float32 bands, in this order (:data:`TIF_BANDS`): ``depth_m`` (mean depth, positive down,
-below the survey's datum), ``tvu95_m`` and ``thu95_m`` (the cell's 95 % total vertical and
-horizontal uncertainty, :mod:`pipeline.uncertainty.cell_uncertainty`), ``iho_order`` (strictest
-IHO S-44 order met, the codes of :func:`pipeline.iho.strictest_order`: 0 exclusive,
-1 special, 2 order 1a/1b, 3 order 2, 4 none), ``count`` (points per cell) and ``spread_m``
+Six float32 bands, in this order (:data:`TIF_BANDS`): ``depth_m`` (cell depth, by default the
+median of its points; positive down, below the survey's datum), ``tvu95_m`` and ``thu95_m``
+(the cell's 95 % total vertical and horizontal uncertainty,
+:mod:`pipeline.uncertainty.cell_uncertainty`), ``iho_order`` (strictest IHO S-44 order met,
+the codes of :func:`pipeline.iho.strictest_order`: 0 exclusive, 1 special, 2 order 1a/1b,
+3 order 2, 4 none), ``count`` (points per cell) and ``spread_m``
 (standard deviation of the cell's depths). Every band has its name as band description and
 its unit as band unit (GDAL ``SetUnitType``: ``m``, or ``1`` for codes and counts). Nodata is
 ``-9999`` where a cell has no value (NaN inside the pipeline; ``count`` is 0 there, never

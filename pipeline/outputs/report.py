@@ -29,11 +29,8 @@ from pipeline.outputs.report_waveforms import posterior_system, waveform_section
 from pipeline.outputs.sweep_report import run_report_section
 from pipeline.process.classify import BATHYMETRIC_POINT, NO_BOTTOM_FOUND_AT
 
-__all__ = ["write_survey_report", "depth_bands", "cube_detection", "CUBE_TOP_TOLERANCE_M"]
+__all__ = ["write_survey_report", "depth_bands"]
 
-#: A cube counts as detected when a class-40 point in its footprint lies within this of the
-#: true depth of its top (the brief's rule; IHO S-44 states no tolerance of its own).
-CUBE_TOP_TOLERANCE_M = 0.3
 #: Class of the no-bottom-found-at points (pipeline.process.classify).
 NO_BOTTOM_CLASS = NO_BOTTOM_FOUND_AT
 #: Coverage factors of the TPU calibration plot.
@@ -63,39 +60,6 @@ def depth_bands(true_depth_m: np.ndarray, err_m: np.ndarray, n_target: int = 6) 
             st = error_stats(e[sel]).to_dict()
             special = float(tvu_allowance_m(0.5 * (lo + hi), "special"))
             out.append({"from_m": float(lo), "to_m": float(hi), **st, "special_m": special})
-    return out
-
-
-def cube_detection(features, points, truth_depth_m) -> list[dict]:
-    """Per cube feature: class-40 points on its top, and whether it counts as detected.
-
-    A point is on the top when it lies inside the cube's (rotated) footprint and its depth is
-    within :data:`CUBE_TOP_TOLERANCE_M` of the true depth at the cube's centre (its top).
-    """
-    is40 = points.classification == BATHYMETRIC_POINT
-    xy, depth = points.xyz_m[is40, :2], points.depth_m[is40]
-    out = []
-    for f in features:
-        if f.kind != "cube":
-            continue
-        h = math.radians(f.heading_deg)
-        dx, dy = xy[:, 0] - f.x_m, xy[:, 1] - f.y_m
-        along = dx * math.sin(h) + dy * math.cos(h)
-        across = dx * math.cos(h) - dy * math.sin(h)
-        inside = (np.abs(along) <= 0.5 * f.size_m) & (np.abs(across) <= 0.5 * f.size_m)
-        top = float(truth_depth_m(np.array([f.x_m]), np.array([f.y_m]))[0])
-        on_top = inside & (np.abs(depth - top) <= CUBE_TOP_TOLERANCE_M)
-        out.append(
-            {
-                "x_m": f.x_m,
-                "y_m": f.y_m,
-                "size_m": f.size_m,
-                "top_depth_m": top,
-                "points_in_footprint": int(inside.sum()),
-                "points_on_top": int(on_top.sum()),
-                "detected": bool(on_top.any()),
-            }
-        )
     return out
 
 
@@ -198,7 +162,7 @@ def write_survey_report(
     s.append(_error_section(truth, pts, grid, level_m, fl.area_m, evaluation))
     s.append(_calibration_section(unc, ctx, truth, evaluation))
     s.append(_limits_section(pts, evaluation))
-    s.append(_features_section(scene, pts, truth))
+    s.append(_features_section(scene, evaluation))
     s.append(view3d_section(views))
     s.append(run_report_section(Path(path).parent))
     with atomic_path(path) as tmp:
@@ -312,15 +276,20 @@ def _limits_section(pts, evaluation) -> str:
     )
 
 
-def _features_section(scene, pts, truth) -> str:
+def _features_section(scene, evaluation) -> str:
     head = "<h2 id='features'>10. Feature detection</h2>"
     if not scene.seabed.features:
         return head + para("The scene has no seabed features.")
-    found = cube_detection(scene.seabed.features, pts, truth.depth_m)
+    feats = evaluation.get("features") or {}
+    found = feats.get("cubes") or []
     rule = (
-        f"Rule: a cube is detected when at least one class-40 point inside its footprint lies "
-        f"within {CUBE_TOP_TOLERANCE_M:g} m of the true depth of its top (taken at its centre). "
-        "Features other than cubes are not scored."
+        "Rule: a cube is detected when a seabed sounding (class 40 or 43) inside its "
+        "footprint lies within half its side of the true depth of its top, or when the grid "
+        "cell at its centre is shallower than its neighbours' median by more than half its "
+        "side (IHO S-44 cubes; other features are not scored). Class 43: submerged-object points "
+        "found by processing within 1 m of it. Density: soundings per m² in its footprint "
+        f"grown by 1 m. Class-43 points in the survey: {feats.get('object_points', 0)}, "
+        f"{feats.get('object_points_elsewhere', 0)} of them away from every cube."
     )
     if not found:
         return head + para(rule) + para("The scene's features include no cube.")
@@ -330,8 +299,11 @@ def _features_section(scene, pts, truth) -> str:
             f["y_m"],
             f["size_m"],
             f["top_depth_m"],
+            f["density_per_m2"],
             f["points_in_footprint"],
             f["points_on_top"],
+            "yes" if f["grid_shows"] else "no",
+            f["object_points"],
             "yes" if f["detected"] else "no",
         ]
         for f in found
@@ -341,8 +313,11 @@ def _features_section(scene, pts, truth) -> str:
         "y (m)",
         "side (m)",
         "top depth (m)",
+        "soundings/m²",
         "points in footprint",
         "on top",
+        "grid shows",
+        "class 43",
         "detected",
     ]
     return head + para(rule) + table(hdr, rows)

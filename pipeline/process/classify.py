@@ -5,8 +5,10 @@ Class codes
 LAS 1.4 R15 standard classes used here: 1 unclassified, 2 ground, 7 low noise, 18 high noise.
 The ASPRS Topo-Bathy Lidar Domain Profile adds 40 bathymetric point (seabed), 41 water surface,
 42 derived water surface (synthetic, where refraction was computed), 43 submerged object,
-44 IHO S-57 object and 45 no-bottom-found-at. 43 and 44 are defined for completeness; the rules
-below do not produce them, and 45 is made by the survey run (:mod:`pipeline.run_survey`).
+44 IHO S-57 object and 45 no-bottom-found-at. The rules below do not produce 43, 44 or 45: 43
+is given to seabed points that stand above the local seabed by :mod:`pipeline.process.objects`
+(after the TPU, which its test uses), 45 by the survey run (:mod:`pipeline.run_survey`); 44 is
+defined for completeness. :data:`SEABED_CLASSES` (40 and 43) are the seabed soundings.
 
 Water column: LAS 1.4 R15 has no class for a return from inside the water column (a
 scattering layer, fish, turbidity). Code 45 is sometimes used for it in USGS/NOAA deliveries,
@@ -75,6 +77,7 @@ __all__ = [
     "IHO_S57_OBJECT",
     "NO_BOTTOM_FOUND_AT",
     "WATER_COLUMN",
+    "SEABED_CLASSES",
     "CLASS_NAMES",
     "ClassifySettings",
     "classify_points",
@@ -96,6 +99,8 @@ NO_BOTTOM_FOUND_AT = 45
 #: deliveries used 45 for the water column, which would clash); named in the file's
 #: Classification Lookup VLR.
 WATER_COLUMN = 64
+#: Seabed soundings: bathymetric points and the submerged objects standing on the seabed
+SEABED_CLASSES = (BATHYMETRIC_POINT, SUBMERGED_OBJECT)
 
 CLASS_NAMES: dict[int, str] = {
     NEVER_CLASSIFIED: "never classified",

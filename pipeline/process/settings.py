@@ -10,6 +10,8 @@ from pipeline.process.datum import DatumSettings
 from pipeline.process.detect import DetectSettings
 from pipeline.process.detect_photons import PhotonDetectSettings
 from pipeline.process.detection_limit import NoBottomSettings
+from pipeline.process.grid import GRID_STATISTICS
+from pipeline.process.objects import ObjectSettings
 from pipeline.process.scatter_bias import ForwardScatterSettings
 from pipeline.process.surface_fit import SurfaceFitSettings
 from pipeline.uncertainty.posterior_settings import PosteriorSettings
@@ -66,6 +68,14 @@ class ProcessSettings:
         doc="a-priori uncertainties of the TPU",
     )
     grid_resolution_m: float = setting(5.0, ge=0.01, le=1000.0, doc="bathymetry grid cell")
+    objects: ObjectSettings = setting(
+        ObjectSettings(), doc="submerged objects (class 43): points standing above the seabed"
+    )
+    grid_statistic: str = setting(
+        "median",
+        choices=GRID_STATISTICS,
+        doc="cell depth: median of its points (robust to outliers) or mean",
+    )
     no_bottom: NoBottomSettings = setting(
         NoBottomSettings(), doc="assumed bottom and water of the class-45 detection limit"
     )

@@ -18,9 +18,12 @@ altitude               200-800 m
 scanner / receiver     full waveform (3 in 4): Palmer 1/2, oscillating 3/10, profiler 1/5;
                        photon counting (1 in 4): nadir profiler (its preset accumulates windows of
                        consecutive shots, which a scan would smear over hundreds of metres)
-features               one IHO cube each of 0.5, 1 and 2 m, at random in the covered swath
-                       (seabed mesh 0.5 m under a profiler, 1 m under a scanner: a 0.5 m cube
-                       on a 1 m mesh is only sampled, so its detection there is a lower bound)
+features               one IHO cube each of 0.5, 1 and 2 m, under the scan (a Palmer circle's
+                       trailing arc) where the plane is 1.5 m to half the planning extinction
+                       depth deep, when the slope allows (:func:`_cube_xy`); seabed mesh 0.5 m
+                       under a profiler, 1 m under a scanner: the mesh samples a cube, so a
+                       cube smaller than two mesh cells loses its top and its detection
+                       there is a lower bound
 =====================  =======================================================================
 
 **The split** (:func:`half`): a seed is ``"heldout"`` when the first byte of
@@ -211,10 +214,9 @@ def draw(seed: int, size: str = "suite", force: dict[str, str] | None = None) ->
     half_swath = 0.0 if scanner == "profiler" else altitude * math.tan(math.radians(20.0))
     cubes = []
     for size_m, (ua, ub) in zip((0.5, 1.0, 2.0), u_cubes, strict=True):
-        # across track within the swath (the Palmer circle's sides are densest), along within
-        # the line; a profiler's cubes sit on its track
-        x = (2.0 * ua - 1.0) * 0.9 * half_swath
-        y = (0.15 + 0.7 * ub) * line
+        x, y = _cube_xy(
+            ua, ub, half_swath, line, scanner == "palmer", d_centre, slope, aspect, ext_guess
+        )
         cubes.append((round(float(x), 2), round(float(y), 2), size_m))
     # deepest seabed in view: the centre depth plus the slope across the swath or along the line
     reach = half_swath if aspect == 90.0 else 0.5 * line + half_swath
@@ -243,6 +245,44 @@ def draw(seed: int, size: str = "suite", force: dict[str, str] | None = None) ->
         window_s=float(f"{window:.3e}"),
         cubes=tuple(cubes),
     )
+
+
+#: cube bases between these depths where the plane allows (m; and a fraction of 4.5 / c)
+_CUBE_MIN_DEPTH_M = 1.5
+_CUBE_EXT_FRACTION = 0.5
+
+
+def _cube_xy(ua, ub, half_swath, line, palmer, d_centre, slope_deg, aspect_deg, ext_guess):
+    """Where a cube goes: under the scan, on seabed a survey can reach.
+
+    The cube's base depth is drawn (``ua``) between :data:`_CUBE_MIN_DEPTH_M` and
+    :data:`_CUBE_EXT_FRACTION` of the planning extinction depth, and the cube put where the
+    plane (depth ``d_centre`` at the origin, ``tan(slope)`` per metre along the aspect) has that
+    depth, clipped to the swath (0.9 of its half width across, 0.15-0.85 of the line along);
+    without slope across (or along) the track, ``ua`` (``ub``) places it uniformly instead. A
+    Palmer scan's footprints lie on a circle of the half swath's radius about the aircraft, so
+    its cubes go on the circle's trailing arc (``y = y_aircraft - sqrt(R^2 - x^2)``) for an
+    aircraft position within the line: inside the circle a short line leaves no sounding. A
+    profiler's cubes sit on its planned track (the flown track wanders by metres: see the
+    issue's feature report).
+    """
+    lo = _CUBE_MIN_DEPTH_M
+    hi = max(lo + 1.0, _CUBE_EXT_FRACTION * ext_guess)
+    grad = math.tan(math.radians(slope_deg))
+    target = lo + ua * (hi - lo)
+    across = aspect_deg == 90.0 and grad > 1e-3
+    if across:  # depth varies with x
+        x = float(np.clip((target - d_centre) / grad, -0.9 * half_swath, 0.9 * half_swath))
+    else:
+        x = (2.0 * ua - 1.0) * 0.9 * half_swath
+    back = math.sqrt(max(half_swath**2 - x**2, 0.0)) if palmer else 0.0
+    y_ac = (0.15 + 0.7 * ub) * line
+    if not across and grad > 1e-3:  # depth varies with y: the aircraft where the cube is
+        y_want = (target - d_centre) / grad + back
+        # out of the line: the uniform place (clipping would stack a profiler's cubes)
+        if 0.15 * line <= y_want <= 0.85 * line:
+            y_ac = y_want
+    return x, y_ac - back
 
 
 def ci_draws() -> list[Draw]:

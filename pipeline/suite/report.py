@@ -24,9 +24,16 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.suite.strata import Pool, shallowest_unbiased_m
+from pipeline.suite.strata import DEPTH_BANDS_M, Pool, shallowest_unbiased_m
 
-__all__ = ["FLOORS", "floors", "write_csv", "write_markdown", "cube_density_table"]
+__all__ = [
+    "FLOORS",
+    "floors",
+    "write_csv",
+    "write_markdown",
+    "cube_density_table",
+    "cube_depth_table",
+]
 
 FLOORS = ("bias", "rmse", "grid", "gross", "tpu68", "tpu95", "post68", "post95", "conv", "cube2")
 _MIN_POINTS, _MIN_TPU, _MIN_POST = 30, 200, 60
@@ -107,14 +114,34 @@ def _pct(v) -> str:
     return _f(None if v is None else 100.0 * v, "{:.1f}")
 
 
-def cube_density_table(pool: Pool) -> list[str]:
-    """Markdown lines: cube detection per size and point-density band, both halves."""
-    bands = ((0.0, 0.25), (0.25, 0.5), (0.5, 1.0), (1.0, 2.0), (2.0, math.inf))
+def _detected_cell(cs: list[dict]) -> str:
+    """``detected / n (points, grid, class 43)`` of a list of cubes."""
+    if not cs:
+        return "0 / 0"
+    ways = ", ".join(str(sum(bool(c.get(k)) for c in cs)) for k in _WAYS)
+    return f"{sum(c['detected'] for c in cs)} / {len(cs)} ({ways})"
+
+
+#: how a cube was detected: soundings on its top, a grid cell, class-43 points
+_WAYS = ("by_points", "by_grid", "by_class43")
+
+
+def _cube_band_table(
+    pool: Pool, label: str, key: str, bands, min_depth_m: float = -math.inf
+) -> list[str]:
     lines = _head(
-        ["cube (m)", "density (points/m²)", "tuning detected / cubes", "held-out detected / cubes"]
+        [
+            "cube (m)",
+            label,
+            "tuning detected / cubes (points, grid, class 43)",
+            "held-out detected / cubes (points, grid, class 43)",
+        ]
     )
     halves = [m["half"] for m in pool.meta]
-    shallow = [c for c in pool.cubes if c["depth_m"] < 0.8 * pool.meta[c["run"]]["d_ext_m"]]
+    # under water (the base at least min_depth_m deep) and shallower than 0.8 D_ext
+    shallow = [
+        c for c in pool.cubes if min_depth_m <= c["depth_m"] < 0.8 * pool.meta[c["run"]]["d_ext_m"]
+    ]
     for size in (0.5, 1.0, 2.0):
         for lo, hi in bands:
             cells = []
@@ -122,13 +149,26 @@ def cube_density_table(pool: Pool) -> list[str]:
                 cs = [
                     c
                     for c in shallow
-                    if c["size_m"] == size
-                    and halves[c["run"]] == h
-                    and lo <= c["density_per_m2"] < hi
+                    if c["size_m"] == size and halves[c["run"]] == h and lo <= c[key] < hi
                 ]
-                cells.append(f"{sum(c['detected'] for c in cs)} / {len(cs)}")
+                cells.append(_detected_cell(cs))
             lines.append(f"| {size:g} | {lo:g}-{hi:g} | {cells[0]} | {cells[1]} |")
     return lines
+
+
+def cube_density_table(pool: Pool) -> list[str]:
+    """Markdown lines: cube detection per size and sounding-density band, both halves."""
+    bands = ((0.0, 0.25), (0.25, 0.5), (0.5, 1.0), (1.0, 2.0), (2.0, 4.0), (4.0, math.inf))
+    # the floors' depth window: base at least 1 m deep (a cube on land or awash is no feature
+    # of the seabed survey)
+    return _cube_band_table(pool, "density (soundings/m²)", "density_per_m2", bands, 1.0)
+
+
+def cube_depth_table(pool: Pool) -> list[str]:
+    """Markdown lines: cube detection per size and depth band (of its base), both halves."""
+    edges = DEPTH_BANDS_M
+    bands = tuple(zip(edges[:-1], edges[1:], strict=True))
+    return _cube_band_table(pool, "depth m", "depth_m", bands)
 
 
 def _row(cells) -> str:
@@ -293,9 +333,19 @@ def write_markdown(
         "",
         *_coverage_table(strata),
         "",
-        "## Cube detection by point density (all depths shallower than 0.8 D_ext)",
+        "## Cube detection by sounding density (base 1 m deep to 0.8 D_ext)",
+        "",
+        "Per cube (`pipeline.evaluate_features`): detected when a sounding inside its footprint"
+        " lies within half its side of its top, or the grid cell at its centre stands above its"
+        " neighbours by half its side; in brackets how many by soundings, by the grid and with"
+        " class-43 (submerged object) points from processing. Density: soundings per m² in its"
+        " footprint grown by 1 m on each side.",
         "",
         *cube_density_table(pool),
+        "",
+        "## Cube detection by depth of the cube's base (shallower than 0.8 D_ext)",
+        "",
+        *cube_depth_table(pool),
         "",
         "## Shallowest depth with |bias| <= 0.10 m (bands from 2 m upward must all pass)",
         "",

@@ -17,10 +17,14 @@ planning value from the scene's beam attenuation ``c``: ``4.5 / c`` (the generat
 (``d_ext_source``). Depth bands report points shallower than ``0.8 D_ext`` only; the points
 deeper than that are the ``past 0.8 D_ext`` stratum.
 
-**Cube detection** (IHO S-44 features): a cube of side ``s`` is *detected* when at least one
-class-40 point lies on its footprint with a depth error below ``s / 2`` (nearer its top than
-the seabed around it); its *density* is the class-40 points per m² within 5 m of its centre
-(for a profiler, whose points lie on one line, this overstates the areal density).
+**Cube detection** (IHO S-44 features): the run's own ``evaluation.json`` ``features``
+(:mod:`pipeline.evaluate_features`): a cube of side ``s`` is *detected* when a seabed sounding
+(class 40 or 43) inside its footprint has a depth error below ``s / 2`` (nearer its top than
+the seabed around it) or the grid cell at its centre stands above its neighbours by ``s / 2``;
+its *density* is the soundings per m² in its footprint grown by 1 m on each side (a 5 m disc,
+used before, counted a profiler's line passing metres beside the cube as density on it); its
+depth is the true depth of the seabed at its base. Runs from before that entry: the same
+point rule and density from ``evaluation_points.npz`` (no grid, no class 43).
 """
 
 from __future__ import annotations
@@ -53,7 +57,10 @@ DEPTH_BANDS_M = (0.1, 1.0, 3.0, 6.0, 12.0, 25.0, math.inf)
 SHALLOW_BANDS_M = (0.1, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 5.0)
 _FLOOR_MIN_DEPTH_M = 1.0
 _FLOOR_EXT_FRACTION = 0.8
-_CUBE_DENSITY_RADIUS_M = 5.0
+#: a cube's density counts the soundings in its footprint grown by this on each side
+_CUBE_MARGIN_M = 1.0
+#: runs without ``features``: the base depth from the soundings within this of the centre
+_CUBE_DEPTH_RADIUS_M = 5.0
 _GROUPS = ("pt", "tpu", "post", "cell")
 
 
@@ -73,33 +80,60 @@ def extinction_depth_m(
     return 4.5 / attenuation_per_m, "planning_4.5_over_c"
 
 
-def cube_detections(arrays: dict[str, np.ndarray], cubes) -> list[dict[str, Any]]:
-    """Per cube ``(x_m, y_m, size_m)``: density, points on it, detected, base depth.
+def cube_detections(
+    arrays: dict[str, np.ndarray], cubes, evaluation: dict | None = None
+) -> list[dict[str, Any]]:
+    """Per cube ``(x_m, y_m, size_m)``: density, points on it, how detected, base depth.
 
     Parameters
     ----------
     arrays : dict
         A run's ``evaluation_points.npz`` arrays.
     cubes : sequence of (x_m, y_m, size_m)
+    evaluation : dict, optional
+        The run's ``evaluation.json``; its ``features`` entry is used when present.
 
     Returns
     -------
     list of dict
-        ``size_m``, ``density_per_m2``, ``n_on_top``, ``detected`` (bool), ``depth_m`` (the
-        median true depth of the points within 5 m; NaN without any).
+        ``size_m``, ``density_per_m2``, ``n_on_top``, ``detected``, ``by_points``,
+        ``by_grid``, ``by_class43`` (bools), ``depth_m`` (true depth at the cube's base; NaN
+        when unknown).
     """
+    feats = ((evaluation or {}).get("features") or {}).get("cubes")
+    if feats is not None:
+        return [
+            {
+                "size_m": float(c["size_m"]),
+                "density_per_m2": float(c["density_per_m2"]),
+                "n_on_top": int(c["points_on_top"]),
+                "detected": bool(c["detected"]),
+                "by_points": c["points_on_top"] > 0,
+                "by_grid": bool(c["grid_shows"]),
+                "by_class43": c["object_points"] > 0,
+                "depth_m": float(c["base_depth_m"]),
+            }
+            for c in feats
+        ]
     x, y, err = arrays["pt_x_m"], arrays["pt_y_m"], arrays["pt_error_m"]
     out = []
     for cx, cy, s in cubes:
-        near = np.hypot(x - cx, y - cy) <= _CUBE_DENSITY_RADIUS_M
+        g = 0.5 * s + _CUBE_MARGIN_M
+        box = (np.abs(x - cx) <= g) & (np.abs(y - cy) <= g)
         on = (np.abs(x - cx) <= 0.5 * s) & (np.abs(y - cy) <= 0.5 * s)
-        around = arrays["pt_true_depth_m"][near]
+        # the base: the true depth of the soundings within 5 m, not on its top
+        near = np.hypot(x - cx, y - cy) <= _CUBE_DEPTH_RADIUS_M
+        around = arrays["pt_true_depth_m"][near & ~on]
+        hit = bool(np.any(np.abs(err[on]) < 0.5 * s))
         out.append(
             {
                 "size_m": float(s),
-                "density_per_m2": float(near.sum() / (math.pi * _CUBE_DENSITY_RADIUS_M**2)),
+                "density_per_m2": float(box.sum() / (2.0 * g) ** 2),
                 "n_on_top": int(on.sum()),
-                "detected": bool(np.any(np.abs(err[on]) < 0.5 * s)),
+                "detected": hit,
+                "by_points": hit,
+                "by_grid": False,
+                "by_class43": False,
                 "depth_m": float(np.median(around)) if around.size else float("nan"),
             }
         )
@@ -136,7 +170,7 @@ def pool_rows(rows: list[dict[str, Any]]) -> Pool:
         for g in _GROUPS:
             n = a[f"{g}_true_depth_m"].size
             scene[g].append(np.full(n, i, dtype=np.int64))
-        cubes += [{**c, "run": i} for c in cube_detections(a, d.cubes)]
+        cubes += [{**c, "run": i} for c in cube_detections(a, d.cubes, row.get("evaluation"))]
     arrays = {k: np.concatenate(v) for k, v in parts.items()}
     return Pool(arrays, {g: np.concatenate(v) for g, v in scene.items()}, meta, cubes)
 

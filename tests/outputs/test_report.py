@@ -16,12 +16,11 @@ import shutil
 import subprocess
 import tomllib
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from pipeline.outputs.report import CUBE_TOP_TOLERANCE_M, cube_detection, depth_bands
+from pipeline.outputs.report import depth_bands
 from pipeline.run import run_scene
 from pipeline.scene import parse_scene
 
@@ -143,38 +142,6 @@ def test_depth_bands_hold_each_point_once_with_its_band_statistics():
     assert [round(b["bias_m"], 12) for b in bands] == [0.1, 0.1, 0.1, -0.2, -0.2, -0.2, -0.2]
     # IHO S-44 Special order at 1 m: sqrt(0.25^2 + (0.0075 * 1)^2)
     assert bands[0]["special_m"] == pytest.approx(math.hypot(0.25, 0.0075))
-
-
-def test_a_cube_is_detected_by_a_point_on_its_top_inside_its_rotated_footprint():
-    # a 2 m cube at (10, 10) turned 45 degrees; the seabed a plane 5 m deep, the cube's top 3 m
-    cube = SimpleNamespace(kind="cube", x_m=10.0, y_m=10.0, size_m=2.0, heading_deg=45.0)
-    ridge = SimpleNamespace(kind="ridge", x_m=0.0, y_m=0.0, size_m=1.0, heading_deg=0.0)
-
-    def truth(x, y):
-        along = (x - 10.0) * math.sin(math.pi / 4) + (y - 10.0) * math.cos(math.pi / 4)
-        across = (x - 10.0) * math.cos(math.pi / 4) - (y - 10.0) * math.sin(math.pi / 4)
-        return np.where((np.abs(along) <= 1.0) & (np.abs(across) <= 1.0), 3.0, 5.0)
-
-    xy = np.array(
-        [
-            [10.5, 10.0],  # inside, on the top within tolerance
-            [10.9, 10.9],  # inside the unrotated square, outside the turned one (along 1.27 m)
-            [10.0, 10.5],  # inside, 0.5 m below the top: not on it
-            [10.0, 9.5],  # inside, on the top, but class 1
-        ]
-    )
-    depth = np.array([3.0 + 0.8 * CUBE_TOP_TOLERANCE_M, 3.0, 3.5, 3.0])
-    points = SimpleNamespace(
-        xyz_m=np.c_[xy, -depth],
-        depth_m=depth,
-        classification=np.array([40, 40, 40, 1], dtype=np.uint8),
-    )
-    (found,) = cube_detection((cube, ridge), points, truth)
-    assert found["top_depth_m"] == 3.0
-    assert found["points_in_footprint"] == 2 and found["points_on_top"] == 1
-    assert found["detected"]
-    points.depth_m = np.array([3.5, 3.0, 3.5, 3.0])
-    assert not cube_detection((cube,), points, truth)[0]["detected"]
 
 
 @pytest.mark.parametrize("north_first", [True, False])

@@ -41,10 +41,14 @@ def test_matches_brute_force():
     np.testing.assert_array_equal(g.count, cnt)
     assert g.count.sum() == n  # default bounds enclose every point
     # summation order differs from numpy's: agree to a few ulps of ~10 m
-    np.testing.assert_allclose(g.depth_m, mean, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(g.mean_depth_m, mean, rtol=0, atol=1e-12)
     np.testing.assert_allclose(g.median_depth_m, med, rtol=0, atol=0)
+    np.testing.assert_allclose(g.depth_m, med, rtol=0, atol=0)  # the default statistic
     np.testing.assert_allclose(g.spread_m, std, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(g.z_m, -mean, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(g.z_m, -med, rtol=0, atol=1e-12)
+    gm = grid_points(x, y, v, resolution_m=2.0, origin_m=origin, statistic="mean")
+    np.testing.assert_allclose(gm.depth_m, mean, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(gm.z_m, -mean, rtol=0, atol=1e-12)
     # cell centres and world transform
     w, e, s, nn = g.bounds_m
     np.testing.assert_allclose(g.x_m, w + 1.0 + 2.0 * np.arange(g.shape[1]))
@@ -90,3 +94,32 @@ def test_grid_seabed_selects_class_40():
     g = grid_seabed(p, 1.0)
     assert g.shape == (1, 1) and g.count[0, 0] == 2
     assert g.depth_m[0, 0] == 6.0 and g.spread_m[0, 0] == pytest.approx(np.sqrt(2.0))
+
+
+def test_cell_depth_robust_to_outliers():
+    """An analytic sloping seabed, 0.05 m noise, and 20 % of the points replaced by blunders
+    (false bottoms 2-30 m off, both ways). The cell depth must stay on the plane: within
+    0.1 m of the plane at the cell centre in every cell with >= 8 points (the median of a
+    cell with fewer than half outliers lies inside the good points' range), and its elevation
+    likewise. A per-cell mean moves by ~20 % of the blunders' size."""
+    rng = np.random.default_rng(11)
+    n = 12000
+    x, y = rng.uniform(0, 40, n), rng.uniform(0, 40, n)
+
+    def plane_depth(x, y):
+        return 6.0 + 0.1 * x - 0.05 * y  # analytic truth: depth (m) below the datum
+
+    d = plane_depth(x, y) + rng.normal(0.0, 0.05, n)
+    bad = rng.random(n) < 0.2
+    d[bad] += rng.choice([-1.0, 1.0], bad.sum()) * rng.uniform(2.0, 30.0, bad.sum())
+    g = grid_points(x, y, d, resolution_m=4.0, bounds_m=(0, 40, 0, 40))
+    xx, yy = np.meshgrid(g.x_m, g.y_m)
+    full = g.count >= 8
+    assert full.sum() == 100
+    # half a cell of slope (0.1 x 2 m) separates a point's truth from the centre's at most;
+    # the median's error here is the noise and the slope's spread, well under 0.1 m
+    err = g.depth_m - plane_depth(xx, yy)
+    assert np.max(np.abs(err[full])) < 0.1
+    np.testing.assert_allclose(g.z_m[full], -g.depth_m[full], atol=1e-12)
+    # the mean is not: the same cells are off by metres
+    assert np.max(np.abs(g.mean_depth_m - plane_depth(xx, yy))[full]) > 0.5
