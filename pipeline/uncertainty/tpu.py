@@ -40,9 +40,9 @@ surface fit tilt       C   tilt sigma of the fitted plane (``/ sqrt 2`` per axis
                            Depth: the plane's height at the sounding and the refraction.
 water temperature,     C   unknown water mass: both indices move together, with the
 salinity                   derivatives of Quan & Fry (1995) (:mod:`pipeline.optics`).
-forward scattering     C   the bottom echo late by a fraction of the in-water time
-                           (``forward_scatter_range_fraction``, off by default; Richter et al.
-                           2021: ~0.8 % in clear coastal water, a VQ-880-G-class Monte Carlo).
+forward scattering     C   the processing's forward-scattering correction
+                           (:mod:`pipeline.process.scatter_bias`) wrong by its
+                           ``process.forward_scatter.relative_sigma``: one water per survey.
 timing (surface,       R   the detector's per-return sigma (``DetectedReturns.t_*_sigma_s``), or
 bottom)                    ``timing_sigma_s``; the full-waveform detector gives each echo's
                            from its own amplitude, width and noise

@@ -19,7 +19,6 @@ from pipeline.uncertainty.tpu_terms import (
     _perp_axes,
     _rotate,
     _xyzd,
-    forward_scatter_sigma_s,
 )
 
 
@@ -65,7 +64,6 @@ def monte_carlo_points(
     fp = _footprint(inp, nominal[:, :3], st)
     slope = math.tan(math.radians(st.seabed_slope_deg))
     pa, pb = _perp_axes(d0)
-    fs = forward_scatter_sigma_s(inp, st)
     for k in range(n_draws):
         g = rng.standard_normal((n, 16))
         # per-pulse: jitter, times, planes (fit and waves)
@@ -97,8 +95,7 @@ def monte_carlo_points(
             t_surface_s=np.where(
                 inp.ret.has_surface, inp.ret.t_surface_s + inp.sig_ts * g[:, 14], 0.0
             ),
-            # forward scattering: one water, one fraction of every in-water time (correlated)
-            t_bottom_s=inp.ret.t_bottom_s + inp.sig_tb * g[:, 15] + fs * rng.standard_normal(),
+            t_bottom_s=inp.ret.t_bottom_s + inp.sig_tb * g[:, 15],
         )
         w = water[:, None]
         surf = dataclasses.replace(

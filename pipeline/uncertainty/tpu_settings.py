@@ -97,14 +97,6 @@ class TpuSettings:
         1.0, ge=0.0, le=100.0, doc="full angle, 1/e² (None: scanner.beam_divergence_mrad)"
     )
     seabed_slope_deg: float = setting(0.0, ge=0.0, lt=90.0, doc="assumed seabed slope")
-    forward_scatter_range_fraction: float = setting(
-        0.0,
-        ge=0.0,
-        le=0.2,
-        doc="one-sigma range bias of forward scattering, as a fraction of the in-water range "
-        "(Richter et al. 2021, VQ-880-G class in clear coastal water: 4.6/7.0/16 cm at "
-        "5/10/20 m, ~0.008; 0: off, as the simulator stretches the bottom echo symmetrically)",
-    )
     gradient_neighbours: int = setting(
         16, ge=3, le=256, doc="soundings per local plane of the seabed gradient"
     )

@@ -206,9 +206,6 @@ def _white_evaluations(inp: _Inputs, st: TpuSettings):
         return lambda a: _xyzd(inp, surf=_with_plane(inp, zeros, axis, a))
 
     return [
-        # forward scattering lengthens the in-water travel time in proportion to it: the
-        # bottom time moved by a fraction of the surface-to-bottom time
-        ("forward_scatter", forward_scatter_sigma_s(inp, st), bottom_time),
         ("timing_surface", inp.sig_ts, lambda a: _xyzd(inp, ret=_with_times(inp, a, zeros))),
         ("timing_bottom", inp.sig_tb, bottom_time),
         ("pointing_a", np.full(n, jitter), turn(pa)),
@@ -220,19 +217,6 @@ def _white_evaluations(inp: _Inputs, st: TpuSettings):
         ("surface_tilt_x", fit_tilt, plane(ex)),
         ("surface_tilt_y", fit_tilt, plane(ey)),
     ]
-
-
-def forward_scatter_sigma_s(inp: _Inputs, st: TpuSettings) -> np.ndarray:
-    """One-sigma forward-scattering delay of each bottom time, ``(n,)`` seconds.
-
-    A fraction of the in-water round trip: ``t_b - t_s``, or from the fitted surface's range
-    without a surface return.
-    """
-    f = st.forward_scatter_range_fraction
-    ret, surf = inp.ret, inp.surf
-    t_entry = 2.0 * surf.range_to_entry_m * surf.air_index / _C
-    t_water = np.where(ret.has_surface, ret.t_bottom_s - ret.t_surface_s, ret.t_bottom_s - t_entry)
-    return np.where(surf.is_water, f * np.maximum(t_water, 0.0), 0.0)
 
 
 def _footprint(inp: _Inputs, xyz: np.ndarray, st: TpuSettings) -> np.ndarray:

@@ -10,9 +10,6 @@ import pytest
 
 from pipeline.process.refraction import seabed_points
 from pipeline.uncertainty.tpu import (
-    DEPTH,
-    TpuSettings,
-    monte_carlo_points,
     pair_scatter,
     point_tpu,
     timing_from_scatter,
@@ -104,26 +101,3 @@ def test_a_random_term_adds_in_quadrature():
     np.testing.assert_array_equal(out.sigma_depth_correlated_m, tpu.sigma_depth_correlated_m)
     np.testing.assert_array_equal(out.sigma_h_m, tpu.sigma_h_m)
     assert out.terms[WINDOW_TERM].shape == (len(tpu), 4)
-
-
-def test_forward_scatter_term_is_the_published_fraction_of_the_depth():
-    """A range bias of a fraction f of the in-water range moves the depth by f times it:
-    at nadir over the 12 m seabed, f = 0.0046 / 5 (Richter et al. 2021 at 5 m) gives
-    0.0046 x 12 / 5 m, in depth and elevation alike, correlated, and the Monte Carlo agrees."""
-    ret, surf = survey(n_side=6)
-    f = 0.046 / 5.0
-    st = TpuSettings(forward_scatter_range_fraction=f)
-    tpu = point_tpu(ret, surf, RST, st)
-    term = tpu.terms["forward_scatter"]
-    assert abs(term[0, DEPTH]) == pytest.approx(f * TRUE_DEPTH_M, rel=1e-3)  # row 0: nadir
-    assert abs(term[0, 2]) == pytest.approx(f * TRUE_DEPTH_M, rel=1e-3)
-    # off nadir the in-water range is longer, the depth is still f x depth
-    np.testing.assert_allclose(np.abs(term[:, DEPTH]), f * TRUE_DEPTH_M, rtol=2e-3)
-    off = point_tpu(ret, surf, RST)
-    np.testing.assert_allclose(
-        tpu.sigma_depth_correlated_m, np.hypot(off.sigma_depth_correlated_m, term[:, DEPTH])
-    )
-    draws = monte_carlo_points(ret, surf, RST, st, n_draws=400, seed=3)
-    base = monte_carlo_points(ret, surf, RST, n_draws=400, seed=3)
-    extra = np.sqrt(np.maximum(draws[:, :, DEPTH].var(0) - base[:, :, DEPTH].var(0), 0.0))
-    assert np.median(extra) == pytest.approx(f * TRUE_DEPTH_M, rel=0.15)
