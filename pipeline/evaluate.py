@@ -51,6 +51,7 @@ __all__ = [
     "ErrorReport",
     "tvu_allowance_m",
     "error_stats",
+    "truth_at",
     "iho_fractions",
     "point_errors_m",
     "grid_errors_m",
@@ -159,8 +160,12 @@ def iho_fractions(errors_m: Any, depth_m: Any) -> tuple[IhoResult, ...]:
     return tuple(out)
 
 
-def _at(fn: TruthFn, x: np.ndarray, y: np.ndarray, pulse_id: Any = None) -> np.ndarray:
-    """The truth at points, each at its own pulse's time when the truth is per pulse."""
+def truth_at(fn: TruthFn, x: np.ndarray, y: np.ndarray, pulse_id: Any = None) -> np.ndarray:
+    """The truth at points ``(n,)``, each at its own pulse's time when the truth is per pulse.
+
+    Shared by every evaluation (points, per-point file, features) so a moving sea is met the
+    same way everywhere.
+    """
     if pulse_id is not None and getattr(fn, "per_pulse", False):
         return np.asarray(fn(x, y, pulse_id), dtype=np.float64)
     return np.asarray(fn(x, y), dtype=np.float64)
@@ -184,9 +189,9 @@ def point_errors_m(
     _truth(truth_depth_m, truth_z_m)
     x, y, z = points.xyz_m[:, 0], points.xyz_m[:, 1], points.xyz_m[:, 2]
     if truth_depth_m is not None:
-        true_d = _at(truth_depth_m, x, y, points.pulse_id)
+        true_d = truth_at(truth_depth_m, x, y, points.pulse_id)
         return points.depth_m - true_d, true_d
-    true_z = _at(truth_z_m, x, y, points.pulse_id)
+    true_z = truth_at(truth_z_m, x, y, points.pulse_id)
     return true_z - z, np.maximum(points.depth_m, 0.0)
 
 
@@ -367,7 +372,7 @@ def posterior_coverage(posteriors, *, truth_depth_m: TruthFn) -> dict[str, Any]:
     started = (posteriors.flags & np.uint16(PosteriorFlag.NO_START)) == 0
     xy = posteriors.xyz_median_m[started]
     pid = getattr(posteriors, "pulse_id", None)
-    truth = _at(truth_depth_m, xy[:, 0], xy[:, 1], None if pid is None else pid[started])
+    truth = truth_at(truth_depth_m, xy[:, 0], xy[:, 1], None if pid is None else pid[started])
     sub = {k: v[started] for k, v in d.items()}
     conv = posteriors.converged[started]
 

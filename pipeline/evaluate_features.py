@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.evaluate import _at, error_stats
+from pipeline.evaluate import error_stats, truth_at
 from pipeline.process.classify import SEABED_CLASSES, SUBMERGED_OBJECT
 
 __all__ = [
@@ -101,7 +101,7 @@ def cube_detection(features, points, truth_depth_m, grid=None, grid_truth_depth_
     depth = np.asarray(points.depth_m)[sea]
     pid = getattr(points, "pulse_id", None)
     pid = None if pid is None else np.asarray(pid)[sea]
-    true_d = _at(truth_depth_m, xy[:, 0], xy[:, 1], pid) if xy.size else np.zeros(0)
+    true_d = truth_at(truth_depth_m, xy[:, 0], xy[:, 1], pid) if xy.size else np.zeros(0)
     is43 = cls[sea] == SUBMERGED_OBJECT
     top_fn = grid_truth_depth_m or truth_depth_m
     out = []

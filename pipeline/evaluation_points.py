@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.evaluate import _at, grid_errors_m, point_errors_m
+from pipeline.evaluate import grid_errors_m, point_errors_m, truth_at
 from pipeline.outputs.atomic import atomic_path
 from pipeline.process.classify import NO_BOTTOM_FOUND_AT, SEABED_CLASSES
 
@@ -105,7 +105,7 @@ def _posterior_arrays(post, truth_depth_m) -> dict[str, np.ndarray]:
     xy = p.xyz_median_m[started]
     # over a moving sea, the depth below the surface each pulse saw (as the points and
     # evaluation.json's posterior coverage): the time-0 sea is another surface
-    true_d = _at(truth_depth_m, xy[:, 0], xy[:, 1], np.asarray(p.pulse_id)[started])
+    true_d = truth_at(truth_depth_m, xy[:, 0], xy[:, 1], np.asarray(p.pulse_id)[started])
     out = {"post_true_depth_m": true_d}
     out.update({f"post_{k}_m": np.asarray(p.depth_m[k])[started] for k in keys})
     wave = getattr(p, "waveform_depth_m", None) or p.depth_m
