@@ -20,14 +20,14 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from pipeline.optics import SPEED_OF_LIGHT_M_S
+from pipeline.detection_store import DetectionStore, SurveyAggregates
 from pipeline.parallel import Executor
 from pipeline.process.context import (
     ProcessingContext,
     processing_context,
     with_measured_attenuation,
 )
-from pipeline.process.returns import DetectedReturns
+from pipeline.process.returns import DetectedReturns, DetectorFlag
 from pipeline.stages import Plan, StageClock
 from pipeline.survey_chunks import ChunkJob, run_chunk
 from pipeline.uncertainty.posterior_selection import KeptWaveforms, posterior_budget
@@ -54,6 +54,9 @@ class SimulatedSurvey:
         Counts of the tracer's and the receiver's flags.
     no_bottom : dict or None
         Summary of the no-bottom limits (full waveform).
+    median_surface_range_m : float or None
+        Median slant range to the surface returns (on the bounded sample of
+        :class:`~pipeline.detection_store.SurveyAggregates`); None without any.
     """
 
     returns: DetectedReturns
@@ -64,6 +67,7 @@ class SimulatedSurvey:
     subray_flags: dict[str, int]
     pulse_flags: dict[str, int]
     no_bottom: dict[str, Any] | None
+    median_surface_range_m: float | None = None
 
 
 def survey_extent_m(scene, lines) -> tuple[float, float, float, float]:
@@ -88,12 +92,15 @@ def simulate_detections(
     plan: Plan,
     ctx: ProcessingContext,
     clock: StageClock,
+    store: DetectionStore,
     log=print,
     progress=False,
     executor: Executor | None = None,
 ) -> SimulatedSurvey:
     """Simulate the survey chunk by chunk; keep the measured navigation and the detections.
 
+    Each chunk's detections go to ``store`` (on disk) as they arrive; the survey-wide
+    statistics are streamed (:class:`~pipeline.detection_store.SurveyAggregates`).
     ``progress``: a progress bar with ETA over the pulses (stderr). ``executor``: where the
     chunks run (:class:`~pipeline.parallel.Executor`; default: one by one in this process);
     the result is the same wherever they run.
@@ -163,9 +170,9 @@ def simulate_detections(
     )
     sub_flags: dict[str, int] = {}
     pulse_flags: dict[str, int] = {}
-    parts: list[dict[str, np.ndarray]] = []
     kept: list[KeptWaveforms] = []
-    nb_inputs: list[dict[str, np.ndarray]] = []
+    agg = SurveyAggregates(lines.n_pulses_total, scene.scene.seed, ins.air_index)
+    beyond = int(DetectorFlag.BEYOND_DETECTION_LIMIT)
     n_chunk = survey.n_chunks(lines, chunk)
     executor = executor or Executor(workers=1)
     log(f"  chunks of {chunk} pulses on {executor.workers} worker(s)")
@@ -178,7 +185,8 @@ def simulate_detections(
         file=sys.stderr,
     )
     # in chunk order, as they arrive; each chunk's stage seconds (in the process that ran it)
-    # add to the clock, so CPU seconds count every worker
+    # add to the clock, so CPU seconds count every worker. Each chunk goes to disk at once
+    # (the store); only its summary and its share of the survey-wide aggregates stay
     for c, res in enumerate(executor.map(run_chunk, job, n_chunk)):
         for name in res.wall_s:
             clock.wall_s[name] = clock.wall_s.get(name, 0.0) + res.wall_s[name]
@@ -187,42 +195,31 @@ def simulate_detections(
         _count(pulse_flags, res.pulse_flags)
         if res.kept is not None:
             kept.append(res.kept)
-        if res.nb is not None:
-            nb_inputs.append(res.nb)
-        parts.append(res.part)
+        agg.add(res.part, res.nb, ctx.refraction.group_index, beyond)
+        part = res.part
+        if res.nb is not None:  # the per-pulse inputs of the limits, until they are set
+            part = {**part, **{f"nb_{k}": res.nb[k] for k in _NB_FIELDS}}
+        store.append(part)
         bar.update(res.n_pulses)
+        del res, part
         if not progress and ((c + 1) % 5 == 0 or c + 1 == n_chunk):
             done = min((c + 1) * chunk, lines.n_pulses_total)
             log(f"  chunk {c + 1}/{n_chunk}: {done} pulses simulated and detected")
     bar.close()
-    returns = _returns(parts)
     no_bottom = None
     if not job.waveform:
-        from pipeline.process.photon_limit import photon_limit_summary
-        from pipeline.process.returns import DetectorFlag
-
-        no_bottom = photon_limit_summary(
-            np.concatenate([p["t_detection_limit_s"] for p in parts]),
-            returns.t_surface_s,
-            returns.flags,
-            returns.has_bottom,
-            ctx.refraction.group_index,
-            int(DetectorFlag.BEYOND_DETECTION_LIMIT),
-        )
+        no_bottom = agg.photon_summary()
         log(f"  photon detection limits: {no_bottom}")
-    if nb_inputs:
-        from pipeline.process.no_bottom import no_bottom_limits
-
+    if job.no_bottom:
         with clock.stage("no_bottom_limit"):
-            t_nb, no_bottom = no_bottom_limits(nb_inputs, returns.t_surface_s, ctx, ps.detect)
-            returns = dataclasses.replace(returns, t_no_bottom_s=t_nb)
+            no_bottom = _no_bottom_limits(store, agg, ctx, ps.detect)
         log(
             f"  no-bottom limits: {no_bottom['pulses_with_limit']} pulses; bottoms fade "
             f"{no_bottom['excess_decay_per_m']:.3f}/m (in-water path) faster than the column "
             f"({no_bottom['bottoms_used']} bottoms)"
         )
     return SimulatedSurvey(
-        returns=returns,
+        returns=store.returns(),
         kept=KeptWaveforms.concatenate(kept),
         truth=truth,
         lines=lines,
@@ -230,37 +227,31 @@ def simulate_detections(
         subray_flags=sub_flags,
         pulse_flags=pulse_flags,
         no_bottom=no_bottom,
+        median_surface_range_m=agg.median_surface_range_m(),
     )
 
 
-def _returns(parts: list[dict[str, np.ndarray]]) -> DetectedReturns:
-    """The chunks' navigation and detections as one DetectedReturns, in pulse order."""
-    cat = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-    return DetectedReturns(
-        pulse_id=cat["pulse_id"],
-        origin_meas_m=cat["origin_meas_m"],
-        direction_meas=cat["direction_meas"],
-        has_surface=cat["has_surface"],
-        t_surface_s=cat["t_surface_s"],
-        has_bottom=cat["has_bottom"],
-        t_bottom_s=cat["t_bottom_s"],
-        surface_confidence=cat["surface_confidence"],
-        bottom_confidence=cat["bottom_confidence"],
-        flags=cat["flags"],
-        surface_amplitude=cat["surface_amplitude"],
-        bottom_amplitude=cat["bottom_amplitude"],
-        # the full-waveform detector's timing sigma of each return (photon counting: none, the
-        # TPU sets it from the scatter of the soundings)
-        t_surface_sigma_s=cat.get("t_surface_sigma_s"),
-        t_bottom_sigma_s=cat.get("t_bottom_sigma_s"),
-        # in-column returns (full waveform only; photon detections leave them empty)
-        **{k: cat[k] for k in DetectedReturns.COLUMN_FIELDS if k in cat},
-        # the photon detector's no-bottom limits (full waveform: zeros, replaced by
-        # no_bottom_limits once the survey's bottoms are in)
-        t_no_bottom_s=cat["t_no_bottom_s"],
-        t_emit_s=cat["t_emit_s"],
-        line_id=cat["line_id"],
-    )
+#: :func:`~pipeline.process.no_bottom.chunk_inputs`' per-pulse fields, stored with the chunk
+_NB_FIELDS = ("none", "margin", "alpha", "t_max", "ok")
+
+
+def _no_bottom_limits(store: DetectionStore, agg: SurveyAggregates, ctx, detect) -> dict:
+    """Fit the bottoms' extra decay once, then set every stored chunk's ``t_no_bottom_s``."""
+    from pipeline.process.no_bottom import excess_decay_summary, limit_times_s
+
+    t_b, loss, alpha = agg.no_bottom_sample()
+    delta, summary = excess_decay_summary(t_b, loss, alpha, agg.nb_counts, ctx, detect)
+    n_limit = 0
+    for c in range(len(store.chunks)):
+        d = store.load_chunk(c, ["t_surface_s", *(f"nb_{k}" for k in _NB_FIELDS)])
+        inputs = {k: d[f"nb_{k}"] for k in _NB_FIELDS}
+        t = limit_times_s(inputs, d["t_surface_s"], delta, ctx, detect)
+        n_limit += int(np.count_nonzero(t > 0.0))
+        store.replace_field(c, "t_no_bottom_s", t)
+    for k in _NB_FIELDS:
+        store.drop_field(f"nb_{k}")
+    summary["pulses_with_limit"] = n_limit
+    return summary
 
 
 def run_survey(
@@ -289,16 +280,13 @@ def run_survey(
     from pipeline.uncertainty.survey_uncertainty import survey_uncertainty, with_tpu
 
     ctx = processing_context(scene)
-    sim = simulate_detections(scene, plan, ctx, clock, log, progress, executor)
-    if sim.no_bottom is not None:
+    with DetectionStore(out, ctx.instrument.air_index) as store:
+        sim = simulate_detections(scene, plan, ctx, clock, store, log, progress, executor)
+    if sim.no_bottom is not None and sim.median_surface_range_m is not None:
         # the forward-scattering correction at the water the survey's columns measured
-        ret = sim.returns
-        r_air = SPEED_OF_LIGHT_M_S * ret.t_surface_s[ret.has_surface]
-        r_air = r_air / (2.0 * ctx.instrument.air_index)
-        if r_air.size:
-            ctx = with_measured_attenuation(
-                ctx, sim.no_bottom.get("column_decay_per_m"), float(np.median(r_air))
-            )
+        ctx = with_measured_attenuation(
+            ctx, sim.no_bottom.get("column_decay_per_m"), sim.median_surface_range_m
+        )
     fs = ctx.refraction.forward_scatter
     if fs is not None:
         where = ctx.sources["process.forward_scatter.beam_attenuation_per_m"]

@@ -1,9 +1,10 @@
 """Per-pulse no-bottom limits of a full-waveform survey, chunk by chunk then once per survey.
 
 :func:`chunk_inputs` keeps, of each chunk's waveforms (then dropped), what the class-45
-detection limit needs (:mod:`pipeline.process.detection_limit`); :func:`no_bottom_limits` fits
-the bottoms' extra decay once over the whole survey, so the limits do not depend on the
-chunking, and gives every pulse's ``t_no_bottom_s``.
+detection limit needs (:mod:`pipeline.process.detection_limit`); :func:`excess_decay_summary`
+fits the bottoms' extra decay once over the whole survey (on the bounded sample of
+:class:`pipeline.detection_store.SurveyAggregates`), so the limits do not depend on the
+chunking, and :func:`limit_times_s` then gives each chunk's ``t_no_bottom_s``.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from pipeline.process.detection_limit import (
 )
 from pipeline.process.returns import DetectedReturns, DetectorFlag
 
-__all__ = ["detector_model", "chunk_inputs", "no_bottom_limits"]
+__all__ = ["detector_model", "chunk_inputs", "excess_decay_summary", "limit_times_s"]
 
 
 def detector_model(ctx: ProcessingContext, detect: DetectSettings) -> DetectorModel:
@@ -111,45 +112,78 @@ def chunk_inputs(
         "ok": ok,
         "t_b": t_b[ok_b],
         "loss": loss[ok_b],
+        # the chunk rows of those bottoms (the survey-wide sample is by pulse)
+        "b_row": np.flatnonzero(strong)[ok_b],
     }
 
 
-def no_bottom_limits(
-    inputs: list[dict[str, np.ndarray]],
-    t_surface_s: np.ndarray,
+def excess_decay_summary(
+    t_b: np.ndarray,
+    loss: np.ndarray,
+    alpha_ok: np.ndarray,
+    counts: dict[str, int],
     ctx: ProcessingContext,
     detect: DetectSettings,
-) -> tuple[np.ndarray, dict[str, Any]]:
-    """``t_no_bottom_s`` from emission of every pulse (0 where none), and a summary.
+) -> tuple[float, dict[str, Any]]:
+    """The bottoms' extra decay ``δ`` (1/s) fitted once per survey, and the survey's summary.
 
     Parameters
     ----------
-    inputs : list of dict
-        :func:`chunk_inputs` of every chunk, in pulse order.
-    t_surface_s : (n_pulses,) float
-        Surface times from emission.
+    t_b, loss : (m,) float
+        :func:`chunk_inputs`' bottom times after the surface and log losses (of every chunk,
+        or of a bounded sample of the pulses, :class:`pipeline.detection_store.
+        SurveyAggregates`), in pulse order.
+    alpha_ok : (k,) float
+        The measured column decays (1/s) of the pulses whose column was measured (same sample).
+    counts : dict
+        ``bottoms`` and ``no_column`` counted over every pulse.
+
+    Returns
+    -------
+    delta : float
+    summary : dict
+        Without ``pulses_with_limit`` (counted by :func:`limit_times_s` chunk by chunk).
     """
-    cat = {k: np.concatenate([d[k] for d in inputs]) for k in inputs[0]}
-    delta = excess_decay_per_s(cat["t_b"], cat["loss"])
-    det = detector_model(ctx, detect)
-    margins = ColumnMargins(
-        log_margin=cat["margin"],
-        alpha_per_s=cat["alpha"],
-        t_max_s=cat["t_max"],
-        ok=cat["ok"],
-        t_min_s=det.min_separation_fwhm * det.pulse_fwhm_s,
-    )
-    t = limit_after_surface_s(margins, delta)
+    delta = excess_decay_per_s(t_b, loss)
+    g = ctx.refraction.group_index
     summary = {
-        "excess_decay_per_m": delta * 2.0 * det.group_index / SPEED_OF_LIGHT_M_S,
-        "bottoms_used": int(cat["t_b"].size),
-        "pulses_with_limit": int(np.count_nonzero(t > 0.0)),
-        "pulses_without_measurable_column": int(np.count_nonzero(cat["none"] & ~cat["ok"])),
+        "excess_decay_per_m": delta * 2.0 * g / SPEED_OF_LIGHT_M_S,
+        "bottoms_used": int(t_b.size),
+        "pulses_with_limit": 0,
+        "pulses_without_measurable_column": int(counts["no_column"]),
         # the lidar attenuation k of the measured columns: C ~ exp(-2 k L), L = c t / (2 n_g)
         "column_decay_per_m": (
-            float(np.median(cat["alpha"][cat["ok"]])) * det.group_index / SPEED_OF_LIGHT_M_S
-            if np.any(cat["ok"])
-            else None
+            float(np.median(alpha_ok)) * g / SPEED_OF_LIGHT_M_S if alpha_ok.size else None
         ),
     }
-    return np.where(t > 0.0, t_surface_s + t, 0.0), summary
+    return delta, summary
+
+
+def limit_times_s(
+    inputs: dict[str, np.ndarray],
+    t_surface_s: np.ndarray,
+    delta_per_s: float,
+    ctx: ProcessingContext,
+    detect: DetectSettings,
+) -> np.ndarray:
+    """``t_no_bottom_s`` from emission of one chunk's pulses (0 where none).
+
+    Parameters
+    ----------
+    inputs : dict
+        :func:`chunk_inputs` of the chunk.
+    t_surface_s : (n_pulses,) float
+        The chunk's surface times from emission.
+    delta_per_s : float
+        The survey's :func:`excess_decay_summary`.
+    """
+    det = detector_model(ctx, detect)
+    margins = ColumnMargins(
+        log_margin=inputs["margin"],
+        alpha_per_s=inputs["alpha"],
+        t_max_s=inputs["t_max"],
+        ok=inputs["ok"],
+        t_min_s=det.min_separation_fwhm * det.pulse_fwhm_s,
+    )
+    t = limit_after_surface_s(margins, delta_per_s)
+    return np.where(t > 0.0, t_surface_s + t, 0.0)
