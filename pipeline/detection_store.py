@@ -1,12 +1,13 @@
 """The chunk loop's detections spilled to disk, and the small summaries kept in memory.
 
-:class:`DetectionStore` writes each chunk's measured navigation and detections (the ``part``
-dict of :func:`pipeline.survey_chunks.run_chunk`) as one ``.npy`` file per field into a
-temporary directory of the run's output folder, and keeps only a :class:`ChunkSummary` per chunk
-(pulse count, pulse-id range, the xy bounding box of the chunk's returns): later stages load the
-chunks they need (all of them, or those meeting a tile). The directory is removed when the store
-closes, on success or failure, so nothing half-written stays. A chunk is written under a
-temporary name and renamed once complete.
+:class:`DetectionStore` appends each chunk's measured navigation and detections (the ``part``
+dict of :func:`pipeline.survey_chunks.run_chunk`), field by field, to one unnamed temporary
+file beside the run's outputs, and keeps only a :class:`ChunkSummary` per chunk (pulse count,
+pulse-id range, the xy bounding box of the chunk's pulses) and each field's offset: later
+stages load the chunks they need (all of them, or those meeting a tile). The file never has a
+name (``O_TMPFILE``): closing the store, ending the run or killing it frees it, so nothing
+half-written stays (the output folder keeps its rule of appearing only with its first complete
+file, :mod:`pipeline.outputs.atomic`).
 
 Survey-wide aggregates that used to need every pulse (:class:`SurveyAggregates`) are gathered
 as the chunks arrive, on a **bounded sample** of the pulses: every pulse while the survey has at
@@ -18,7 +19,8 @@ which does not depend on the chunk size, the order of arrival or the workers. Co
 
 from __future__ import annotations
 
-import shutil
+import os
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -77,24 +79,31 @@ def pulse_position_m(part: dict[str, np.ndarray], air_index: float) -> np.ndarra
 
 
 class DetectionStore:
-    """Per-chunk detections on disk (``<out>/.detections.tmp``); a context manager.
+    """Per-chunk detections in one unnamed temporary file; a context manager.
+
+    The file is made by :func:`tempfile.TemporaryFile` in the run's output folder (or, before
+    that folder exists, its parent: the output folder appears only with its first complete
+    file, :mod:`pipeline.outputs.atomic`): on Linux an ``O_TMPFILE`` inode that never has a
+    name, so even a killed run leaves nothing behind, and the space is freed when the store
+    closes. Each field of each chunk is appended as raw bytes; only its offset, dtype and shape
+    stay in memory.
 
     Parameters
     ----------
     out : Path
-        The run's output folder (created if missing).
+        The run's output folder.
     air_index : float
         Processing's refractive index of air (the chunk positions of :func:`pulse_position_m`).
     """
 
     def __init__(self, out: Path, air_index: float) -> None:
-        self.dir = Path(out) / ".detections.tmp"
-        if self.dir.exists():  # left by a killed run
-            shutil.rmtree(self.dir)
-        self.dir.mkdir(parents=True)
+        out = Path(out)
+        where = out if out.is_dir() else next(p for p in out.parents if p.is_dir())
+        self._file = tempfile.TemporaryFile(dir=where)
+        self._end = 0
         self.air_index = float(air_index)
         self.chunks: list[ChunkSummary] = []
-        self._fields: list[str] = []
+        self._index: list[dict[str, tuple[int, str, tuple[int, ...]]]] = []
 
     def __enter__(self) -> DetectionStore:
         return self
@@ -103,24 +112,26 @@ class DetectionStore:
         self.close()
 
     def close(self) -> None:
-        """Remove the directory and everything in it."""
-        shutil.rmtree(self.dir, ignore_errors=True)
+        """Close (and so free) the file."""
+        self._file.close()
 
     @property
     def n_pulses(self) -> int:
         """Pulses stored."""
         return sum(c.n_pulses for c in self.chunks)
 
+    def _put(self, c: int, name: str, values: np.ndarray) -> None:
+        a = np.ascontiguousarray(values)
+        os.pwrite(self._file.fileno(), a.tobytes(), self._end)
+        self._index[c][name] = (self._end, a.dtype.str, a.shape)
+        self._end += a.nbytes
+
     def append(self, part: dict[str, np.ndarray]) -> ChunkSummary:
         """Write one chunk (the next in pulse order) and return its summary."""
         c = len(self.chunks)
-        tmp = self.dir / f"c{c:06d}.part"
-        tmp.mkdir()
+        self._index.append({})
         for name, arr in part.items():
-            np.save(tmp / f"{name}.npy", np.asarray(arr), allow_pickle=False)
-        tmp.rename(self.dir / f"c{c:06d}")
-        if not self._fields:
-            self._fields = list(part)
+            self._put(c, name, np.asarray(arr))
         ids = part["pulse_id"]
         n = len(ids)
         bbox = None
@@ -133,29 +144,28 @@ class DetectionStore:
 
     def load_chunk(self, c: int, fields: list[str] | None = None) -> dict[str, np.ndarray]:
         """Fields of chunk ``c`` (all by default)."""
-        d = self.dir / f"c{c:06d}"
-        return {k: np.load(d / f"{k}.npy", allow_pickle=False) for k in fields or self._fields}
+        out = {}
+        for k in fields or list(self._index[c]):
+            off, dtype, shape = self._index[c][k]
+            n = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
+            buf = os.pread(self._file.fileno(), n, off) if n else b""
+            out[k] = np.frombuffer(buf, dtype=dtype).reshape(shape).copy()
+        return out
 
     def replace_field(self, c: int, name: str, values: np.ndarray) -> None:
-        """Overwrite (or add) one field of chunk ``c``, atomically."""
-        d = self.dir / f"c{c:06d}"
-        tmp = d / f"{name}.tmp.npy"
-        np.save(tmp, np.asarray(values), allow_pickle=False)
-        tmp.replace(d / f"{name}.npy")
-        if name not in self._fields:
-            self._fields.append(name)
+        """Overwrite (or add) one field of chunk ``c`` (appended; the old bytes are left)."""
+        self._put(c, name, np.asarray(values))
 
     def drop_field(self, name: str) -> None:
-        """Forget a field of every chunk (and delete its files)."""
-        for c in range(len(self.chunks)):
-            (self.dir / f"c{c:06d}" / f"{name}.npy").unlink(missing_ok=True)
-        self._fields = [f for f in self._fields if f != name]
+        """Forget a field of every chunk."""
+        for idx in self._index:
+            idx.pop(name, None)
 
     def load(self, chunks: list[int] | None = None) -> dict[str, np.ndarray]:
         """The fields of ``chunks`` (default: all) concatenated in pulse order."""
-        idx = range(len(self.chunks)) if chunks is None else chunks
+        idx = list(range(len(self.chunks)) if chunks is None else chunks)
         parts = [self.load_chunk(c) for c in idx]
-        return {k: np.concatenate([p[k] for p in parts]) for k in self._fields}
+        return {k: np.concatenate([p[k] for p in parts]) for k in self._index[idx[0]]}
 
     def returns(self, chunks: list[int] | None = None) -> DetectedReturns:
         """The detections of ``chunks`` (default: all) as one DetectedReturns."""

@@ -30,6 +30,7 @@ from pipeline.process.context import (
 from pipeline.process.returns import DetectedReturns, DetectorFlag
 from pipeline.stages import Plan, StageClock
 from pipeline.survey_chunks import ChunkJob, run_chunk
+from pipeline.survey_tiles import grid_by_tiles, tile_layout, write_points_by_tiles
 from pipeline.uncertainty.posterior_selection import KeptWaveforms, posterior_budget
 
 __all__ = ["SimulatedSurvey", "survey_extent_m", "simulate_detections", "run_survey"]
@@ -275,7 +276,7 @@ def run_survey(
     """
     from pipeline.process.coverage import area_coverage
     from pipeline.process.datum import survey_datum
-    from pipeline.process.grid import grid_seabed, snap_bounds_m
+    from pipeline.process.grid import snap_bounds_m
     from pipeline.process.survey_points import process_detections
     from pipeline.uncertainty.survey_uncertainty import survey_uncertainty, with_tpu
 
@@ -308,15 +309,8 @@ def run_survey(
         # one datum for the grid (the user's water level, else the mean measured surface):
         # depth below the local fitted surface would carry the wave heights into the grid
         datum = survey_datum(processed.points, ps.datum)
-        grid = grid_seabed(
-            processed.points,
-            ps.grid_resolution_m,
-            bounds_m=bounds,
-            origin_m=origin,
-            crs=fr.crs,
-            datum_m=datum.water_level_m,
-            statistic=ps.grid_statistic,
-        )
+        layout = tile_layout(scene, bounds)
+        grid = grid_by_tiles(processed.points, layout, origin, fr.crs, datum.water_level_m, ps)
         covered = area_coverage(
             processed.points.xyz_m[:, :2], scene.flight.area_m, ps.grid_resolution_m
         )
@@ -353,18 +347,12 @@ def run_survey(
                 std = p.depth_m["std"] if p.waveform_std_m is None else p.waveform_std_m
                 unc = with_posteriors(unc, grid, post.point_index, p.converged, std)
     with clock.stage("outputs"):
-        from pipeline.outputs.las import write_points_laz
         from pipeline.outputs.netcdf import write_grid_nc
         from pipeline.outputs.raster import write_grid_tif
 
         files = {
-            "points": write_points_laz(
-                out / "points.laz",
-                processed.points,
-                crs=fr.crs,
-                origin_m=origin,
-                returns=sim.returns,
-                amplitude_full_scale=ctx.instrument.amplitude_full_scale,
+            "points": write_points_by_tiles(
+                out / "points.laz", processed.points, sim.returns, layout, ctx, origin, fr.crs
             ),
             "grid": write_grid_tif(out / "grid.tif", grid, unc.cells),
             "grid_nc": write_grid_nc(out / "grid.nc", grid, unc.cells),

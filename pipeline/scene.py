@@ -228,6 +228,13 @@ class RunSettings:
     """How the run is executed (never what it computes)."""
 
     chunk_pulses: int = setting(100_000, ge=1, le=10_000_000, doc="pulses per streamed chunk")
+    tile_m: float | None = setting(
+        None,
+        gt=0.0,
+        le=1e6,
+        doc="side of the square tiles the grid and the points file are made by (local frame), "
+        "rounded to a whole number of grid cells so a cell lies in one tile; None: one tile",
+    )
 
 
 @dataclass(frozen=True, kw_only=True)

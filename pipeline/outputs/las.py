@@ -30,6 +30,7 @@ Layout
 
 from __future__ import annotations
 
+import contextlib
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -47,7 +48,15 @@ from pipeline.process.classify import CLASS_NAMES, NO_BOTTOM_FOUND_AT
 from pipeline.process.return_order import time_order_numbers
 from pipeline.process.returns import DetectedReturns, PointFlag, Points, ReturnKind
 
-__all__ = ["LOOKUP_NAMES", "LazContents", "write_points_laz", "read_points_laz"]
+__all__ = [
+    "LOOKUP_NAMES",
+    "LazContents",
+    "LazTileWriter",
+    "las_header",
+    "las_records",
+    "write_points_laz",
+    "read_points_laz",
+]
 
 #: Classification Lookup VLR descriptions of the classes of :mod:`pipeline.process.classify`
 #: (15 bytes each; laspy keeps only letters, digits and spaces when reading them).
@@ -163,6 +172,24 @@ def write_points_laz(
         If a coordinate does not fit int32 at this scale around the offset.
     """
     path = Path(path)
+    header = las_header(points.classification, points.amplitude is not None, crs, origin_m, scale_m)
+    las = las_records(header, points, returns, amplitude_full_scale)
+    do_compress = path.suffix.lower() == ".laz" if compress is None else compress
+    # a stream, not a path: laspy takes the compression from a path's suffix and ignores
+    # do_compress (and the temporary path has no suffix)
+    with atomic_path(path) as tmp, open(tmp, "wb+") as f:
+        las.write(f, do_compress=do_compress)
+    return path
+
+
+def las_header(
+    classes: np.ndarray,
+    amplitude: bool,
+    crs: Any,
+    origin_m: Sequence[float] = (0.0, 0.0, 0.0),
+    scale_m: float = 0.001,
+) -> laspy.LasHeader:
+    """The LAS 1.4 header :func:`write_points_laz` writes (``classes``: the codes to name)."""
     origin = np.asarray(origin_m, dtype=np.float64)
     if origin.shape != (3,) or not np.all(np.isfinite(origin)):
         raise ValueError(f"`origin_m` must be 3 finite numbers; got {origin_m!r}")
@@ -177,7 +204,7 @@ def write_points_laz(
     header.system_identifier = "bathy pipeline"
     header.generating_software = "bathy pipeline (laspy)"
     extras = list(_EXTRA)
-    if points.amplitude is not None:
+    if amplitude:
         extras.append(("amplitude", "f4", "amplitude (detector units)"))
     header.add_extra_dims(
         [laspy.ExtraBytesParams(name=n, type=t, description=desc) for n, t, desc in extras]
@@ -188,7 +215,7 @@ def write_points_laz(
         raise ValueError(f"`crs` has no OGC WKT 1 form (LAS 1.4 needs one): {crs!r}")
     header.vlrs.append(WktCoordinateSystemVlr(wkt1))
     header.global_encoding.wkt = True
-    header.vlrs.append(_classification_lookup(points.classification))
+    header.vlrs.append(_classification_lookup(np.asarray(classes)))
     meta = {"origin_m": origin.tolist(), "frame": "local = world - origin_m; z up; metres"}
     header.vlrs.append(
         laspy.VLR(
@@ -198,13 +225,24 @@ def write_points_laz(
             record_data=json.dumps(meta).encode("utf-8"),
         )
     )
+    return header
 
+
+def las_records(
+    header: laspy.LasHeader,
+    points: Points,
+    returns: DetectedReturns | None,
+    amplitude_full_scale: float,
+) -> laspy.LasData:
+    """The point records of ``points`` under ``header`` (every pulse's points must be there)."""
     las = laspy.LasData(header)
+    origin = _header_origin(header)
+    offsets, scales = np.asarray(header.offsets), np.asarray(header.scales)
     world = points.xyz_m + origin
     ints = np.round((world - offsets) / scales)
     if ints.size and np.max(np.abs(ints)) > _INT32:
         raise ValueError(
-            f"coordinates span more than int32 at scale {scale_m} m around offset "
+            f"coordinates span more than int32 at scale {scales[0]} m around offset "
             f"{offsets.tolist()}; use a coarser `scale_m`"
         )
     las.X, las.Y, las.Z = (ints[:, i].astype(np.int32) for i in range(3))
@@ -233,12 +271,45 @@ def write_points_laz(
     las.detector_flags = points.detector_flags
     if points.amplitude is not None:
         las.amplitude = points.amplitude.astype(np.float32)
-    do_compress = path.suffix.lower() == ".laz" if compress is None else compress
-    # a stream, not a path: laspy takes the compression from a path's suffix and ignores
-    # do_compress (and the temporary path has no suffix)
-    with atomic_path(path) as tmp, open(tmp, "wb+") as f:
-        las.write(f, do_compress=do_compress)
-    return path
+    return las
+
+
+def _header_origin(header: laspy.LasHeader) -> np.ndarray:
+    """The exact local origin kept in the header's ``bathy`` VLR."""
+    for vlr in header.vlrs:
+        if vlr.user_id == _VLR_USER and vlr.record_id == _VLR_RECORD:
+            return np.asarray(json.loads(bytes(vlr.record_data).decode())["origin_m"], float)
+    return np.asarray(header.offsets, dtype=np.float64)
+
+
+class LazTileWriter:
+    """``points.laz`` appended tile by tile (laspy's chunked writer), renamed when complete.
+
+    The header (:func:`las_header`) names the classes given up front; each :meth:`write`
+    appends the records of whole pulses (:func:`las_records`). Used as a context manager: the
+    file appears only if the block completes (:func:`~pipeline.outputs.atomic.atomic_path`).
+    """
+
+    def __init__(self, path: str | Path, header: laspy.LasHeader, amplitude_full_scale: float):
+        self.path, self.header, self.afs = Path(path), header, amplitude_full_scale
+        self._stack = contextlib.ExitStack()
+
+    def __enter__(self) -> LazTileWriter:
+        tmp = self._stack.enter_context(atomic_path(self.path))
+        f = self._stack.enter_context(open(tmp, "wb+"))
+        compress = self.path.suffix.lower() == ".laz"
+        self._writer = self._stack.enter_context(
+            laspy.open(f, mode="w", header=self.header, do_compress=compress, closefd=False)
+        )
+        return self
+
+    def write(self, points: Points, returns: DetectedReturns | None) -> None:
+        """Append the records of ``points`` (whole pulses)."""
+        if len(points):
+            self._writer.write_points(las_records(self.header, points, returns, self.afs).points)
+
+    def __exit__(self, *exc) -> None:
+        self._stack.__exit__(*exc)
 
 
 def read_points_laz(path: str | Path) -> LazContents:

@@ -37,7 +37,17 @@ from affine import Affine
 from pipeline.process.classify import BATHYMETRIC_POINT, SUBMERGED_OBJECT
 from pipeline.process.returns import Points
 
-__all__ = ["Grid", "GRID_STATISTICS", "grid_points", "grid_seabed", "snap_bounds_m"]
+__all__ = [
+    "Grid",
+    "GRID_STATISTICS",
+    "cell_index",
+    "cell_statistics",
+    "grid_from_statistics",
+    "grid_points",
+    "grid_seabed",
+    "seabed_values",
+    "snap_bounds_m",
+]
 
 #: statistics a cell's depth can take (:func:`grid_points`)
 GRID_STATISTICS = ("median", "mean")
@@ -190,44 +200,75 @@ def grid_points(
             f"`bounds_m` {tuple(bounds)} must span whole cells of {r} m (W < E, S < N)"
         )
 
-    col = np.floor((x - w) / r).astype(np.int64)
-    row = np.floor((n - y) / r).astype(np.int64)
-    inside = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
-    cell = (row * nx + col)[inside]
-    v, z = v[inside], z[inside]
-    size = nx * ny
+    cell, inside = cell_index(x, y, bounds, r)
+    st = cell_statistics(cell[inside], v[inside], z[inside], nx * ny)
 
-    count = np.bincount(cell, minlength=size)
-    has = count > 0
-    cnt = np.where(has, count, 1)
-    mean = np.bincount(cell, weights=v, minlength=size) / cnt
-    zmean = np.bincount(cell, weights=z, minlength=size) / cnt
-    ss = np.bincount(cell, weights=(v - mean[cell]) ** 2, minlength=size)
-    spread = np.sqrt(ss / np.maximum(count - 1, 1))
+    return grid_from_statistics(st, bounds, r, origin, crs, statistic)
 
-    start = np.concatenate([[0], np.cumsum(count)[:-1]])
-    median = _cell_median(v, cell, start, cnt, mean)
-    zmedian = _cell_median(z, cell, start, cnt, zmean)
+
+def grid_from_statistics(
+    st: dict, bounds_m: np.ndarray, resolution_m: float, origin_m, crs, statistic: str
+) -> Grid:
+    """The :class:`Grid` of :func:`cell_statistics` over every cell of ``bounds_m``."""
+    w, e, s, n = bounds_m
+    r = resolution_m
+    nx, ny = int(round((e - w) / r)), int(round((n - s) / r))
 
     def shaped(a, ok):
         return np.where(ok, a, np.nan).reshape(ny, nx)
 
+    count, has = st["count"], st["count"] > 0
     robust = statistic == "median"
     return Grid(
-        depth_m=shaped(median if robust else mean, has),
-        median_depth_m=shaped(median, has),
-        mean_depth_m=shaped(mean, has),
+        depth_m=shaped(st["median"] if robust else st["mean"], has),
+        median_depth_m=shaped(st["median"], has),
+        mean_depth_m=shaped(st["mean"], has),
         statistic=statistic,
-        spread_m=shaped(spread, count >= 2),
-        z_m=shaped(zmedian if robust else zmean, has),
+        spread_m=shaped(st["spread"], count >= 2),
+        z_m=shaped(st["zmedian"] if robust else st["zmean"], has),
         count=count.reshape(ny, nx).astype(np.int64),
         x_m=w + (np.arange(nx) + 0.5) * r,
         y_m=n - (np.arange(ny) + 0.5) * r,
         resolution_m=r,
-        bounds_m=bounds,
-        origin_m=origin,
+        bounds_m=np.asarray(bounds_m, dtype=np.float64),
+        origin_m=np.asarray(origin_m, dtype=np.float64),
         crs=None if crs is None else pyproj.CRS.from_user_input(crs),
     )
+
+
+def cell_index(
+    x: np.ndarray, y: np.ndarray, bounds_m: np.ndarray, resolution_m: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Flat cell ``row * nx + col`` of each point, ``(n,)`` int64, and whether it is inside."""
+    w, e, s, n = bounds_m
+    nx, ny = int(round((e - w) / resolution_m)), int(round((n - s) / resolution_m))
+    col = np.floor((x - w) / resolution_m).astype(np.int64)
+    row = np.floor((n - y) / resolution_m).astype(np.int64)
+    inside = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
+    return row * nx + col, inside
+
+
+def cell_statistics(cell: np.ndarray, v: np.ndarray, z: np.ndarray, size: int) -> dict:
+    """Per-cell count, mean, spread and median of ``v`` (and mean, median of ``z``), ``(size,)``.
+
+    ``cell`` in ``0 .. size-1``; cells without a point hold the fallback values of
+    :func:`grid_points` (masked there). A cell's figures depend only on its own points (and
+    their order, for the sums): gridding tile by tile gives the same cells.
+    """
+    count = np.bincount(cell, minlength=size)
+    cnt = np.where(count > 0, count, 1)
+    mean = np.bincount(cell, weights=v, minlength=size) / cnt
+    zmean = np.bincount(cell, weights=z, minlength=size) / cnt
+    ss = np.bincount(cell, weights=(v - mean[cell]) ** 2, minlength=size)
+    start = np.concatenate([[0], np.cumsum(count)[:-1]])
+    return {
+        "count": count,
+        "mean": mean,
+        "zmean": zmean,
+        "spread": np.sqrt(ss / np.maximum(count - 1, 1)),
+        "median": _cell_median(v, cell, start, cnt, mean),
+        "zmedian": _cell_median(z, cell, start, cnt, zmean),
+    }
 
 
 def _cell_median(v, cell, start, cnt, fallback):
@@ -261,9 +302,7 @@ def grid_seabed(
     points' own ``depth_m`` (below the local fitted surface, which under waves carries the
     wave heights).
     """
-    keep = np.isin(points.classification, np.asarray(classes, dtype=np.uint8))
-    xyz = points.xyz_m[keep]
-    depth = points.depth_m[keep] if datum_m is None else float(datum_m) - xyz[:, 2]
+    xyz, depth = seabed_values(points, classes, datum_m)
     grid = grid_points(
         xyz[:, 0],
         xyz[:, 1],
@@ -276,3 +315,18 @@ def grid_seabed(
         statistic=statistic,
     )
     return grid if datum_m is None else dataclasses.replace(grid, datum_m=float(datum_m))
+
+
+def seabed_values(
+    points: Points,
+    classes: Sequence[int] = (BATHYMETRIC_POINT, SUBMERGED_OBJECT),
+    datum_m: float | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(xyz_m (m, 3), depth_m (m,))`` of the points of ``classes``, as gridded.
+
+    As :func:`grid_seabed` grids them: depth below ``datum_m``, else the points' own.
+    """
+    keep = np.isin(points.classification, np.asarray(classes, dtype=np.uint8))
+    xyz = points.xyz_m[keep]
+    depth = points.depth_m[keep] if datum_m is None else float(datum_m) - xyz[:, 2]
+    return xyz, depth
