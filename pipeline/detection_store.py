@@ -164,8 +164,19 @@ class DetectionStore:
     def load(self, chunks: list[int] | None = None) -> dict[str, np.ndarray]:
         """The fields of ``chunks`` (default: all) concatenated in pulse order."""
         idx = list(range(len(self.chunks)) if chunks is None else chunks)
-        parts = [self.load_chunk(c) for c in idx]
-        return {k: np.concatenate([p[k] for p in parts]) for k in self._index[idx[0]]}
+        # filled chunk by chunk: the survey's arrays once, not beside a list of their parts
+        n = sum(self._index[c]["pulse_id"][2][0] for c in idx)
+        out = {}
+        for k, (_, dtype, shape) in self._index[idx[0]].items():
+            out[k] = np.empty((n, *shape[1:]), dtype=dtype)
+        lo = 0
+        for c in idx:
+            part = self.load_chunk(c, list(out))
+            m = len(part["pulse_id"])
+            for k, v in part.items():
+                out[k][lo : lo + m] = v
+            lo += m
+        return out
 
     def returns(self, chunks: list[int] | None = None) -> DetectedReturns:
         """The detections of ``chunks`` (default: all) as one DetectedReturns."""

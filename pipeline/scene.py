@@ -229,11 +229,12 @@ class RunSettings:
 
     chunk_pulses: int = setting(100_000, ge=1, le=10_000_000, doc="pulses per streamed chunk")
     tile_m: float | None = setting(
-        None,
+        250.0,
         gt=0.0,
         le=1e6,
         doc="side of the square tiles the grid and the points file are made by (local frame), "
-        "rounded to a whole number of grid cells so a cell lies in one tile; None: one tile",
+        "rounded to a whole number of grid cells so a cell lies in one tile; larger than the "
+        "survey: one tile (the outputs are the same for any tile size)",
     )
 
 
