@@ -217,9 +217,10 @@ def report(runs: list[dict], mem_runs: list[dict], command: str) -> str:
             )
         lines += [
             "",
-            "Processing after the chunk loop is not streamed yet: the detections of every pulse",
-            "and the point cloud stay in memory, so the peak grows with the pulses (the last",
-            "column); the chunk loop itself holds at most 2 × workers chunks.",
+            "The chunk loop holds at most 2 × workers chunks and spills each chunk's detections",
+            "to disk; the grid and points.laz are made tile by tile (run.tile_m). Processing",
+            "(surface fit, refraction, TPU, classes), evaluation, views and report still load the",
+            "whole survey, so the peak still grows with the pulses (the last column).",
         ]
     return "\n".join(lines) + "\n"
 

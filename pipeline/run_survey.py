@@ -3,10 +3,13 @@
 Simulation (terrain → survey → trace → receiver) runs in chunks of ``run.chunk_pulses`` pulses
 (:mod:`pipeline.survey_chunks`), here or on workers (:mod:`pipeline.parallel`); of each chunk
 only what a real system records is kept: the measured navigation and the detections of the
-receiver's data. Processing (:mod:`pipeline.process`) then sees only those and
+receiver's data, spilled chunk by chunk to disk (:mod:`pipeline.detection_store`; the
+survey-wide statistics the later stages need are streamed). Processing
+(:mod:`pipeline.process`) then sees only those (loaded back whole: not tiled yet) and
 the :class:`~pipeline.process.context.ProcessingContext`; the evaluate stage alone meets the
 truth (:mod:`pipeline.survey_report`). Every stage runs only where the plan
 (:func:`pipeline.stages.plan`) says so, under the :class:`~pipeline.stages.StageClock`.
+The grid and ``points.laz`` are made tile by tile (:mod:`pipeline.survey_tiles`).
 """
 
 from __future__ import annotations

@@ -10,6 +10,15 @@ points alone (:class:`GridAccumulator`) and are the same whatever the tile size.
 (j + 1) k)``, ``k = tile_m / resolution_m``; its edges are half-open as the grid's are, and
 points outside the grid are assigned to the nearest edge tile.
 
+What runs by tile
+-----------------
+The grid (:func:`grid_by_tiles`, a cell's points by their own position) and ``points.laz``
+(:func:`write_points_by_tiles`, a pulse's points by the pulse's position, so each pulse is
+numbered whole). Processing (surface fit, refraction, classes, TPU, class 43) still runs on the
+whole survey: its survey-wide parts (the water level and global plane, the sea's sigma, the
+land regions, the TPU's mean tilt sigma, the datum) must first become streamed aggregates;
+:func:`halo_m` and :func:`chunks_meeting` are what its tiles will load by.
+
 Halo
 ----
 A tile's neighbour searches reach :func:`halo_m` past its edges: the largest of the
