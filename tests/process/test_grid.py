@@ -1,5 +1,7 @@
 """Gridding against a brute-force loop over the cells."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -123,3 +125,45 @@ def test_cell_depth_robust_to_outliers():
     np.testing.assert_allclose(g.z_m[full], -g.depth_m[full], atol=1e-12)
     # the mean is not: the same cells are off by metres
     assert np.max(np.abs(g.mean_depth_m - plane_depth(xx, yy))[full]) > 0.5
+
+
+def _seabed_with_a_cube():
+    """A flat seabed 5 m deep sounded on a 0.25 m lattice, a 1 m cube (top 4 m) at (5, 5).
+
+    2 m cells: the cube's 16 soundings are a quarter of the 64 in its cell (4..6 x 4..6), so
+    the median gives the seabed there; its soundings are class 43, one class-40 blunder 2 m
+    shoal sits in the cell (0..2 x 0..2).
+    """
+    g = np.arange(0.125, 10.0, 0.25)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    on = (np.abs(x - 5.0) <= 0.5) & (np.abs(y - 5.0) <= 0.5)
+    depth = np.where(on, 4.0, 5.0)
+    depth[np.flatnonzero((x < 2) & (y < 2))[0]] = 3.0
+    cls = np.where(on, 43, 40).astype(np.uint8)
+    return SimpleNamespace(xyz_m=np.c_[x, y, -depth], depth_m=depth, classification=cls)
+
+
+def test_designated_objects_keep_a_cube_the_median_erases():
+    from pipeline.process.grid import designate_objects
+
+    pts = _seabed_with_a_cube()
+    grid = grid_seabed(pts, 2.0, bounds_m=(0, 10, 0, 10))
+    assert np.all(grid.depth_m == 5.0)  # the median: no cube, no blunder
+    des = designate_objects(grid, pts)
+    row, col = 2, 2  # the cell y in (4, 6], x in [4, 6) holds the whole cube
+    assert des.depth_m[row, col] == 4.0 and des.z_m[row, col] == -4.0
+    others = np.ones(grid.shape, bool)
+    others[row, col] = False
+    assert np.all(des.depth_m[others] == 5.0)  # the class-40 blunder still meets the median
+    assert des.median_depth_m[row, col] == 5.0 and des.count[row, col] == 64
+    # below a datum 0.5 m above the points' reference: depths 0.5 m more
+    below = grid_seabed(pts, 2.0, bounds_m=(0, 10, 0, 10), datum_m=0.5)
+    des_d = designate_objects(below, pts, 0.5)
+    assert des_d.depth_m[row, col] == 4.5
+    # the evaluation's grid criterion (the cell stands above its neighbours by s/2) now holds
+    from pipeline.evaluate_features import cube_detection
+
+    cube = SimpleNamespace(kind="cube", x_m=5.0, y_m=5.0, size_m=1.0, heading_deg=0.0)
+    flat = lambda x, y: np.full(np.shape(x), 5.0)  # noqa: E731
+    assert not cube_detection((cube,), pts, flat, grid)[0]["grid_shows"]
+    assert cube_detection((cube,), pts, flat, des)[0]["grid_shows"]
