@@ -88,6 +88,9 @@ class Grid:
         the depths are the points' own ``depth_m`` (below the local fitted surface).
     statistic : str
         What ``depth_m`` and ``z_m`` are per cell: ``"median"`` or ``"mean"``.
+    designated : (ny, nx) bool or None
+        Cells whose ``depth_m`` and ``z_m`` are a designated sounding, the least depth of the
+        submerged objects in them (:func:`designate_objects`); None: none designated.
     """
 
     depth_m: np.ndarray
@@ -104,6 +107,7 @@ class Grid:
     datum_m: float | None = None
     mean_depth_m: np.ndarray | None = None
     statistic: str = "median"
+    designated: np.ndarray | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -298,8 +302,9 @@ def designate_objects(grid: Grid, points: Points, datum_m: float | None = None) 
     """Cells holding submerged-object soundings (class 43) take the least depth among them.
 
     Designated soundings (module docstring): ``depth_m`` (and ``z_m``) of such a cell become
-    the shoalest class-43 point's depth (its highest elevation); ``median_depth_m``,
-    ``mean_depth_m``, ``spread_m`` and ``count`` keep every sounding's statistics.
+    the shoalest class-43 point's depth (its highest elevation), and ``designated`` marks the
+    cell; ``median_depth_m``, ``mean_depth_m``, ``spread_m`` and ``count`` keep every
+    sounding's statistics.
 
     Parameters
     ----------
@@ -336,4 +341,5 @@ def designate_objects(grid: Grid, points: Points, datum_m: float | None = None) 
         grid,
         depth_m=np.where(has, shoal.reshape(ny, nx), grid.depth_m),
         z_m=np.where(has, high.reshape(ny, nx), grid.z_m),
+        designated=has,
     )

@@ -167,3 +167,29 @@ def test_designated_objects_keep_a_cube_the_median_erases():
     flat = lambda x, y: np.full(np.shape(x), 5.0)  # noqa: E731
     assert not cube_detection((cube,), pts, flat, grid)[0]["grid_shows"]
     assert cube_detection((cube,), pts, flat, des)[0]["grid_shows"]
+
+
+def test_a_designated_cell_is_scored_against_the_least_true_depth_in_it():
+    from pipeline.evaluate import grid_errors_m
+    from pipeline.evaluate_features import grid_elevation_errors_m
+    from pipeline.process.grid import designate_objects
+
+    pts = _seabed_with_a_cube()
+
+    def depth(x, y):  # the analytic seabed: 5 m, the cube's top 4 m
+        return np.where((np.abs(x - 5.0) <= 0.5) & (np.abs(y - 5.0) <= 0.5), 4.0, 5.0)
+
+    des = designate_objects(grid_seabed(pts, 2.0, bounds_m=(0, 10, 0, 10)), pts)
+    assert des.designated.sum() == 1 and des.designated[2, 2]
+    err, _ = grid_errors_m(des, truth_depth_m=depth)
+    # the cell (4..6)^2 states the cube's least depth, 4 m, and so is the truth's least depth;
+    # at its centre the truth is the top too, so test a cube off the centre below
+    assert err[2, 2] == 0.0 and np.all(err[~des.designated] == 0.0)
+
+    def off_centre(x, y):  # the same cell, the cube moved to (4.5, 5.5): centre (5, 5) off it
+        return np.where((np.abs(x - 4.2) <= 0.25) & (np.abs(y - 5.7) <= 0.25), 4.0, 5.0)
+
+    err, _ = grid_errors_m(des, truth_depth_m=off_centre)
+    assert err[2, 2] == 0.0  # not -1 m: the cell's least true depth is the cube's top
+    elev = grid_elevation_errors_m(des, lambda x, y: -off_centre(x, y))
+    assert np.all(elev == 0.0)
