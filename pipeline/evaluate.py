@@ -55,6 +55,7 @@ __all__ = [
     "iho_fractions",
     "point_errors_m",
     "grid_errors_m",
+    "cell_truth",
     "evaluate",
     "water_column_report",
     "posterior_coverage",
@@ -201,17 +202,45 @@ def grid_errors_m(
     truth_depth_m: TruthFn | None = None,
     truth_z_m: TruthFn | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Cell errors (truth at the cell centres; NaN where empty) and depths for the allowance."""
+    """Cell errors (truth at the cell centres; NaN where empty) and depths for the allowance.
+
+    A designated cell (``grid.designated``: the least depth of a submerged object in it) is
+    scored against the least true depth in the cell (:func:`cell_truth`), what it states.
+    """
     _truth(truth_depth_m, truth_z_m)
-    xx, yy = np.meshgrid(grid.x_m, grid.y_m)
     empty = grid.count == 0
     if truth_depth_m is not None:
-        true_d = np.asarray(truth_depth_m(xx, yy), dtype=np.float64)
+        true_d = cell_truth(grid, truth_depth_m, shoal=np.minimum)
         err = np.where(empty, np.nan, grid.depth_m - np.where(empty, 0.0, true_d))
         return err, true_d
-    true_z = np.asarray(truth_z_m(xx, yy), dtype=np.float64)
+    true_z = cell_truth(grid, truth_z_m, shoal=np.maximum)
     err = np.where(empty, np.nan, true_z - np.where(empty, 0.0, grid.z_m))
     return err, np.where(empty, np.nan, grid.depth_m)
+
+
+#: samples per cell side for the least true depth of a designated cell
+_CELL_SAMPLES = 21
+
+
+def cell_truth(grid: Grid, fn: TruthFn, shoal=np.minimum) -> np.ndarray:
+    """The truth ``fn(x, y)`` at the cell centres, ``(ny, nx)``; at designated cells its extreme.
+
+    ``shoal``: ``np.minimum`` for depths, ``np.maximum`` for elevations; taken over
+    ``_CELL_SAMPLES`` x ``_CELL_SAMPLES`` points spanning the cell (edges included), so a
+    designated sounding (a feature's least depth) is compared with the cell's shoalest truth.
+    """
+    xx, yy = np.meshgrid(grid.x_m, grid.y_m)
+    out = np.asarray(fn(xx, yy), dtype=np.float64)
+    des = getattr(grid, "designated", None)
+    if des is None or not np.any(des):
+        return out
+    r = grid.resolution_m
+    off = np.linspace(-0.5, 0.5, _CELL_SAMPLES) * r * (1.0 - 1e-9)
+    ox, oy = (a.ravel() for a in np.meshgrid(off, off))
+    cx, cy = xx[des], yy[des]
+    vals = np.asarray(fn(cx[:, None] + ox, cy[:, None] + oy), dtype=np.float64)
+    out[des] = shoal.reduce(vals, axis=1)
+    return out
 
 
 def evaluate(

@@ -348,6 +348,11 @@ def run_survey(
 
         pts, n_obj = classify_objects(processed.points, ps.objects)
         processed = dataclasses.replace(processed, points=pts)
+        if ps.grid_object_least_depth:
+            from pipeline.process.grid import designate_objects
+
+            # the object's least depth in its cell: the median would erase a cube (grid.py)
+            grid = designate_objects(grid, pts, datum.water_level_m)
     log(f"  submerged objects: {n_obj} seabed points stand above the local seabed (class 43)")
     post = None
     if plan.runs("posterior"):

@@ -76,6 +76,11 @@ class ProcessSettings:
         choices=GRID_STATISTICS,
         doc="cell depth: median of its points (robust to outliers) or mean",
     )
+    grid_object_least_depth: bool = setting(
+        True,
+        doc="cells holding a submerged-object point (class 43) take its least depth "
+        "(designated sounding: a feature narrower than a cell survives the median)",
+    )
     no_bottom: NoBottomSettings = setting(
         NoBottomSettings(), doc="assumed bottom and water of the class-45 detection limit"
     )

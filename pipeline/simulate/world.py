@@ -345,7 +345,11 @@ def build_world(scene, truth: Truth, extent_m):
 
     sb = scene.seabed
     ws = scene.water_surface
-    seabed_mesh = truth.seabed.to_mesh(sb.mesh_resolution_m, extent_m)
+    from terrain.box_mesh import seabed_mesh as mesh_with_boxes
+
+    # boxes (IHO cubes, wrecks) as exact tops and walls: a regular grid alone turns a cube
+    # narrower than two cells into a pyramid the truth does not have (terrain.box_mesh)
+    seabed_mesh = mesh_with_boxes(truth.seabed, sb.mesh_resolution_m, extent_m)
     seabed = MeshCaster.from_trimesh(seabed_mesh)
     if ws.kind == "flat":
         water = _plane_caster(ws.level_m, extent_m, pad_m=1000.0)
