@@ -22,9 +22,11 @@ Geometry per pulse with a bottom return (measured origin ``o``, unit direction `
   without an own surface return are flagged ``SURFACE_INTERPOLATED``.
 * ``L`` less the forward-scattering range bias the bottom echo carries
   (:mod:`pipeline.process.scatter_bias`, when ``forward_scatter`` is set).
-* Seabed point ``B = E + t L``; ``depth_m`` is the height at ``B``'s horizontal position of
-  the surface the pulse met (the plane through ``E`` with normal ``N``) minus ``B_z``
-  (vertical, positive down).
+* Seabed point ``B = E + t L``; ``depth_m`` is the height of the local water plane at ``B``'s
+  horizontal position minus ``B_z`` (vertical, positive down): the sea above ``B``, metres
+  from ``E`` off nadir, is better told by the plane fitted around it than by the echo at ``E``
+  (on the suite's tuning wave scenes the depth below the plane through the own echo was worse
+  with the same ``B``: seed 57, 10 m/s, p95 0.369 against 0.345 m).
 
 The *uncorrected* point (``correct_refraction=False``, flagged ``NOT_REFRACTED``) is the
 straight beam at the speed of light in air for the whole range: ``o + d c t_b / (2 n_air)``.
@@ -180,12 +182,9 @@ def seabed_points(
         flags |= np.uint16(PointFlag.NOT_REFRACTED)
         xyz = straight
 
-    # depth below the surface the pulse met: the plane through its entry point (the fitted
-    # local plane's normal); the fitted plane itself where it did not enter the water
-    nz = np.where(np.abs(nrm[:, 2]) > 0.0, nrm[:, 2], 1.0)
-    dxy = xyz[:, :2] - entry[:, :2]
-    z_in = entry[:, 2] - (nrm[:, 0] * dxy[:, 0] + nrm[:, 1] * dxy[:, 1]) / nz
-    depth = np.where(refr, z_in, surface.surface_z_m(idx, xyz[:, 0], xyz[:, 1])) - xyz[:, 2]
+    # depth below the fitted local plane at the point: the sea above the point, which lies a
+    # few metres from the entry, is better told by the plane than by the echo at the entry
+    depth = surface.surface_z_m(idx, xyz[:, 0], xyz[:, 1]) - xyz[:, 2]
 
     # a-priori uncertainty, first order
     point = np.radians(st.pointing_sigma_deg)
