@@ -267,3 +267,18 @@ def land_surface_points(
     # supported point (not a lone high point: on a calm sea the width bound is ~0)
     land[q] = np.isin(comp, comp[seed]) | (wide[comp] & np.isin(comp, comp[supported]))
     return land, sigma, sea_margin
+
+
+def own_echo_weight(fit_sigma_m: np.ndarray, ranging_sigma_m: np.ndarray) -> np.ndarray:
+    """How much of a pulse's own surface echo's offset from its local plane is the sea, (n,).
+
+    The plane's residual scatter ``fit_sigma_m`` holds the waves the plane cannot follow and
+    the surface points' ranging noise; with the echo's ranging sigma ``ranging_sigma_m`` (along
+    the normal) the wave variance is ``fit² - ranging²``, and the weight of the echo's offset
+    in the least-squares estimate of the height the pulse met (plane + weight * offset) is
+    ``wave² / (wave² + ranging²) = 1 - (ranging / fit)²``, clipped to [0, 1]; 0 where the fit
+    has no scatter (nothing is left to follow).
+    """
+    fit = np.asarray(fit_sigma_m, dtype=np.float64)
+    ratio = np.asarray(ranging_sigma_m, dtype=np.float64) / np.where(fit > 0.0, fit, 1.0)
+    return np.where(fit > 0.0, np.clip(1.0 - ratio**2, 0.0, 1.0), 0.0)

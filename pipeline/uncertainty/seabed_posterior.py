@@ -76,12 +76,16 @@ _SURFACE_ROWS = (
     "normal_sigma_rad",
     "n_used",
     "flags",
+    "own_weight",
 )
 
 
 def take_surface(surface: WaterSurface, index: Any) -> WaterSurface:
     """The rows ``index`` of a fitted surface (repeats allowed), as a new object."""
-    kw = {name: getattr(surface, name)[index] for name in _SURFACE_ROWS}
+    kw = {
+        name: None if getattr(surface, name) is None else getattr(surface, name)[index]
+        for name in _SURFACE_ROWS
+    }
     return WaterSurface(
         **kw,
         global_plane=surface.global_plane,

@@ -309,10 +309,10 @@ def timing_from_scatter(
 
     For a detector that reports no timing sigma: the timing terms' depth variance is set to the
     measured random scatter of the soundings (:func:`pair_scatter`) less the other random
-    terms', ``s_t² = max(scatter² - other², 0)``. With the pulse's own surface return the depth
-    depends on ``t_b - t_s`` only, so the split between the two returns does not change it; it
-    is made as for photon-limited timing, variance in proportion to ``1 / amplitude``
-    (equal without amplitudes). Rows with a NaN scatter keep the a-priori sigma.
+    terms', ``s_t² = max(scatter² - other², 0)``, split between the two returns (each through
+    its own depth derivative: the surface's moves the entry by its weight) as for
+    photon-limited timing, variance in proportion to ``1 / amplitude`` (equal without
+    amplitudes). Rows with a NaN scatter keep the a-priori sigma.
 
     The sigma is ``scatter / |d depth / d t|``, the derivative of the depth compared at the
     measured position: it tends to 0 where a beam runs along the local seabed gradient
