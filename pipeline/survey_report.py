@@ -85,7 +85,7 @@ def evaluate_survey(
     coverage = tpu_coverage(
         unc.points40, unc.tpu40.sigma_depth_m, truth_depth_m=truth.depth_at_pulses_m, group=group
     )
-    from pipeline.evaluation_points import point_arrays, write_evaluation_points
+    from pipeline.evaluation_points import point_arrays, rejected_report, write_evaluation_points
 
     # per-point residuals and sigmas, so a scene suite can pool strata across runs
     write_evaluation_points(
@@ -125,6 +125,8 @@ def evaluate_survey(
         "subray_flags": sim.subray_flags,
         "receiver_pulse_flags": sim.pulse_flags,
         "error": report,
+        # the soundings processing rejected as gross errors (class 7, withheld), per rule
+        "seabed_rejected": rejected_report(processed.points, truth.depth_at_pulses_m),
         # per IHO cube: detected by soundings on its top / a grid cell / class 43; the grid
         # as seabed elevation against the true seabed
         **features_report(
