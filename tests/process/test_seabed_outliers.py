@@ -88,9 +88,7 @@ def test_tpu_beyond_the_iho_order_is_rejected():
     y = np.zeros(4)
     z = np.full(4, -10.0)
     sig = np.array([0.26, 0.27, 0.52, 0.53])
-    out, counts = reject_seabed_outliers(
-        points(x, y, z, sig), OutlierSettings(), ObjectSettings()
-    )
+    out, counts = reject_seabed_outliers(points(x, y, z, sig), OutlierSettings(), ObjectSettings())
     assert has(out, PointFlag.TVU_EXCEEDED).tolist() == [False, False, False, True]
     assert out.classification.tolist() == [40, 40, 40, 7]
     assert counts["tvu_exceeded"] == 1
