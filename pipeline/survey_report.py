@@ -15,6 +15,7 @@ from pipeline.evaluate import evaluate, tpu_coverage, water_column_report
 from pipeline.evaluate_features import features_report
 from pipeline.outputs.atomic import write_json
 from pipeline.process.classify import SEABED_CLASSES
+from pipeline.process.no_bottom import extinction_depth_summary
 
 __all__ = ["evaluate_survey"]
 
@@ -120,7 +121,9 @@ def evaluate_survey(
         "receiver": scene.detector.mode,
         "bottom_detected_fraction": float(np.mean(sim.returns.has_bottom)),
         "datum": {**datum.to_dict(), "true_mean_water_level_m": true_level_m},
-        "no_bottom": sim.no_bottom,
+        # the detection limits, and the depths of the class-45 points they placed: the
+        # survey's measured extinction depth
+        "no_bottom": {**(sim.no_bottom or {}), **extinction_depth_summary(processed.points)},
         "water_column": water_column_report(processed.points, scene.water.layer_depth_m),
         "subray_flags": sim.subray_flags,
         "receiver_pulse_flags": sim.pulse_flags,

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S
+from pipeline.process.classify import NO_BOTTOM_FOUND_AT
 from pipeline.process.context import ProcessingContext
 from pipeline.process.detect import DetectSettings
 from pipeline.process.detection_limit import (
@@ -24,9 +25,9 @@ from pipeline.process.detection_limit import (
     excess_decay_per_s,
     limit_after_surface_s,
 )
-from pipeline.process.returns import DetectedReturns, DetectorFlag
+from pipeline.process.returns import DetectedReturns, DetectorFlag, Points
 
-__all__ = ["detector_model", "chunk_inputs", "no_bottom_limits"]
+__all__ = ["detector_model", "chunk_inputs", "no_bottom_limits", "extinction_depth_summary"]
 
 
 def detector_model(ctx: ProcessingContext, detect: DetectSettings) -> DetectorModel:
@@ -153,3 +154,29 @@ def no_bottom_limits(
         ),
     }
     return np.where(t > 0.0, t_surface_s + t, 0.0), summary
+
+
+def extinction_depth_summary(points: Points) -> dict[str, Any]:
+    """The survey's measured extinction depth: its class-45 points' depths.
+
+    Each class-45 point stands at its pulse's detection limit (full waveform:
+    :mod:`pipeline.process.detection_limit`; photon counting: the window's limit), so their
+    depths say how deep this survey could establish the seabed or its absence; a class-40
+    point much deeper than them was found only where the bottom was brighter than assumed.
+
+    Returns
+    -------
+    dict
+        ``class45_points`` and the 5th, 50th (the survey's extinction depth) and 95th
+        percentiles of their depths below the local surface, ``class45_depth_m_p05``,
+        ``extinction_depth_m``, ``class45_depth_m_p95`` (None without class-45 points).
+    """
+    d = points.depth_m[points.classification == NO_BOTTOM_FOUND_AT]
+    d = d[np.isfinite(d)]
+    q = np.percentile(d, [5.0, 50.0, 95.0]) if d.size else [None] * 3
+    return {
+        "class45_points": int(d.size),
+        "class45_depth_m_p05": None if q[0] is None else float(q[0]),
+        "extinction_depth_m": None if q[1] is None else float(q[1]),
+        "class45_depth_m_p95": None if q[2] is None else float(q[2]),
+    }

@@ -141,3 +141,23 @@ def test_rejected_points_are_withheld_in_the_las_file(tmp_path):
     las = laspy.read(path)
     assert np.flatnonzero(np.asarray(las.withheld)).tolist() == [5, 7]
     assert np.asarray(las.classification)[[5, 7]].tolist() == [7, 7]
+
+
+def test_extinction_depth_is_the_median_class_45_depth():
+    """21 class-45 points at 10.0, 10.5, ... 20.0 m (and class-40 points deeper, which do not
+    count): the survey's extinction depth is their median, 15 m; 5th/95th percentiles by
+    linear interpolation at ranks 1 and 19: 10.5 and 19.5 m."""
+    from pipeline.process.no_bottom import extinction_depth_summary
+
+    d45 = np.arange(21) * 0.5 + 10.0
+    d = np.r_[d45, [30.0, 40.0]]
+    p = points(np.zeros(d.size), np.zeros(d.size), -d, np.full(d.size, 0.1))
+    cls = np.r_[np.full(21, 45), [40, 40]].astype(np.uint8)
+    s = extinction_depth_summary(p.replace(classification=cls))
+    assert s == {
+        "class45_points": 21,
+        "class45_depth_m_p05": pytest.approx(10.5),
+        "extinction_depth_m": pytest.approx(15.0),
+        "class45_depth_m_p95": pytest.approx(19.5),
+    }
+    assert extinction_depth_summary(p)["extinction_depth_m"] is None
