@@ -143,7 +143,7 @@ def test_rejected_points_are_withheld_in_the_las_file(tmp_path):
     assert np.asarray(las.classification)[[5, 7]].tolist() == [7, 7]
 
 
-def test_extinction_depth_is_the_median_class_45_depth():
+def test_extinction_depth_summary_is_the_class_45_depths():
     """21 class-45 points at 10.0, 10.5, ... 20.0 m (and class-40 points deeper, which do not
     count): the survey's extinction depth is their median, 15 m; 5th/95th percentiles by
     linear interpolation at ranks 1 and 19: 10.5 and 19.5 m."""
@@ -157,7 +157,7 @@ def test_extinction_depth_is_the_median_class_45_depth():
     assert s == {
         "class45_points": 21,
         "class45_depth_m_p05": pytest.approx(10.5),
-        "extinction_depth_m": pytest.approx(15.0),
+        "class45_depth_m_median": pytest.approx(15.0),
         "class45_depth_m_p95": pytest.approx(19.5),
     }
-    assert extinction_depth_summary(p)["extinction_depth_m"] is None
+    assert extinction_depth_summary(p)["class45_depth_m_median"] is None
