@@ -21,7 +21,8 @@ Arrays (``n`` rows per group; a group is empty when the run has none):
   datum), ``cell_true_depth_m`` (below the true mean level), ``cell_error_m``, ``cell_count``.
 * ``rej_*`` - the bathymetric points processing rejected as gross errors (class 7, withheld:
   :mod:`pipeline.process.seabed_outliers`): ``rej_true_depth_m``, ``rej_error_m``,
-  ``rej_tvu`` (True: rejected for its TPU, else as a seabed outlier).
+  ``rej_tvu`` (rejected for its TPU), ``rej_surface`` (for an implausible water surface;
+  neither: a seabed outlier).
 * ``nb_depth_m`` - measured depths of the class-45 (no-bottom-found-at) points: each is a
   pulse's own detection limit (:mod:`pipeline.process.detection_limit`), the run's measured
   extinction depth.
@@ -101,7 +102,8 @@ def rejected_arrays(points, truth_depth_m) -> dict[str, np.ndarray]:
     rej = points.select((points.flags & np.uint16(REJECTED)) != 0)
     err, true_d = point_errors_m(rej, truth_depth_m=truth_depth_m)
     tvu = (rej.flags & np.uint16(PointFlag.TVU_EXCEEDED)) != 0
-    return {"rej_true_depth_m": true_d, "rej_error_m": err, "rej_tvu": tvu}
+    surf = (rej.flags & np.uint16(PointFlag.SURFACE_IMPLAUSIBLE)) != 0
+    return {"rej_true_depth_m": true_d, "rej_error_m": err, "rej_tvu": tvu, "rej_surface": surf}
 
 
 def rejected_report(points, truth_depth_m) -> dict[str, int | float | None]:
@@ -115,7 +117,8 @@ def rejected_report(points, truth_depth_m) -> dict[str, int | float | None]:
     return {
         "n": int(e.size),
         "tvu_exceeded": int(a["rej_tvu"].sum()),
-        "seabed_outlier": int((~a["rej_tvu"]).sum()),
+        "surface_implausible": int(a["rej_surface"].sum()),
+        "seabed_outlier": int((~a["rej_tvu"] & ~a["rej_surface"]).sum()),
         "over_1m": int(np.sum(e > 1.0)),
         "within_0.5m": int(np.sum(e <= 0.5)),
         "max_abs_error_m": float(e.max()) if e.size else None,

@@ -63,7 +63,12 @@ _CUBE_MARGIN_M = 1.0
 _CUBE_DEPTH_RADIUS_M = 5.0
 _GROUPS = ("pt", "tpu", "post", "cell", "rej")
 #: the rejected soundings' arrays, empty for runs from before processing rejected any
-_REJ_EMPTY = {"rej_true_depth_m": np.float64, "rej_error_m": np.float64, "rej_tvu": np.bool_}
+_REJ_EMPTY = {
+    "rej_true_depth_m": np.float64,
+    "rej_error_m": np.float64,
+    "rej_tvu": np.bool_,
+    "rej_surface": np.bool_,
+}
 
 
 def extinction_depth_m(

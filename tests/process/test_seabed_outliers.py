@@ -58,7 +58,7 @@ def test_false_bottoms_below_the_seabed_are_rejected_and_kept_as_class_7():
     out, counts = reject_seabed_outliers(points(x, y, z, sig), OutlierSettings(), ObjectSettings())
     rejected = has(out, PointFlag.SEABED_OUTLIER)
     assert set(np.flatnonzero(rejected)) == set(blunders)
-    assert counts == {"tvu_exceeded": 0, "seabed_outlier": 8}
+    assert counts == {"tvu_exceeded": 0, "surface_implausible": 0, "seabed_outlier": 8}
     # not dropped: class 7, same position and depth
     assert np.all(out.classification[blunders] == LOW_NOISE)
     assert np.all(out.classification[~rejected] == BATHYMETRIC_POINT)
@@ -102,6 +102,35 @@ def test_tpu_beyond_the_iho_order_is_rejected():
     assert not has(out, PointFlag.TVU_EXCEEDED).any()
 
 
+def test_depth_read_on_an_extrapolated_water_plane_is_rejected():
+    """Water-surface returns between -1.2 and +1.3 m (a wave field) and 400 soundings on the
+    analytic seabed whose depth is read on their local plane. Four planes were extrapolated
+    (a tilted fit at a swath edge): their height at the point is +4.0, +1.6, -1.5 and +1.54 m,
+    so the depths are 4.0, 1.6, -1.5 and 1.54 m off while the elevations are right. The
+    envelope is [-1.2, 1.3] m; with the 0.25 m margin +4.0, +1.6 and -1.5 are out, +1.54
+    (0.24 m beyond) stays; a plane at +1.3 m (inside) is a wave crest, kept."""
+    rng = np.random.default_rng(15)
+    x, y, z, sig = cloud(rng, n=400)
+    plane = rng.uniform(-0.8, 0.8, x.size)  # the local planes at the points: inside
+    plane[:5] = [4.0, 1.6, -1.5, 1.54, 1.3]
+    bottoms = points(x, y, z, sig).replace(depth_m=plane - z)
+    ns = 50
+    xs, ys = rng.uniform(-20, 20, ns), rng.uniform(-20, 20, ns)
+    zs = np.r_[-1.2, 1.3, rng.uniform(-1.0, 1.0, ns - 2)]
+    surf = points(xs, ys, zs, np.full(ns, 0.05)).replace(
+        classification=np.full(ns, 41, np.uint8),
+        kind=np.full(ns, ReturnKind.SURFACE, np.uint8),
+        depth_m=np.zeros(ns),
+    )
+    pts = Points.concatenate([bottoms, surf])
+    out, counts = reject_seabed_outliers(pts, OutlierSettings(), ObjectSettings())
+    assert np.flatnonzero(has(out, PointFlag.SURFACE_IMPLAUSIBLE)).tolist() == [0, 1, 2]
+    assert counts["surface_implausible"] == 3 and counts["seabed_outlier"] == 0
+    assert np.all(out.classification[:3] == LOW_NOISE)
+    assert np.all(out.classification[3:400] == BATHYMETRIC_POINT)
+    assert np.all(out.classification[400:] == 41)  # the surface returns are not tested
+
+
 def test_cubes_are_objects_not_blunders():
     """0.5, 1 and 2 m cubes standing on the seabed: class 43 by the object test, and neither
     their points nor the seabed around them are rejected (a cube is above the seabed; the
@@ -136,7 +165,7 @@ def test_rejected_points_are_withheld_in_the_las_file(tmp_path):
     z[5] -= 4.0
     sig[7] = 2.0  # TVU beyond order 2
     out, counts = reject_seabed_outliers(points(x, y, z, sig), OutlierSettings(), ObjectSettings())
-    assert counts == {"tvu_exceeded": 1, "seabed_outlier": 1}
+    assert counts == {"tvu_exceeded": 1, "surface_implausible": 0, "seabed_outlier": 1}
     path = write_points_laz(tmp_path / "p.laz", out, crs="EPSG:32631")
     las = laspy.read(path)
     assert np.flatnonzero(np.asarray(las.withheld)).tolist() == [5, 7]
