@@ -286,7 +286,11 @@ def run_survey(
     from pipeline.process.datum import survey_datum
     from pipeline.process.grid import grid_seabed, snap_bounds_m
     from pipeline.process.survey_points import process_detections
-    from pipeline.uncertainty.survey_uncertainty import survey_uncertainty, with_tpu
+    from pipeline.uncertainty.survey_uncertainty import (
+        survey_uncertainty,
+        with_tpu,
+        without_points,
+    )
 
     ctx = processing_context(scene)
     sim = simulate_detections(scene, plan, ctx, clock, log, progress, executor)
@@ -320,15 +324,19 @@ def run_survey(
         # one datum for the grid (the user's water level, else the mean measured surface):
         # depth below the local fitted surface would carry the wave heights into the grid
         datum = survey_datum(processed.points, ps.datum)
-        grid = grid_seabed(
-            processed.points,
-            ps.grid_resolution_m,
-            bounds_m=bounds,
-            origin_m=origin,
-            crs=fr.crs,
-            datum_m=datum.water_level_m,
-            statistic=ps.grid_statistic,
-        )
+
+        def make_grid(points):
+            return grid_seabed(
+                points,
+                ps.grid_resolution_m,
+                bounds_m=bounds,
+                origin_m=origin,
+                crs=fr.crs,
+                datum_m=datum.water_level_m,
+                statistic=ps.grid_statistic,
+            )
+
+        grid = make_grid(processed.points)
         covered = area_coverage(
             processed.points.xyz_m[:, :2], scene.flight.area_m, ps.grid_resolution_m
         )
@@ -345,15 +353,23 @@ def run_survey(
     with clock.stage("process"):
         # class 43: seabed points standing above the local seabed by k sigma of their TPU
         from pipeline.process.objects import classify_objects
+        from pipeline.process.seabed_outliers import REJECTED, reject_seabed_outliers
 
         pts, n_obj = classify_objects(processed.points, ps.objects)
+        # gross errors: class 7, withheld; the grid and the cells again without them
+        pts, rejected = reject_seabed_outliers(pts, ps.outliers, ps.objects)
         processed = dataclasses.replace(processed, points=pts)
+        if sum(rejected.values()):
+            grid = make_grid(processed.points)
+            kept = (pts.flags[unc.is40] & np.uint16(REJECTED)) == 0
+            unc = without_points(unc, kept, grid)
         if ps.grid_object_least_depth:
             from pipeline.process.grid import designate_objects
 
             # the object's least depth in its cell: the median would erase a cube (grid.py)
             grid = designate_objects(grid, pts, datum.water_level_m)
     log(f"  submerged objects: {n_obj} seabed points stand above the local seabed (class 43)")
+    log(f"  rejected bathymetric points (class 7, withheld): {rejected}")
     post = None
     if plan.runs("posterior"):
         with clock.stage("posterior"):

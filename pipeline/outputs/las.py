@@ -18,7 +18,9 @@ Layout
 * Standard fields: classification (ASPRS codes of :mod:`pipeline.process.classify`); return
   number / number of returns 1..n in time order over *all* the points of a pulse, class 45 and
   64 and derived points included (:mod:`pipeline.process.return_order`); synthetic flag on
-  every derived point (``PointFlag.SYNTHETIC``, class 45, derived surface). Given the
+  every derived point (``PointFlag.SYNTHETIC``, class 45, derived surface); withheld flag on
+  the rejected soundings (``TVU_EXCEEDED``, ``SURFACE_IMPLAUSIBLE``, ``SEABED_OUTLIER``: class 7,
+  :mod:`pipeline.process.seabed_outliers`). Given the
   detections (``returns``): GPS time, intensity, scan angle and point source ID (flight line)
   of :mod:`pipeline.outputs.las_fields`; without them those four are 0.
 * Extra bytes (LAS 1.4 extra-bytes VLR): ``depth_m`` (f8; below the *local fitted* water
@@ -217,6 +219,10 @@ def write_points_laz(
         | (points.kind == ReturnKind.DERIVED_SURFACE)
         | (points.classification == NO_BOTTOM_FOUND_AT)
     )
+    # rejected soundings (class 7) stay in the file, withheld as LAS 1.4 defines the bit: a
+    # point that should not be used in normal processing
+    rejected = PointFlag.TVU_EXCEEDED | PointFlag.SEABED_OUTLIER | PointFlag.SURFACE_IMPLAUSIBLE
+    las.withheld = (points.flags & np.uint16(rejected)) != 0
     if returns is not None:
         pf = pulse_fields(points, returns, amplitude_full_scale)
         las.gps_time = pf.gps_time_s

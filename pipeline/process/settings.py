@@ -13,6 +13,7 @@ from pipeline.process.detection_limit import NoBottomSettings
 from pipeline.process.grid import GRID_STATISTICS
 from pipeline.process.objects import ObjectSettings
 from pipeline.process.scatter_bias import ForwardScatterSettings
+from pipeline.process.seabed_outliers import OutlierSettings
 from pipeline.process.surface_fit import SurfaceFitSettings
 from pipeline.uncertainty.posterior_settings import PosteriorSettings
 from pipeline.uncertainty.tpu import TpuSettings
@@ -70,6 +71,10 @@ class ProcessSettings:
     grid_resolution_m: float = setting(5.0, ge=0.01, le=1000.0, doc="bathymetry grid cell")
     objects: ObjectSettings = setting(
         ObjectSettings(), doc="submerged objects (class 43): points standing above the seabed"
+    )
+    outliers: OutlierSettings = setting(
+        OutlierSettings(),
+        doc="class-40 gross errors (TPU beyond the IHO order, far below the seabed): class 7",
     )
     grid_statistic: str = setting(
         "median",

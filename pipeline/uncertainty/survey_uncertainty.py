@@ -47,7 +47,14 @@ from pipeline.uncertainty.tpu_window import (
     with_random_term,
 )
 
-__all__ = ["SurveyUncertainty", "survey_uncertainty", "with_tpu", "with_posteriors", "take_tpu"]
+__all__ = [
+    "SurveyUncertainty",
+    "survey_uncertainty",
+    "with_tpu",
+    "with_posteriors",
+    "take_tpu",
+    "without_points",
+]
 
 
 @dataclass(frozen=True)
@@ -227,3 +234,32 @@ def take_tpu(tpu: PointTpu, index: np.ndarray) -> PointTpu:
         else:
             kw[f.name] = v
     return dataclasses.replace(tpu, **kw)
+
+
+def without_points(unc: SurveyUncertainty, keep: np.ndarray, grid: Grid) -> SurveyUncertainty:
+    """The uncertainty of the kept bathymetric points only, cells again on ``grid``.
+
+    Processing that rejects soundings after the TPU
+    (:mod:`pipeline.process.seabed_outliers`) leaves the other points' TPU as it was; the
+    rejected ones leave the TPU check and the cells (``grid``: gridded without them).
+
+    Parameters
+    ----------
+    unc : SurveyUncertainty
+    keep : (len(unc.points40),) bool
+        The bathymetric points that stay.
+    grid : Grid
+    """
+    keep = np.asarray(keep, dtype=bool)
+    tpu40 = take_tpu(unc.tpu40, np.flatnonzero(keep))
+    is40 = unc.is40.copy()
+    is40[np.flatnonzero(unc.is40)[~keep]] = False
+    cells = cell_uncertainty(grid, tpu40)
+    return dataclasses.replace(
+        unc,
+        tpu40=tpu40,
+        points40=unc.points40.select(keep),
+        is40=is40,
+        cells=cells,
+        summary=iho.order_summary(cells.order).to_dict(),
+    )
