@@ -11,7 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.evaluate import evaluate, tpu_coverage, water_column_report
+from pipeline.evaluate import evaluate, water_column_report
+from pipeline.evaluate_coverage import tpu_coverage
 from pipeline.evaluate_features import features_report
 from pipeline.outputs.atomic import write_json
 from pipeline.process.classify import SEABED_CLASSES
@@ -103,7 +104,7 @@ def evaluate_survey(
     )
     post_eval = None
     if post is not None:
-        from pipeline.evaluate import posterior_coverage
+        from pipeline.evaluate_coverage import posterior_coverage
 
         post_eval = {"n": 0}
         if post.posteriors is not None:

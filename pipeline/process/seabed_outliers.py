@@ -20,7 +20,7 @@ applied after the TPU and the submerged objects (class 43):
    measurement. Rejected when that height lies outside ``[min, max]`` of the survey's
    class-41 heights by more than ``surface_margin_m``. 0.25 m: at 0 the 4-cm envelope of a
    calm tuning scene (seed 56) put 245 good points out; at 0.25 m no point within 0.5 m of
-   the truth in the tuning half is out, and on tuning seed 57 (Palmer, 10 m/s) every point
+   the true seabed in the tuning half is out, and on tuning seed 57 (Palmer, 10 m/s) every point
    out (203) was more than 1 m off.
 3. **Far below the local seabed** (``SEABED_OUTLIER``). A pulse that met a false bottom (a
    noise or after-pulse excursion past the real bottom, a late candidate of a multi-peaked
