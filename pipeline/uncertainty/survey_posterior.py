@@ -11,6 +11,11 @@ carried through refraction onto the seabed point
 terms the waveform does not hold (:func:`nuisance_depth_sigma_m`). Cost: the budget times
 about 0.1 CPU s (``benchmarks/RESULTS_posterior.md``; about 3 CPU min per km² at the default
 2000/km²), linear in the area, bounded per km².
+
+Photon counting (no waveform per pulse): the chunk loop keeps the events of a share of the
+accumulation windows, the budget counts windows, and one shot per kept window is sampled on
+the window's histogram along its beam, with each bin's live share under the dead time
+(:mod:`pipeline.uncertainty.photon_posterior`); the rest is the same.
 """
 
 from __future__ import annotations
