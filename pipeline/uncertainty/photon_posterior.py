@@ -255,7 +255,7 @@ def window_histograms(
     t_end = np.asarray(t_bottom_s) + TAIL_S + SPAN_SHARE * span
     samples, exposure = [], []
     for i, w in enumerate(np.asarray(window, dtype=np.int64)):
-        k = int(np.searchsorted(kept.window, w))
+        k = int(np.flatnonzero(kept.window == w)[0])  # any chunk order
         ev = slice(kept.offsets[k], kept.offsets[k + 1])
         z, tau_h = kept.z_m[ev], kept.tau_h_m[ev]
         scale = 2.0 * n_air / (c * abs(float(direction_z[i])))  # s of round trip per m
