@@ -30,6 +30,7 @@ from pipeline.process.context import (
 from pipeline.process.returns import DetectedReturns
 from pipeline.stages import Plan, StageClock
 from pipeline.survey_chunks import ChunkJob, run_chunk
+from pipeline.uncertainty.photon_posterior import KeptPhotons
 from pipeline.uncertainty.posterior_selection import KeptWaveforms, posterior_budget
 
 __all__ = ["SimulatedSurvey", "survey_extent_m", "simulate_detections", "run_survey"]
@@ -43,8 +44,8 @@ class SimulatedSurvey:
     ----------
     returns : DetectedReturns
         Measured navigation and detections of every pulse, ``(n_pulses,)`` per field.
-    kept : KeptWaveforms or None
-        Waveforms kept for posteriors.
+    kept : KeptWaveforms or KeptPhotons or None
+        Waveforms (photon counting: the events of the windows) kept for posteriors.
     truth : Truth
         The exact world: read by the evaluate stage alone.
     lines : FlightLines
@@ -57,7 +58,7 @@ class SimulatedSurvey:
     """
 
     returns: DetectedReturns
-    kept: KeptWaveforms | None
+    kept: KeptWaveforms | KeptPhotons | None
     truth: Any
     lines: Any
     extent_m: tuple[float, float, float, float]
@@ -146,11 +147,15 @@ def simulate_detections(
         chunk = max(ins.shots_per_window, chunk // ins.shots_per_window * ins.shots_per_window)
     # waveforms of a bounded share of the pulses are kept for posteriors (a few times the
     # pulses sampled, so the cells that matter can be chosen among them)
+    # (photon counting: the events of a share of the windows, one posterior per window)
     keep_fraction = 0.0
     if plan.runs("posterior"):
         xmin, xmax, ymin, ymax = extent
-        n_post = posterior_budget(ps, False, (xmax - xmin) * (ymax - ymin) / 1e6)
-        keep_fraction = min(1.0, 4.0 * n_post / max(lines.n_pulses_total, 1))
+        n_post = posterior_budget(ps, (xmax - xmin) * (ymax - ymin) / 1e6)
+        n_units = lines.n_pulses_total
+        if ins.photon_counting:
+            n_units = -(-n_units // ins.shots_per_window)
+        keep_fraction = min(1.0, 4.0 * n_post / max(n_units, 1))
     job = ChunkJob(
         scene=scene,
         ctx=ctx,
@@ -164,7 +169,7 @@ def simulate_detections(
     sub_flags: dict[str, int] = {}
     pulse_flags: dict[str, int] = {}
     parts: list[dict[str, np.ndarray]] = []
-    kept: list[KeptWaveforms] = []
+    kept: list = []
     nb_inputs: list[dict[str, np.ndarray]] = []
     n_chunk = survey.n_chunks(lines, chunk)
     executor = executor or Executor(workers=1)
@@ -223,7 +228,7 @@ def simulate_detections(
         )
     return SimulatedSurvey(
         returns=returns,
-        kept=KeptWaveforms.concatenate(kept),
+        kept=(KeptPhotons if not job.waveform else KeptWaveforms).concatenate(kept),
         truth=truth,
         lines=lines,
         extent_m=extent,

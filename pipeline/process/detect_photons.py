@@ -53,6 +53,7 @@ from pipeline.process.photon_limit import photon_detection_limit
 from pipeline.process.photon_livetime import (
     bin_live_fraction,
     dead_height_m,
+    event_heights_m,
     event_live_fraction,
     surface_pileup_pe,
 )
@@ -197,10 +198,7 @@ def detect_photon_events(
     s = settings or PhotonDetectSettings()
     n = origin_m.shape[0]
     c = optics.SPEED_OF_LIGHT_M_S
-    counts = np.diff(offsets)
-    shot = np.repeat(np.arange(n), counts)
-    r = c * times_s / (2.0 * n_air)
-    z = origin_m[shot, 2] + r * direction[shot, 2]
+    shot, z = event_heights_m(offsets, times_s, origin_m, direction, n_air)
     ids = np.arange(n) if pulse_id is None else np.asarray(pulse_id)
     _, window = np.unique(ids // s.shots_per_window, return_inverse=True)
     n_win = int(window.max()) + 1 if n else 0

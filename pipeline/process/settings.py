@@ -94,9 +94,16 @@ class ProcessSettings:
     )
     # ~0.3-0.5 s each on one core (benchmarks/RESULTS_posterior.md): 2000/km² is ~15 min/km²
     posterior_pulses_per_km2: float = setting(
-        2000.0, ge=0.0, le=1e7, doc="bathymetric points given an emcee depth posterior, per km²"
+        2000.0,
+        ge=0.0,
+        le=1e7,
+        doc="bathymetric points given an emcee depth posterior, per km² (photon counting: "
+        "accumulation windows, one posterior each)",
     )
     posterior_min_pulses: int = setting(
-        48, ge=0, le=100000, doc="posteriors at least, in a survey with a bathymetric point"
+        48,
+        ge=0,
+        le=100000,
+        doc="posteriors at least, in a survey with a bathymetric point (photon counting: windows)",
     )
     posterior: PosteriorSettings = setting(PosteriorSettings(), doc="emcee depth posteriors")

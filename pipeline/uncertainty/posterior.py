@@ -139,6 +139,7 @@ def sample_batch(
     seed: int = 0,
     detect_settings: DetectSettings | None = None,
     detect_noise: tuple[int | None, float] | None = None,
+    exposure: Any = None,
 ) -> PulseChains:
     """Sample the posteriors of a batch of waveforms with one emcee ensemble.
 
@@ -156,6 +157,9 @@ def sample_batch(
     detect_settings, detect_noise : optional
         The survey detector's settings and ``(noise_samples, shot_noise_counts)``, for the
         starts (:func:`start_theta`): the same detections the survey's points come from.
+    exposure : like ``waveforms``, optional
+        Live share of each sample (photon counting's dead time; see
+        :class:`~pipeline.uncertainty.posterior_target.PulseBatch`); default 1.
 
     Returns
     -------
@@ -163,7 +167,7 @@ def sample_batch(
         ``n_steps`` per pulse: a pulse stops at the first chunk boundary where it converged.
     """
     st = settings or PosteriorSettings()
-    data = make_pulse_batch(waveforms, system, st, cos_water)
+    data = make_pulse_batch(waveforms, system, st, cos_water, exposure)
     n_p = len(data)
     rng = np.random.default_rng(seed)
     starts = [None] * n_p if theta0 is None else list(np.asarray(theta0, dtype=np.float64))
@@ -172,7 +176,12 @@ def sample_batch(
         if starts[i] is None:
             one = data.pulse(i)
             starts[i], scanned = _start(
-                one.samples[0], system, float(one.cos_water[0]), detect_settings, detect_noise
+                one.samples[0],
+                system,
+                float(one.cos_water[0]),
+                detect_settings,
+                detect_noise,
+                exposure=one.exposure[0],
             )
             if scanned:
                 flags[i] |= np.uint16(PosteriorFlag.START_SCANNED)
@@ -187,6 +196,7 @@ def sample_batch(
                 cos_water=data.cos_water[has],
                 theta0=np.array([starts[i] for i in np.flatnonzero(has)]),
                 seed=seed,
+                exposure=[data.exposure[i, data.valid[i]] for i in np.flatnonzero(has)],
             )
             if has.any()
             else None
@@ -356,7 +366,16 @@ def integrated_time_blocks(x: np.ndarray, c: float = 5.0) -> np.ndarray:
     return np.take_along_axis(taus, window[None], axis=0)[0]
 
 
-_BATCH_FIELDS = ("samples", "valid", "cos_water", "lower", "upper", "t_last_s", "ln_k_prior")
+_BATCH_FIELDS = (
+    "samples",
+    "valid",
+    "cos_water",
+    "lower",
+    "upper",
+    "t_last_s",
+    "ln_k_prior",
+    "exposure",
+)
 
 
 def interval_summary(values: Any, axis: int = -1) -> dict[str, np.ndarray]:

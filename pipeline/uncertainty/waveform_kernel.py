@@ -170,14 +170,14 @@ def expected_rows(theta, cos_water, n_samples, dt, s, group_index, offset):
 
 
 @numba.njit(cache=True, nogil=True)
-def log_post_rows(theta, samples, n_valid, cos_water, box, ln_k_prior, system):
+def log_post_rows(theta, samples, n_valid, cos_water, box, ln_k_prior, system, exposure):
     """Log posterior of walker rows ``theta`` (N, 9), row ``k`` for pulse ``k % P``.
 
     ``box`` (P, 19): each pulse's prior lower and upper bounds (9 + 9) and the last sample's
     time ``t_last_s``; ``ln_k_prior`` (P, 2) the normal prior's mean and sigma on ``ln k``
     (``inf``: none). ``-inf`` outside the box or with the bottom after ``t_last_s``, else
     :func:`log_lik_rows` plus the prior (flat in the box). ``system`` as
-    :func:`log_lik_rows`' trailing arguments, in a tuple.
+    :func:`log_lik_rows`' trailing arguments, in a tuple; ``exposure`` (P, m) as there.
     """
     n, n_p = theta.shape[0], samples.shape[0]
     dt, s, group_index, offset, poisson, floor, shot = system
@@ -194,7 +194,7 @@ def log_post_rows(theta, samples, n_valid, cos_water, box, ln_k_prior, system):
     idx = np.flatnonzero(keep)
     ll = log_lik_rows(
         theta[idx], idx % n_p, samples, n_valid, cos_water, dt, s, group_index, offset, poisson,
-        floor, shot,
+        floor, shot, exposure,
     )  # fmt: skip
     for q in range(idx.size):
         k = idx[q]
@@ -207,14 +207,18 @@ def log_post_rows(theta, samples, n_valid, cos_water, box, ln_k_prior, system):
 
 @numba.njit(cache=True, nogil=True)
 def log_lik_rows(
-    theta, pulse, samples, n_valid, cos_water, dt, s, group_index, offset, poisson, floor, shot
-):
+    theta, pulse, samples, n_valid, cos_water, dt, s, group_index, offset, poisson, floor, shot,
+    exposure,
+):  # fmt: skip
     """Log-likelihood of rows ``theta`` (N, 9), row ``k`` against ``samples[pulse[k]]``.
 
     Only the first ``n_valid[p]`` samples of pulse ``p`` count (the rest is padding). Gaussian
     law: ``-((y - mu)^2 / v + log v) / 2`` with ``v = floor + shot max(mu - offset, 0)``;
-    Poisson: ``y log mu - mu`` (``-inf`` where ``mu <= 0 < y``). Data-only constants dropped,
-    as :func:`pipeline.uncertainty.waveform_model.log_likelihood`.
+    Poisson: ``y log(e mu) - e mu`` with ``e = exposure[p, i]`` the live share of sample ``i``
+    (dead time: a photon-counting record is Poisson of the rate times its live exposure;
+    1 where every channel was live; ``-inf`` where ``e mu <= 0 < y``; the Gaussian law ignores
+    it). Data-only constants dropped, as :func:`pipeline.uncertainty.waveform_model.
+    log_likelihood`.
     """
     n = theta.shape[0]
     out = np.empty(n)
@@ -225,11 +229,13 @@ def log_lik_rows(
         row = mu[:m]
         model_row(theta[k], cos_water[p], row, dt, s, group_index, offset)
         y = samples[p]
+        e = exposure[p]
         acc = 0.0
         if poisson:
             for i in range(m):
-                if row[i] > 0.0:
-                    acc += y[i] * math.log(row[i]) - row[i]
+                lam = e[i] * row[i]
+                if lam > 0.0:
+                    acc += y[i] * math.log(lam) - lam
                 elif y[i] > 0.0:
                     acc = -np.inf
                     break
