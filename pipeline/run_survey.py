@@ -291,11 +291,7 @@ def run_survey(
     from pipeline.process.datum import survey_datum
     from pipeline.process.grid import grid_seabed, snap_bounds_m
     from pipeline.process.survey_points import process_detections
-    from pipeline.uncertainty.survey_uncertainty import (
-        survey_uncertainty,
-        with_tpu,
-        without_points,
-    )
+    from pipeline.uncertainty.survey_uncertainty import survey_uncertainty, with_tpu
 
     ctx = processing_context(scene)
     sim = simulate_detections(scene, plan, ctx, clock, log, progress, executor)
@@ -356,23 +352,11 @@ def run_survey(
         unc = survey_uncertainty(sim.returns, processed, ctx, grid)
         processed = dataclasses.replace(processed, points=with_tpu(processed.points, unc))
     with clock.stage("process"):
-        # class 43: seabed points standing above the local seabed by k sigma of their TPU
-        from pipeline.process.objects import classify_objects
-        from pipeline.process.seabed_outliers import REJECTED, reject_seabed_outliers
+        from pipeline.survey_cleanup import objects_and_rejections
 
-        pts, n_obj = classify_objects(processed.points, ps.objects)
-        # gross errors: class 7, withheld; the grid and the cells again without them
-        pts, rejected = reject_seabed_outliers(pts, ps.outliers, ps.objects)
-        processed = dataclasses.replace(processed, points=pts)
-        if sum(rejected.values()):
-            grid = make_grid(processed.points)
-            kept = (pts.flags[unc.is40] & np.uint16(REJECTED)) == 0
-            unc = without_points(unc, kept, grid)
-        if ps.grid_object_least_depth:
-            from pipeline.process.grid import designate_objects
-
-            # the object's least depth in its cell: the median would erase a cube (grid.py)
-            grid = designate_objects(grid, pts, datum.water_level_m)
+        processed, unc, grid, n_obj, rejected = objects_and_rejections(
+            processed, unc, grid, make_grid, ps, datum.water_level_m
+        )
     log(f"  submerged objects: {n_obj} seabed points stand above the local seabed (class 43)")
     log(f"  rejected bathymetric points (class 7, withheld): {rejected}")
     post = None
