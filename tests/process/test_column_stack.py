@@ -52,8 +52,12 @@ def _filtered_noise():
     return NOISE_COUNTS / math.sqrt(2.0 * math.sqrt(math.pi) * SIGMA_SAMPLES)
 
 
-def _waveforms(n, seed=0, column_top_sigma=4.0, bottoms=True):
-    """(n, N_SAMPLES) waveforms: baseline, noise, surface, column of decay ``K_PER_M``, bottoms."""
+def _waveforms(n, seed=0, column_top_sigma=4.0, bottoms=True, faint_bottoms=False):
+    """(n, N_SAMPLES) waveforms: baseline, noise, surface, column of decay ``K_PER_M``, bottoms.
+
+    ``faint_bottoms``: every pulse without a bright bottom has one 240-250 samples below the
+    surface whose filtered peak is two filtered noise σ (under the detector's 5 σ threshold).
+    """
     rng = np.random.default_rng(seed)
     s = SIGMA_SAMPLES
     a = K_PER_M * V_M_S * DT_S  # column decay per sample: exp(−2 k l), l = v τ / 2
@@ -71,6 +75,13 @@ def _waveforms(n, seed=0, column_top_sigma=4.0, bottoms=True):
         has = (np.arange(n) % 3 == 0)[:, None]
         tb = rng.uniform(40.0, 300.0, (n, 1))
         y = y + has * 150.0 * np.exp(-0.5 * ((tau - tb) / s) ** 2)
+    if faint_bottoms:
+        # a Gaussian of σ_samples and peak p filters (unit-area Gaussian of σ_samples) to a
+        # peak p / √2
+        faint = ~has if bottoms else np.ones((n, 1), dtype=bool)
+        tb = rng.uniform(240.0, 250.0, (n, 1))
+        peak = 2.0 * math.sqrt(2.0) * _filtered_noise()
+        y = y + faint * peak * np.exp(-0.5 * ((tau - tb) / s) ** 2)
     return y
 
 
@@ -104,6 +115,15 @@ def test_median_of_per_pulse_fits_is_biased_high_in_the_same_water(clear_water):
     # the same check the stack passes fails for the per-pulse fits (the old estimate)
     old = _survey(clear_water)["column_decay_median_fit_per_m"]
     assert old > (1.0 + REL_TOL) * K_PER_M
+
+
+def test_faint_bottoms_under_the_noise_do_not_flatten_the_decay():
+    # each faint bottom is under the noise (none is found), but the stack of 2000 of them is a
+    # bump far above the column there (~6x): it must not enter the fit (with it: 0.050 /m)
+    y = _waveforms(3000, seed=3, faint_bottoms=True)
+    found = detect_full_waveform(y, DT_S, FWHM_S, DetectSettings(), noise_samples=NOISE_SAMPLES)
+    assert found.has_bottom.sum() <= 1000 + 20  # the bright ones (and a handful of faint ones)
+    assert _survey(y)["column_decay_per_m"] == pytest.approx(K_PER_M, rel=REL_TOL)
 
 
 def test_bright_column_agrees_with_per_pulse_fits():
