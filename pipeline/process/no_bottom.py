@@ -8,12 +8,14 @@ chunking, and gives every pulse's ``t_no_bottom_s``.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.classify import NO_BOTTOM_FOUND_AT
+from pipeline.process.column_stack import ColumnStack, stack_column, stacked_decay_per_m
 from pipeline.process.context import ProcessingContext
 from pipeline.process.detect import DetectSettings
 from pipeline.process.detection_limit import (
@@ -68,7 +70,9 @@ def chunk_inputs(
         The column margins of the pulses with a surface, no bottom and no saturation
         (:func:`~pipeline.process.detection_limit.column_margins`; zeros elsewhere) and the
         losses of the well-detected bottoms, SNR ≥ 2 × threshold
-        (:func:`~pipeline.process.detection_limit.bottom_losses`).
+        (:func:`~pipeline.process.detection_limit.bottom_losses`); ``column_stack``, the
+        :class:`~pipeline.process.column_stack.ColumnStack` of the columns of both sets of
+        pulses (added over the chunks, not concatenated).
     """
     det = detector_model(ctx, detect)
     n = found.has_surface.shape[0]
@@ -104,7 +108,18 @@ def chunk_inputs(
         det,
         settings,
     )
+    # the stacked column (the survey's water decay, pipeline.process.column_stack) of the same
+    # pulses, each up to its own end: the searched end, or one separation before its bottom or
+    # in-column echo (no echo enters the stack)
+    sep_s = det.min_separation_fwhm * det.pulse_fwhm_s
+    m = samples.shape[1]
+    searched_end_s = (m - max(2, math.ceil(1.5 * det.pulse_fwhm_s / det.dt_s))) * det.dt_s
+    t_end = np.where(strong, found.t_bottom_s - sep_s, searched_end_s)
+    t_end = np.where(found.has_column, np.minimum(t_end, found.t_column_s - sep_s), t_end)
+    stacked = none | strong
+    stack = stack_column(samples[stacked], found.t_surface_s[stacked], t_end[stacked], det)
     return {
+        "column_stack": stack,
         "none": none,
         "margin": margin,
         "alpha": alpha,
@@ -129,8 +144,17 @@ def no_bottom_limits(
         :func:`chunk_inputs` of every chunk, in pulse order.
     t_surface_s : (n_pulses,) float
         Surface times from emission.
+
+    Returns
+    -------
+    t_no_bottom_s : (n_pulses,) float
+    summary : dict
+        ``column_decay_per_m`` is the lidar decay of the survey's stacked column
+        (:func:`~pipeline.process.column_stack.stacked_decay_per_m`, None without a measurable
+        column); ``column_decay_median_fit_per_m`` the median of the per-pulse fits (biased
+        high in clear water; kept for the record, the limits use the per-pulse fits).
     """
-    cat = {k: np.concatenate([d[k] for d in inputs]) for k in inputs[0]}
+    cat = {k: np.concatenate([d[k] for d in inputs]) for k in inputs[0] if k != "column_stack"}
     delta = excess_decay_per_s(cat["t_b"], cat["loss"])
     det = detector_model(ctx, detect)
     margins = ColumnMargins(
@@ -146,8 +170,15 @@ def no_bottom_limits(
         "bottoms_used": int(cat["t_b"].size),
         "pulses_with_limit": int(np.count_nonzero(t > 0.0)),
         "pulses_without_measurable_column": int(np.count_nonzero(cat["none"] & ~cat["ok"])),
-        # the lidar attenuation k of the measured columns: C ~ exp(-2 k L), L = c t / (2 n_g)
-        "column_decay_per_m": (
+        # the lidar attenuation k of the measured columns: C ~ exp(-2 k L), L = c t / (2 n_g),
+        # from their stack (the per-pulse fits are biased high in clear water, where a pulse's
+        # column is a few noise-selected samples: pipeline.process.column_stack)
+        "column_decay_per_m": stacked_decay_per_m(
+            ColumnStack.total([d["column_stack"] for d in inputs], det.dt_s),
+            det.group_index,
+        ),
+        # the median of the per-pulse fits, for the record
+        "column_decay_median_fit_per_m": (
             float(np.median(cat["alpha"][cat["ok"]])) * det.group_index / SPEED_OF_LIGHT_M_S
             if np.any(cat["ok"])
             else None
