@@ -119,6 +119,9 @@ class WaterSurface:
         Weight in [0, 1] of the pulse's own surface echo against its local plane in the height
         the pulse met (:func:`~pipeline.process.surface_land.own_echo_weight`): 1 where the
         detector gives no timing sigma. None (older objects): 1.
+    sea_correlation : SeaCorrelation or None
+        How far the own echo's sea tells the sea above the sounding
+        (:mod:`pipeline.process.sea_correlation`); None: not at all (the plane alone).
     """
 
     entry_m: np.ndarray
@@ -138,6 +141,7 @@ class WaterSurface:
     air_index: float
     time_window_s: float | None = None
     own_weight: np.ndarray | None = None
+    sea_correlation: object | None = None
 
     def __len__(self) -> int:
         return int(self.entry_m.shape[0])

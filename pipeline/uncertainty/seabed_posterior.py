@@ -91,6 +91,8 @@ def take_surface(surface: WaterSurface, index: Any) -> WaterSurface:
         global_plane=surface.global_plane,
         global_sigma_m=surface.global_sigma_m,
         air_index=surface.air_index,
+        time_window_s=surface.time_window_s,
+        sea_correlation=surface.sea_correlation,
     )
 
 
