@@ -23,9 +23,9 @@ Layout
   :mod:`pipeline.process.seabed_outliers`). Given the
   detections (``returns``): GPS time, intensity, scan angle and point source ID (flight line)
   of :mod:`pipeline.outputs.las_fields`; without them those four are 0.
-* Extra bytes (LAS 1.4 extra-bytes VLR): ``depth_m`` (f8; below the *local fitted* water
-  surface, as its description says; the grid's datum is in ``grid.tif`` and
-  ``evaluation.json``), ``uncertainty_v_m``, ``uncertainty_h_m``, ``confidence`` (f4),
+* Extra bytes (LAS 1.4 extra-bytes VLR): ``depth_m`` (f8; below the *local* sea at the
+  pulse's time (fitted plane and sea correlation), as its description says; the grid's
+  datum is in ``grid.tif`` and ``evaluation.json``), ``uncertainty_v_m``, ``uncertainty_h_m``, ``confidence`` (f4),
   ``pulse_id`` (i8), ``kind`` (u1),
   ``process_flags``, ``detector_flags`` (u2), and ``amplitude`` (f4) when present.
 """
@@ -73,7 +73,7 @@ _VLR_RECORD = 1
 _EXTRA = (
     # the point's own reference: below the water surface fitted around it (under waves it moves
     # with them); grid.tif's depth is below the survey's datum (pipeline.process.datum)
-    ("depth_m", "f8", "below local fitted water surf. m"),
+    ("depth_m", "f8", "below local sea at pulse time, m"),
     ("uncertainty_v_m", "f4", "vertical 1-sigma uncertainty (m)"),
     ("uncertainty_h_m", "f4", "horiz. 1-sigma uncertainty (m)"),
     ("confidence", "f4", "detection confidence 0-1"),
