@@ -25,8 +25,8 @@ Layout
   of :mod:`pipeline.outputs.las_fields`; without them those four are 0.
 * Extra bytes (LAS 1.4 extra-bytes VLR): ``depth_m`` (f8; below the *local* sea at the
   pulse's time (fitted plane and sea correlation), as its description says; the grid's
-  datum is in ``grid.tif`` and ``evaluation.json``), ``uncertainty_v_m``, ``uncertainty_h_m``, ``confidence`` (f4),
-  ``pulse_id`` (i8), ``kind`` (u1),
+  datum is in ``grid.tif`` and ``evaluation.json``), ``uncertainty_v_m``, ``uncertainty_h_m``,
+  ``confidence`` (f4), ``pulse_id`` (i8), ``kind`` (u1),
   ``process_flags``, ``detector_flags`` (u2), and ``amplitude`` (f4) when present.
 """
 
