@@ -25,15 +25,20 @@ at least ``min_pairs`` pairs each.
 **wave height between entry and sounding** (random, depth only) - the in-water range starts
 where the beam met the actual sea at ``E``, the depth is read against the sea above ``B``,
 ``Delta = |B - E|`` away (about a quarter of the depth at 20° off nadir), so the depth is off
-by the difference of the sea's heights about the pulse's plane there, of variance ``2 (gamma(
-Delta) - n)``, the wave part of the variogram (Westfeld et al. 2017, "Analysis and correction
-of ocean wave pattern induced systematic coordinate errors in airborne LiDAR bathymetry",
-ISPRS J. Photogramm. Remote Sens. 128; the water-surface terms of the TPU of Eren et al. 2019,
-"Total vertical uncertainty (TVU) modeling for topo-bathymetric LIDAR systems",
-Photogramm. Eng. Remote Sens. 85). Zero on calm water, where the variogram is flat. The
-fitted plane's tilt terms already hold the waves the plane follows (the tilt is measured
-between entry and sounding, :func:`~pipeline.uncertainty.tpu_neighbours.surface_tilt_sigma`):
-only the excess over them is added (:func:`with_wave_entry`).
+by the difference of the sea's heights about the pulse's plane there, of variance
+``2 (gamma(Delta) - gamma(h_0))``, the wave part of the variogram beyond its shortest lag
+``h_0`` (Westfeld et al. 2017, "Analysis and correction of ocean wave pattern induced
+systematic coordinate errors in airborne LiDAR bathymetry", ISPRS J. Photogramm. Remote Sens.
+128; the water-surface terms of the TPU of Eren et al. 2019, "Total vertical uncertainty (TVU)
+modeling for topo-bathymetric LIDAR systems", Photogramm. Eng. Remote Sens. 85). Zero on calm
+water, where the variogram is flat. The fitted plane's tilt terms already hold the waves the
+plane follows (the tilt is measured between entry and sounding,
+:func:`~pipeline.uncertainty.tpu_neighbours.surface_tilt_sigma`): only the excess over them is
+added (:func:`with_wave_entry`).
+
+Only pairs of like incidence (within 2.5°) enter: their ranging errors are then alike at every
+lag, and only the sea makes the variogram rise (an oscillating scanner would otherwise pair a
+specular nadir echo with an oblique onset, a rise that is no wave).
 
 Measured data only: surface points, their emission times, the fitted planes.
 """
@@ -71,6 +76,8 @@ LAG_EDGES_M = (0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24
 INCIDENCE_BANDS_DEG = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 90.0)
 #: Cressie & Hawkins (1980) bias factor of the fourth power of the mean root: 0.457 + 0.494 / N.
 _CH_A, _CH_B = 0.457, 0.494
+#: Pairs whose incidences differ by more than this (deg) are not used.
+_LIKE_INCIDENCE_DEG = 2.5
 #: Lag bins of each incidence band the nugget is extrapolated from.
 _NUGGET_BINS = 3
 #: Offsets (in time order) of the partners of each surface point, at most this far.
@@ -210,7 +217,10 @@ def surface_variogram(
     lag = np.hypot(p[i, 0] - p[j, 0], p[i, 1] - p[j, 1])
     cos_i = np.abs(np.sum(returns.direction_meas[idx] * surface.normal[idx], axis=1))
     inc = np.degrees(np.arccos(np.clip(cos_i, 0.0, 1.0)))
-    inc_pair = 0.5 * (inc[i] + inc[j])
+    # pairs of like incidence only: the ranging error then is the same at every lag and only
+    # the sea makes the variogram rise (an oscillating scanner pairs nadir and edge otherwise)
+    like = np.abs(inc[i] - inc[j]) <= _LIKE_INCIDENCE_DEG
+    d, lag, inc_pair = d[like], lag[like], 0.5 * (inc[i] + inc[j])[like]
     edges = np.asarray(LAG_EDGES_M)
     lag_bin = np.digitize(lag, edges) - 1
     lags, gammas = [], []
@@ -270,8 +280,10 @@ def with_surface_ranging(
 def wave_entry_sigma_m(vg: SurfaceVariogram, delta_m) -> np.ndarray:
     """One-sigma depth error of the wave height between entry and sounding, ``(n,)`` m.
 
-    ``sqrt(2 max(gamma(Delta) - n, 0))``: the wave part of the variogram at the sounding's
-    offset ``Delta`` from its entry, ``n`` the nugget of all incidences pooled.
+    ``sqrt(2 max(gamma(Delta) - gamma(h_0), 0))``: the wave part of the variogram at the
+    sounding's offset ``Delta`` from its entry, ``h_0`` its shortest lag with enough pairs
+    (what the sea adds within ``h_0`` is left out: the shortest lags are a fraction of a
+    metre to a few metres, where a wind sea's height changes least).
 
     Parameters
     ----------
@@ -282,8 +294,7 @@ def wave_entry_sigma_m(vg: SurfaceVariogram, delta_m) -> np.ndarray:
     delta = np.asarray(delta_m, dtype=np.float64)
     if vg.lag_m.size == 0:
         return np.zeros(delta.shape)
-    n = _nugget(vg.lag_m[:_NUGGET_BINS], vg.gamma_m2[:_NUGGET_BINS])
-    wave = vg.gamma_at(delta) - n
+    wave = vg.gamma_at(delta) - vg.gamma_m2[0]
     return np.sqrt(2.0 * np.maximum(np.nan_to_num(wave), 0.0))
 
 
