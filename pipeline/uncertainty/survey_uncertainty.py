@@ -11,6 +11,9 @@ per-return sigmas (full waveform: the Cramér–Rao bound of each echo from its 
 shows more (:func:`~pipeline.uncertainty.tpu.pair_scatter`,
 :func:`~pipeline.uncertainty.tpu.timing_from_scatter`); without detector sigmas (photon
 counting) the scatter sets them.
+The surface returns' height variogram (:mod:`pipeline.uncertainty.tpu_measured`) raises the
+surface timing sigmas to the ranging error they show and adds the waves between each pulse's
+water entry and its sounding that the fitted plane's tilt does not hold.
 A photon-counting window's shots share one detection: they count as one sounding, and each
 shot carries the spread of the seabed under the window's shots
 (:mod:`pipeline.uncertainty.tpu_window`). Pulses the
