@@ -80,6 +80,8 @@ _CH_A, _CH_B = 0.457, 0.494
 _LIKE_INCIDENCE_DEG = 2.5
 #: Lag bins of each incidence band the nugget is extrapolated from.
 _NUGGET_BINS = 3
+#: Pairs per time offset at most (evenly strided anchors).
+_MAX_PER_OFFSET = 50_000
 #: Offsets (in time order) of the partners of each surface point, at most this far.
 _MAX_OFFSET = 2000
 
@@ -149,7 +151,9 @@ def _pairs(t, group, max_dt_s):
     for k in offsets.astype(np.int64):
         if k >= n:
             break
-        i = np.arange(n - k)
+        # at most _MAX_PER_OFFSET anchors, evenly strided (a survey of millions of pulses
+        # would otherwise pair each one 64 times)
+        i = np.arange(0, n - k, max(1, -(-(n - k) // _MAX_PER_OFFSET)))
         j = i + k
         ok = (t[j] - t[i]) <= max_dt_s
         if group is not None:
