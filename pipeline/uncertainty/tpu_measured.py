@@ -80,7 +80,7 @@ _CH_A, _CH_B = 0.457, 0.494
 _LIKE_INCIDENCE_DEG = 2.5
 #: Lag bins of each incidence band the nugget is extrapolated from.
 _NUGGET_BINS = 3
-#: Pairs per time offset at most (evenly strided anchors).
+#: Pairs per time offset at most (anchors drawn at random, fixed seed).
 _MAX_PER_OFFSET = 50_000
 #: Offsets (in time order) of the partners of each surface point, at most this far.
 _MAX_OFFSET = 2000
@@ -146,14 +146,19 @@ def _nugget(h: np.ndarray, g: np.ndarray) -> float:
 def _pairs(t, group, max_dt_s):
     """Pairs ``(i, j)`` of time-ordered points at most ``max_dt_s`` apart, not in one group."""
     n = t.size
+    rng = np.random.default_rng(0)  # reproducible: the same survey, the same pairs
     offsets = np.unique(np.round(np.geomspace(1, max(min(_MAX_OFFSET, n - 1), 1), 64)))
     ii, jj = [], []
     for k in offsets.astype(np.int64):
         if k >= n:
             break
-        # at most _MAX_PER_OFFSET anchors, evenly strided (a survey of millions of pulses
-        # would otherwise pair each one 64 times)
-        i = np.arange(0, n - k, max(1, -(-(n - k) // _MAX_PER_OFFSET)))
+        # at most _MAX_PER_OFFSET anchors (a survey of millions of pulses would otherwise pair
+        # each one 64 times), drawn at random with a fixed seed: a regular stride would alias
+        # with the pulse structure (a photon window's boundaries are its only pairs)
+        if n - k > _MAX_PER_OFFSET:
+            i = np.sort(rng.choice(n - k, _MAX_PER_OFFSET, replace=False))
+        else:
+            i = np.arange(n - k)
         j = i + k
         ok = (t[j] - t[i]) <= max_dt_s
         if group is not None:

@@ -127,6 +127,15 @@ def test_photon_windows_are_not_paired_within():
     assert math.sqrt(vg.nugget_m2[0]) == pytest.approx(0.03, rel=0.1)
 
 
+def test_photon_windows_of_a_long_survey_still_pair_across():
+    """More pulses than the pairs kept per offset: the anchors kept must still reach the
+    window boundaries, the only pairs a window's shared detection leaves (a regular stride
+    of 2 never anchors on a 400-shot window's last shot)."""
+    ret, surf = track(lambda x: np.zeros_like(x), 0.03, n=120_000, spacing_m=0.002)
+    vg = surface_variogram(ret, surf, group=np.arange(len(ret)) // 400)
+    assert math.sqrt(vg.nugget_m2[0]) == pytest.approx(0.03, rel=0.1)
+
+
 def test_surface_ranging_raises_the_timing_and_reaches_the_depth():
     """At nadir a surface timing error ``dt`` moves the surface point by ``c dt / (2 n_a)``
     and the depth by ``c dt / (2 n_g)``: a measured ranging sigma ``s_r`` gives the depth
