@@ -128,9 +128,9 @@ def test_photon_windows_are_not_paired_within():
 
 
 def test_photon_windows_of_a_long_survey_still_pair_across():
-    """More pulses than the pairs kept per offset: the anchors kept must still reach the
-    window boundaries, the only pairs a window's shared detection leaves (a regular stride
-    of 2 never anchors on a 400-shot window's last shot)."""
+    """More pulses than the pairs kept per offset (anchors subsampled): the pairs across
+    window boundaries, the only ones a window's shared detection leaves, still give the
+    ranging sigma."""
     ret, surf = track(lambda x: np.zeros_like(x), 0.03, n=120_000, spacing_m=0.002)
     vg = surface_variogram(ret, surf, group=np.arange(len(ret)) // 400)
     assert math.sqrt(vg.nugget_m2[0]) == pytest.approx(0.03, rel=0.1)
