@@ -184,7 +184,8 @@ def survey_uncertainty(
         tpu40 = with_random_term(tpu40, WINDOW_TERM, spread, spread)
     # the waves between each pulse's water entry and its sounding (the variogram's wave part
     # beyond what the fitted plane's measured tilt already holds)
-    tpu40 = with_wave_entry(tpu40, vg, processed.surface.entry_m[tpu40.row, :2])
+    surf = processed.surface
+    tpu40 = with_wave_entry(tpu40, vg, surf.entry_m[tpu40.row, :2], surf.sea_correlation)
     cells = cell_uncertainty(grid, tpu40)
     return SurveyUncertainty(
         tpu40=tpu40,

@@ -1,7 +1,7 @@
 """TPU terms of the water surface measured from the surface returns themselves.
 
-A sounding's depth is its in-water range from its pulse's own surface time, read below the
-fitted local plane at the sounding ``B`` (:func:`~pipeline.process.refraction.seabed_points`).
+A sounding's depth is its in-water range from where its pulse met the sea, read below the sea
+above the sounding ``B`` (:func:`~pipeline.process.refraction.seabed_points`).
 Two errors of the surface enter it that the per-echo timing sigmas and the fitted plane do not
 show, and both are measured here from the **height variogram of the measured surface points**
 (Matheron's semivariogram, estimated robustly after Cressie & Hawkins 1980), ``2 gamma(h) =
@@ -24,12 +24,15 @@ at least ``min_pairs`` pairs each.
 
 **wave height between entry and sounding** (random, depth only) - the in-water range starts
 where the beam met the actual sea at ``E``, the depth is read against the sea above ``B``,
-``Delta = |B - E|`` away (about a quarter of the depth at 20° off nadir), so the depth is off
-by the difference of the sea's heights about the pulse's plane there, of variance
-``2 (gamma(Delta) - gamma(h_0))``, the wave part of the variogram beyond its shortest lag
-``h_0`` (Westfeld et al. 2017, "Analysis and correction of ocean wave pattern induced
-systematic coordinate errors in airborne LiDAR bathymetry", ISPRS J. Photogramm. Remote Sens.
-128; the water-surface terms of the TPU of Eren et al. 2019, "Total vertical uncertainty (TVU)
+``Delta = |B - E|`` away (about a quarter of the depth at 20° off nadir), predicted from the
+sea met at ``E`` as ``rho(Delta) w s_E`` above the plane
+(:mod:`pipeline.process.sea_correlation`); the predictor's error variance is
+``(gamma(Delta) - gamma(h_0)) (1 + rho)``, the wave part of the variogram beyond its shortest
+lag ``h_0`` (``2 (gamma(Delta) - gamma(h_0))``, the variance of the difference of the heights,
+when the depth reads the sea at ``E`` itself) (Westfeld et al. 2017, "Analysis and correction
+of ocean wave pattern induced systematic coordinate errors in airborne LiDAR bathymetry", ISPRS
+J. Photogramm. Remote Sens. 128; the water-surface terms of the TPU of Eren et al. 2019,
+"Total vertical uncertainty (TVU)
 modeling for topo-bathymetric LIDAR systems", Photogramm. Eng. Remote Sens. 85). Zero on calm
 water, where the variogram is flat. The fitted plane's tilt terms already hold the waves the
 plane follows (the tilt is measured between entry and sounding,
@@ -53,6 +56,7 @@ import numpy as np
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.returns import DetectedReturns, PointFlag
+from pipeline.process.sea_correlation import time_pairs
 from pipeline.process.surface_fit import WaterSurface
 from pipeline.uncertainty.tpu_settings import DEPTH, PointTpu
 from pipeline.uncertainty.tpu_window import with_random_term
@@ -80,10 +84,6 @@ _CH_A, _CH_B = 0.457, 0.494
 _LIKE_INCIDENCE_DEG = 2.5
 #: Lag bins of each incidence band the nugget is extrapolated from.
 _NUGGET_BINS = 3
-#: Pairs per time offset at most (anchors drawn at random, fixed seed).
-_MAX_PER_OFFSET = 50_000
-#: Offsets (in time order) of the partners of each surface point, at most this far.
-_MAX_OFFSET = 2000
 
 
 @dataclass(frozen=True)
@@ -143,35 +143,6 @@ def _nugget(h: np.ndarray, g: np.ndarray) -> float:
     return float(np.mean(g))
 
 
-def _pairs(t, group, max_dt_s):
-    """Pairs ``(i, j)`` of time-ordered points at most ``max_dt_s`` apart, not in one group."""
-    n = t.size
-    rng = np.random.default_rng(0)  # reproducible: the same survey, the same pairs
-    offsets = np.unique(np.round(np.geomspace(1, max(min(_MAX_OFFSET, n - 1), 1), 64)))
-    ii, jj = [], []
-    for k in offsets.astype(np.int64):
-        if k >= n:
-            break
-        # at most _MAX_PER_OFFSET anchors (a survey of millions of pulses would otherwise pair
-        # each one 64 times), drawn at random with a fixed seed: a regular stride would alias
-        # with the pulse structure (a photon window's boundaries are its only pairs)
-        if n - k > _MAX_PER_OFFSET:
-            i = np.sort(rng.choice(n - k, _MAX_PER_OFFSET, replace=False))
-        else:
-            i = np.arange(n - k)
-        j = i + k
-        ok = (t[j] - t[i]) <= max_dt_s
-        if group is not None:
-            ok &= group[i] != group[j]
-        if not ok.any():
-            break  # farther offsets are farther apart in time still
-        ii.append(i[ok])
-        jj.append(j[ok])
-    if not ii:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    return np.concatenate(ii), np.concatenate(jj)
-
-
 def surface_variogram(
     returns: DetectedReturns,
     surface: WaterSurface,
@@ -213,7 +184,7 @@ def surface_variogram(
     order = np.argsort(t, kind="stable")
     idx, t = idx[order], t[order]
     g = None if group is None else np.asarray(group).ravel()[idx]
-    i, j = _pairs(t, g, max_dt_s)
+    i, j = time_pairs(t, g, max_dt_s)
     if i.size == 0:
         return SurfaceVariogram.empty()
     p = surface.surface_point_m[idx]
@@ -286,32 +257,40 @@ def with_surface_ranging(
     return dataclasses.replace(returns, t_surface_sigma_s=out)
 
 
-def wave_entry_sigma_m(vg: SurfaceVariogram, delta_m) -> np.ndarray:
+def wave_entry_sigma_m(vg: SurfaceVariogram, delta_m, rho=None) -> np.ndarray:
     """One-sigma depth error of the wave height between entry and sounding, ``(n,)`` m.
 
-    ``sqrt(2 max(gamma(Delta) - gamma(h_0), 0))``: the wave part of the variogram at the
-    sounding's offset ``Delta`` from its entry, ``h_0`` its shortest lag with enough pairs
-    (what the sea adds within ``h_0`` is left out: the shortest lags are a fraction of a
-    metre to a few metres, where a wind sea's height changes least).
+    The sea above the sounding is read as the plane plus ``rho w s_E``
+    (:mod:`pipeline.process.sea_correlation`): with a wave variance ``sigma²`` about the
+    plane and ``rho = 1 - (gamma(Delta) - gamma(h_0)) / sigma²``, the predictor's error
+    variance is ``sigma² (1 - rho²) = (gamma(Delta) - gamma(h_0)) (1 + rho)`` (simple kriging
+    from one observation). ``rho = None`` reads the sea above the sounding as the sea at the
+    entry (``rho = 1`` in the depth): ``2 (gamma(Delta) - gamma(h_0))``. ``Delta``: the
+    sounding's offset from its entry; ``h_0`` the shortest lag with enough pairs (what the sea
+    adds within ``h_0`` is left out: the shortest lags are a fraction of a metre to a few
+    metres, where a wind sea's height changes least).
 
     Parameters
     ----------
     vg : SurfaceVariogram
     delta_m : (n,) array_like
         Horizontal offset of each sounding from its water entry.
+    rho : (n,) array_like, optional
+        The correlation the depth used at each ``Delta``.
     """
     delta = np.asarray(delta_m, dtype=np.float64)
     if vg.lag_m.size == 0:
         return np.zeros(delta.shape)
     wave = vg.gamma_at(delta) - vg.gamma_m2[0]
-    return np.sqrt(2.0 * np.maximum(np.nan_to_num(wave), 0.0))
+    factor = 2.0 if rho is None else 1.0 + np.clip(np.asarray(rho, dtype=np.float64), 0.0, 1.0)
+    return np.sqrt(factor * np.maximum(np.nan_to_num(wave), 0.0))
 
 
 #: The fitted plane's tilt terms: they hold the waves the plane follows between entry and sounding.
 _TILT_TERMS = ("surface_tilt_x", "surface_tilt_y")
 
 
-def with_wave_entry(tpu: PointTpu, vg: SurfaceVariogram, entry_xy_m) -> PointTpu:
+def with_wave_entry(tpu: PointTpu, vg: SurfaceVariogram, entry_xy_m, sea=None) -> PointTpu:
     """``tpu`` with the wave term (:data:`WAVE_TERM`, random, depth only).
 
     Its variance is that of :func:`wave_entry_sigma_m` at each sounding's offset ``Delta``
@@ -327,6 +306,8 @@ def with_wave_entry(tpu: PointTpu, vg: SurfaceVariogram, entry_xy_m) -> PointTpu
     vg : SurfaceVariogram
     entry_xy_m : (n, 2) array_like
         Horizontal water entry of each row's pulse.
+    sea : SeaCorrelation, optional
+        The correlation the depths used (``WaterSurface.sea_correlation``); None: ``rho = 1``.
     """
     entry = np.asarray(entry_xy_m, dtype=np.float64).reshape(-1, 2)
     if entry.shape[0] != len(tpu):
@@ -336,5 +317,6 @@ def with_wave_entry(tpu: PointTpu, vg: SurfaceVariogram, entry_xy_m) -> PointTpu
     for k in _TILT_TERMS:
         if k in tpu.terms:
             tilt_var += tpu.terms[k][:, DEPTH] ** 2
-    wave = np.sqrt(np.maximum(wave_entry_sigma_m(vg, delta) ** 2 - tilt_var, 0.0))
+    rho = None if sea is None else sea.at(delta)
+    wave = np.sqrt(np.maximum(wave_entry_sigma_m(vg, delta, rho) ** 2 - tilt_var, 0.0))
     return with_random_term(tpu, WAVE_TERM, np.zeros(len(tpu)), wave)

@@ -16,6 +16,7 @@ import pytest
 from scipy import constants
 
 from pipeline.process.returns import DetectedReturns
+from pipeline.process.sea_correlation import SeaCorrelation
 from pipeline.process.surface_fit import SurfaceFitSettings, fit_water_surface
 from pipeline.uncertainty.tpu import point_tpu
 from pipeline.uncertainty.tpu_measured import (
@@ -137,11 +138,15 @@ def test_photon_windows_of_a_long_survey_still_pair_across():
 
 
 def test_surface_ranging_raises_the_timing_and_reaches_the_depth():
-    """At nadir a surface timing error ``dt`` moves the surface point by ``c dt / (2 n_a)``
-    and the depth by ``c dt / (2 n_g)``: a measured ranging sigma ``s_r`` gives the depth
-    ``s_r n_a / n_g``. A detector sigma already larger is kept."""
+    """At nadir a surface timing error ``dt`` moves the surface point by ``dr = c dt / (2 n_a)``;
+    where the pulse enters at its own echo (``w = 1``) and the sea above the sounding is the
+    one met there (``rho = 1``), the entry, the sea above the sounding and the sounding all
+    move by ``dr`` but the in-water path shortens by ``dr n_a / n_g``: a measured ranging sigma
+    ``s_r`` gives the depth ``s_r n_a / n_g``. A detector sigma already larger is kept."""
     s_r = 0.05
     ret, surf = track(lambda x: np.zeros_like(x), 0.0, n=50)
+    everywhere = SeaCorrelation(np.array([100.0]), np.array([1.0]), 1)
+    surf = dataclasses.replace(surf, own_weight=np.ones(len(surf)), sea_correlation=everywhere)
     nb = len(SurfaceVariogram.empty().nugget_m2)
     vg = SurfaceVariogram(np.array([1.0]), np.array([s_r**2]), np.full(nb, s_r**2), 100)
     big = 2 * N_AIR * 0.2 / C  # 0.2 m of vertical ranging
@@ -176,3 +181,24 @@ def test_wave_term_adds_only_the_excess_over_the_plane_tilt():
     assert np.allclose(out.terms[WAVE_TERM][:, :3], 0.0)
     assert np.allclose(out.sigma_depth_m, np.hypot(tpu.sigma_depth_m, want))
     assert np.allclose(out.sigma_v_m, tpu.sigma_v_m)
+
+
+def test_wave_term_is_the_error_of_the_sea_predicted_at_the_sounding():
+    """Heights above the plane at E and B, variance sigma², correlation rho: the depth reads
+    ``rho s_E`` for the sea at B, whose error variance is sigma² (1 - rho²) (brute force over
+    drawn pairs); the variogram with gamma(h_0) = 0 and gamma(Delta) = sigma² (1 - rho) gives it."""
+    rng = np.random.default_rng(7)
+    sigma, rho = 0.3, 0.6
+    s_e = rng.normal(0, sigma, 200_000)
+    s_b = rho * s_e + np.sqrt(1 - rho**2) * rng.normal(0, sigma, s_e.size)
+    brute = np.var(s_b - rho * s_e)
+    nb = len(SurfaceVariogram.empty().nugget_m2)
+    vg = SurfaceVariogram(
+        np.array([0.1, 4.0]), np.array([0.0, sigma**2 * (1 - rho)]), np.zeros(nb), 1000
+    )
+    got = wave_entry_sigma_m(vg, np.array([4.0]), np.array([rho]))[0] ** 2
+    assert got == pytest.approx(brute, rel=0.02)
+    # read as the sea at E itself (rho = 1 in the depth): the variance of the difference
+    assert wave_entry_sigma_m(vg, np.array([4.0]))[0] ** 2 == pytest.approx(
+        np.var(s_b - s_e), rel=0.02
+    )
