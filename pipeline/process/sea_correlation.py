@@ -35,7 +35,7 @@ import numpy as np
 
 from pipeline.process.returns import DetectedReturns, PointFlag
 
-__all__ = ["LAG_EDGES_M", "SeaCorrelation", "sea_correlation"]
+__all__ = ["LAG_EDGES_M", "SeaCorrelation", "sea_correlation", "time_pairs"]
 
 #: Lag bins (m): fine at the lags of shallow soundings, up to those of 100 m depths.
 LAG_EDGES_M = (0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0)
@@ -78,7 +78,7 @@ class SeaCorrelation:
         return np.interp(lag, np.r_[0.0, self.lag_m], np.r_[1.0, self.rho])
 
 
-def _time_pairs(t: np.ndarray, group, max_dt_s: float):
+def time_pairs(t: np.ndarray, group, max_dt_s: float):
     """Pairs ``(i, j)``, ``i < j`` in time order, at most ``max_dt_s`` apart, not in one group."""
     n = t.size
     rng = np.random.default_rng(0)  # the same survey, the same pairs
@@ -144,7 +144,7 @@ def sea_correlation(
     order = np.argsort(t, kind="stable")
     idx, t = idx[order], t[order]
     g = None if group is None else np.asarray(group).ravel()[idx]
-    i, j = _time_pairs(t, g, np.inf if max_dt_s is None else float(max_dt_s))
+    i, j = time_pairs(t, g, np.inf if max_dt_s is None else float(max_dt_s))
     if i.size == 0:
         return empty
     p = surface.surface_point_m[idx]

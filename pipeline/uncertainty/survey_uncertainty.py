@@ -11,6 +11,9 @@ per-return sigmas (full waveform: the Cramér–Rao bound of each echo from its 
 shows more (:func:`~pipeline.uncertainty.tpu.pair_scatter`,
 :func:`~pipeline.uncertainty.tpu.timing_from_scatter`); without detector sigmas (photon
 counting) the scatter sets them.
+The surface returns' height variogram (:mod:`pipeline.uncertainty.tpu_measured`) raises the
+surface timing sigmas to the ranging error they show and adds the waves between each pulse's
+water entry and its sounding that the fitted plane's tilt does not hold.
 A photon-counting window's shots share one detection: they count as one sounding, and each
 shot carries the spread of the seabed under the window's shots
 (:mod:`pipeline.uncertainty.tpu_window`). Pulses the
@@ -40,6 +43,11 @@ from pipeline.uncertainty.tpu import (
     seabed_gradient,
     surface_tilt_sigma,
     timing_from_scatter,
+)
+from pipeline.uncertainty.tpu_measured import (
+    surface_variogram,
+    with_surface_ranging,
+    with_wave_entry,
 )
 from pipeline.uncertainty.tpu_window import (
     WINDOW_TERM,
@@ -143,6 +151,17 @@ def survey_uncertainty(
         max_sigma_s=ins.window_s / math.sqrt(12.0),
         raise_only=returns.t_bottom_sigma_s is not None,
     )
+    # the surface as its returns measure it: their height variogram's nugget (the ranging
+    # error of a surface point, e.g. a calm-water onset) raises each surface timing sigma
+    shots = ins.shots_per_window if ins.photon_counting else None
+    vg = surface_variogram(
+        returns,
+        processed.surface,
+        max_dt_s=st.surface_pair_max_dt_s,
+        min_pairs=st.surface_min_pairs,
+        group=None if shots is None else returns.pulse_id // shots,
+    )
+    returns = with_surface_ranging(returns, processed.surface, vg)
     tpu = point_tpu(
         returns, processed.surface, refr, st, seabed_gradient=grad, surface_tilt_sigma_rad=tilt
     )
@@ -163,6 +182,10 @@ def survey_uncertainty(
             points40.xyz_m[:, :2], points40.pulse_id // ins.shots_per_window, g40
         )
         tpu40 = with_random_term(tpu40, WINDOW_TERM, spread, spread)
+    # the waves between each pulse's water entry and its sounding (the variogram's wave part
+    # beyond what the fitted plane's measured tilt already holds)
+    surf = processed.surface
+    tpu40 = with_wave_entry(tpu40, vg, surf.entry_m[tpu40.row, :2], surf.sea_correlation)
     cells = cell_uncertainty(grid, tpu40)
     return SurveyUncertainty(
         tpu40=tpu40,

@@ -85,6 +85,11 @@ circular normal, ``sqrt((s_x^2 + s_y^2) / 2)``. The IHO 95 % values are ``1.96 s
 ``2.45 sigma_h``.
 :func:`monte_carlo_points` redraws every input and recomputes the points with
 :func:`~pipeline.process.refraction.seabed_points` (the check of the linearisation).
+The survey also measures the water surface from its own surface returns
+(:mod:`pipeline.uncertainty.tpu_measured`): the nugget of their height variogram raises each
+surface timing sigma (the ranging error a calm-water onset or a spread echo makes, which the
+per-echo bound misses), and its wave part at each sounding's entry offset adds one more random
+depth term, ``wave_entry``, beyond what the fitted plane's tilt terms hold.
 A photon-counting window's shots share one detected depth: the survey adds the spread of the
 seabed plane under them as one more random term
 (:mod:`pipeline.uncertainty.tpu_window`, :func:`~pipeline.uncertainty.tpu_window.
