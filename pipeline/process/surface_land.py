@@ -117,23 +117,30 @@ def global_plane(ps: np.ndarray, st, wet: np.ndarray | None = None) -> tuple[np.
         level = 0.5 * (edges[i] + edges[i + 1])
     plane = np.array([level, 0.0, 0.0])
     sigma = 0.0
+    used = None
     for _ in range(6):
         res = z - (plane[0] + plane[1] * ps[:, 0] + plane[2] * ps[:, 1])
         band = (res > -st.below_margin_m) & (res < st.land_margin_m)
         if band.sum() < 3:
             break
-        new, sigma = _plane_lstsq(ps[band, 0], ps[band, 1], z[band], st.global_tilt_prior_rad)
+        new, sigma = _plane_lstsq(ps[band, 0], ps[band, 1], z[band])
+        used = (ps[band, 0], ps[band, 1], z[band])
         # one robust pass: drop gross outliers of this fit, then refit
         r2 = z[band] - (new[0] + new[1] * ps[band, 0] + new[2] * ps[band, 1])
         keep = np.abs(r2) <= max(st.outlier_sigma * MAD_TO_SIGMA * np.median(np.abs(r2)), 1e-9)
         keep |= np.abs(r2) <= st.outlier_floor_m
         if keep.sum() >= 3:
             xb, yb, zb = ps[band, 0][keep], ps[band, 1][keep], z[band][keep]
-            new, sigma = _plane_lstsq(xb, yb, zb, st.global_tilt_prior_rad)
+            new, sigma = _plane_lstsq(xb, yb, zb)
+            used = (xb, yb, zb)
         converged = np.allclose(new, plane, rtol=0.0, atol=1e-12)
         plane = new
         if converged:
             break
+    if used is not None:
+        # the band chosen, the tilt once more under its prior (the band iterations run without
+        # it: a steep synthetic plane would otherwise never enter its own band)
+        plane, sigma = _plane_lstsq(*used, st.global_tilt_prior_rad)
     return plane, sigma
 
 
