@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.constants import FWHM_TO_SIGMA
 from pipeline.process.context import ProcessingContext
 from pipeline.stages import StageClock
 from pipeline.uncertainty.photon_posterior import KeptPhotons, keep_windows
@@ -205,6 +206,8 @@ def _photon_chunk(job: ChunkJob, clock: StageClock, paths, pulses):
             # the detection limit's assumptions (class 45), as the full-waveform one's
             no_bottom=scene.process.no_bottom,
             group_index=job.ctx.refraction.group_index,
+            # the system response processing assumes (pulse and detector): the surface's pulse
+            pulse_sigma_s=job.ctx.instrument.system_fwhm_s * FWHM_TO_SIGMA,
         )
     kept = keep_windows(
         pulses.pulse_id,
