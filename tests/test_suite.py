@@ -357,7 +357,7 @@ def test_ci_no_gross_error_held_out(ci_suite):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="measured: TPU 95 % coverage 98.6 % tuning (too wide), 96.5 % held-out")
+@pytest.mark.xfail(strict=True, reason="measured: TPU 95 % coverage 98.6 % tuning, 96.5 % held-out")
 def test_ci_tpu_95_coverage_floor(ci_suite):
     for h in ("tuning", "heldout"):
         assert 0.93 <= ci_suite["strata"][("all", "all")][h]["tpu"]["cov95"] <= 0.97
