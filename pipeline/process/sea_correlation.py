@@ -35,7 +35,14 @@ import numpy as np
 
 from pipeline.process.returns import DetectedReturns, PointFlag
 
-__all__ = ["LAG_EDGES_M", "SeaCorrelation", "sea_correlation", "time_pairs"]
+__all__ = [
+    "LAG_EDGES_M",
+    "SeaCorrelation",
+    "SurfacePairs",
+    "sea_correlation",
+    "surface_pairs",
+    "time_pairs",
+]
 
 #: Lag bins (m): fine at the lags of shallow soundings, up to those of 100 m depths.
 LAG_EDGES_M = (0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0)
@@ -103,6 +110,59 @@ def time_pairs(t: np.ndarray, group, max_dt_s: float):
     return np.concatenate(ii), np.concatenate(jj)
 
 
+@dataclass(frozen=True)
+class SurfacePairs:
+    """Pairs of near-simultaneous surface points, both heights above the earlier one's plane.
+
+    Attributes
+    ----------
+    row_i, row_j : (p,) int64
+        Pulse rows of the earlier (anchor) and the later point of each pair.
+    s_i_m, s_j_m : (p,) float64
+        Their heights above the anchor's local plane (what a sounding's depth reads: its
+        entry and the sea over it, against its own plane).
+    lag_m : (p,) float64
+        Horizontal separation.
+    """
+
+    row_i: np.ndarray
+    row_j: np.ndarray
+    s_i_m: np.ndarray
+    s_j_m: np.ndarray
+    lag_m: np.ndarray
+
+
+def surface_pairs(
+    returns: DetectedReturns, surface, *, max_dt_s: float | None, group=None
+) -> SurfacePairs | None:
+    """Pairs of the water pulses' own, non-outlier surface points; None without any.
+
+    :func:`time_pairs` in emission-time order (pulse-id order, no time limit, without
+    ``t_emit_s``); ``group``: pulses sharing one detection (never paired together).
+    """
+    ok = surface.is_water & returns.has_surface
+    ok &= (surface.flags & np.uint16(PointFlag.SURFACE_OUTLIER)) == 0
+    idx = np.flatnonzero(ok)
+    if idx.size < 2:
+        return None
+    if returns.t_emit_s is not None:
+        t = np.asarray(returns.t_emit_s, dtype=np.float64)[idx]
+    else:
+        t, max_dt_s = returns.pulse_id[idx].astype(np.float64), None
+    order = np.argsort(t, kind="stable")
+    idx, t = idx[order], t[order]
+    g = None if group is None else np.asarray(group).ravel()[idx]
+    i, j = time_pairs(t, g, np.inf if max_dt_s is None else float(max_dt_s))
+    if i.size == 0:
+        return None
+    p = surface.surface_point_m[idx]
+    anchor = idx[i]
+    s_i = p[i, 2] - surface.surface_z_m(anchor, p[i, 0], p[i, 1])
+    s_j = p[j, 2] - surface.surface_z_m(anchor, p[j, 0], p[j, 1])
+    lag = np.hypot(p[i, 0] - p[j, 0], p[i, 1] - p[j, 1])
+    return SurfacePairs(anchor, idx[j], s_i, s_j, lag)
+
+
 def sea_correlation(
     returns: DetectedReturns,
     surface,
@@ -131,27 +191,11 @@ def sea_correlation(
     -------
     SeaCorrelation
     """
-    ok = surface.is_water & returns.has_surface
-    ok &= (surface.flags & np.uint16(PointFlag.SURFACE_OUTLIER)) == 0
-    idx = np.flatnonzero(ok)
+    pairs = surface_pairs(returns, surface, max_dt_s=max_dt_s, group=group)
     empty = SeaCorrelation(np.zeros(0), np.zeros(0), 0)
-    if idx.size < 2:
+    if pairs is None:
         return empty
-    if returns.t_emit_s is not None:
-        t = np.asarray(returns.t_emit_s, dtype=np.float64)[idx]
-    else:
-        t, max_dt_s = returns.pulse_id[idx].astype(np.float64), None
-    order = np.argsort(t, kind="stable")
-    idx, t = idx[order], t[order]
-    g = None if group is None else np.asarray(group).ravel()[idx]
-    i, j = time_pairs(t, g, np.inf if max_dt_s is None else float(max_dt_s))
-    if i.size == 0:
-        return empty
-    p = surface.surface_point_m[idx]
-    anchor = idx[i]
-    s_i = p[i, 2] - surface.surface_z_m(anchor, p[i, 0], p[i, 1])
-    s_j = p[j, 2] - surface.surface_z_m(anchor, p[j, 0], p[j, 1])
-    lag = np.hypot(p[i, 0] - p[j, 0], p[i, 1] - p[j, 1])
+    i, s_i, s_j, lag = pairs.row_i, pairs.s_i_m, pairs.s_j_m, pairs.lag_m
     edges = np.asarray(LAG_EDGES_M)
     b = np.digitize(lag, edges) - 1
     inside = (b >= 0) & (b < edges.size - 1)

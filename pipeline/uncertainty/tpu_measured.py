@@ -49,14 +49,13 @@ Measured data only: surface points, their emission times, the fitted planes.
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S
-from pipeline.process.returns import DetectedReturns, PointFlag
-from pipeline.process.sea_correlation import time_pairs
+from pipeline.process.returns import DetectedReturns
+from pipeline.process.sea_correlation import surface_pairs
 from pipeline.process.surface_fit import WaterSurface
 from pipeline.uncertainty.tpu_settings import DEPTH, PointTpu
 from pipeline.uncertainty.tpu_window import with_random_term
@@ -172,35 +171,16 @@ def surface_variogram(
     -------
     SurfaceVariogram
     """
-    ok = surface.is_water & returns.has_surface
-    ok &= (surface.flags & np.uint16(PointFlag.SURFACE_OUTLIER)) == 0
-    idx = np.flatnonzero(ok)
-    if idx.size < 2:
+    pairs = surface_pairs(returns, surface, max_dt_s=max_dt_s, group=group)
+    if pairs is None:
         return SurfaceVariogram.empty()
-    if returns.t_emit_s is not None:
-        t = np.asarray(returns.t_emit_s, dtype=np.float64)[idx]
-    else:
-        t, max_dt_s = returns.pulse_id[idx].astype(np.float64), math.inf
-    order = np.argsort(t, kind="stable")
-    idx, t = idx[order], t[order]
-    g = None if group is None else np.asarray(group).ravel()[idx]
-    i, j = time_pairs(t, g, max_dt_s)
-    if i.size == 0:
-        return SurfaceVariogram.empty()
-    p = surface.surface_point_m[idx]
-    # both heights above the earlier pulse's own local plane: what a sounding's depth reads
-    # (its entry and the point above it, both against its own plane)
-    own_plane = idx[i]
-    d = (p[i, 2] - surface.surface_z_m(own_plane, p[i, 0], p[i, 1])) - (
-        p[j, 2] - surface.surface_z_m(own_plane, p[j, 0], p[j, 1])
-    )
-    lag = np.hypot(p[i, 0] - p[j, 0], p[i, 1] - p[j, 1])
-    cos_i = np.abs(np.sum(returns.direction_meas[idx] * surface.normal[idx], axis=1))
-    inc = np.degrees(np.arccos(np.clip(cos_i, 0.0, 1.0)))
+    d, lag = pairs.s_i_m - pairs.s_j_m, pairs.lag_m
+    inc_i, _ = _incidence_deg(returns, surface, pairs.row_i)
+    inc_j, _ = _incidence_deg(returns, surface, pairs.row_j)
     # pairs of like incidence only: the ranging error then is the same at every lag and only
     # the sea makes the variogram rise (an oscillating scanner pairs nadir and edge otherwise)
-    like = np.abs(inc[i] - inc[j]) <= _LIKE_INCIDENCE_DEG
-    d, lag, inc_pair = d[like], lag[like], 0.5 * (inc[i] + inc[j])[like]
+    like = np.abs(inc_i - inc_j) <= _LIKE_INCIDENCE_DEG
+    d, lag, inc_pair = d[like], lag[like], 0.5 * (inc_i + inc_j)[like]
     edges = np.asarray(LAG_EDGES_M)
     lag_bin = np.digitize(lag, edges) - 1
     lags, gammas = [], []
@@ -224,7 +204,7 @@ def surface_variogram(
                 break
         if hs:
             nugget[b] = _nugget(np.array(hs), np.array(gs))
-    return SurfaceVariogram(np.array(lags), np.array(gammas), nugget, int(i.size))
+    return SurfaceVariogram(np.array(lags), np.array(gammas), nugget, int(pairs.row_i.size))
 
 
 def _incidence_deg(returns, surface, rows):
