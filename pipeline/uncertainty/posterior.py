@@ -55,10 +55,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-import emcee
 import numpy as np
 
 from pipeline.process.detect import DetectSettings
+from pipeline.uncertainty.posterior_loop import run_steps
 from pipeline.uncertainty.posterior_moves import BlockDEMove, BlockIndependenceMove
 from pipeline.uncertainty.posterior_settings import PosteriorFlag, PosteriorSettings
 from pipeline.uncertainty.posterior_start import (
@@ -302,34 +302,10 @@ def _run(data: PulseBatch, pulses, pos, system, st, n_steps: int, thin: int, rng
         Fraction of proposals accepted per pulse (both moves).
     """
     sub = PulseBatch(*(getattr(data, f)[pulses] for f in _BATCH_FIELDS))
-    nw, n_p = pos.shape[0], len(pulses)
-    de = BlockDEMove(n_p, N_PARAMS)
-    ind = BlockIndependenceMove(proposal[0], proposal[1], st.proposal_dof)
-    w = st.independence_weight
-    moves = [(de, 1.0 - w), (ind, w)] if 0.0 < w < 1.0 else [(ind if w >= 1.0 else de, 1.0)]
-    weights = np.array([m[1] for m in moves])
-    weights /= weights.sum()
-    # emcee's EnsembleSampler loop, without its per-step bookkeeping (it copied the generator
-    # state and split every walker's blobs in Python each step, which cost as much as the
-    # compiled model): the same generator, move choice and moves, so the same chains
-    rnd = np.random.RandomState(int(rng.integers(2**31)))
-
-    def evaluate(coords):
-        out = log_prob_blocks(coords, sub, system)
-        return out[:, 0], out[:, 1:]
-
-    model = emcee.model.Model(None, evaluate, map, rnd)
-    coords = pos.reshape(nw, n_p * N_PARAMS).copy()
-    state = emcee.State(coords, *evaluate(coords))
-    chain = np.empty((n_steps // thin, nw, n_p * N_PARAMS))
-    for k in range(chain.shape[0]):
-        for _ in range(thin):
-            move = moves[rnd.choice(len(moves), p=weights)][0]
-            state, _ = move.propose(model, state)
-        chain[k] = state.coords
-    chain = chain.reshape(-1, nw, n_p, N_PARAMS)
-    acc = (de.accepted + ind.accepted) / max(de.proposed + ind.proposed, 1)
-    return state.coords.reshape(nw, n_p, N_PARAMS), (chain, acc)
+    # emcee's EnsembleSampler loop on these moves, compiled (posterior_loop: the same
+    # generator, draws and decisions, so the same chains; without its per-step Python: the
+    # moves' numpy and the sampler's bookkeeping cost more than the compiled model)
+    return run_steps(sub, pos, system, st, n_steps, thin, rng, proposal)
 
 
 def integrated_time_blocks(x: np.ndarray, c: float = 5.0) -> np.ndarray:
