@@ -58,6 +58,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.process.detect import DetectSettings
+from pipeline.uncertainty.posterior_autocorr import integrated_time_blocks
 from pipeline.uncertainty.posterior_loop import run_steps
 from pipeline.uncertainty.posterior_moves import BlockDEMove, BlockIndependenceMove
 from pipeline.uncertainty.posterior_settings import PosteriorFlag, PosteriorSettings
@@ -90,6 +91,7 @@ __all__ = [
     "start_theta",
     "posterior_modes",
     "sample_batch",
+    "integrated_time_blocks",
     "interval_summary",
 ]
 
@@ -306,40 +308,6 @@ def _run(data: PulseBatch, pulses, pos, system, st, n_steps: int, thin: int, rng
     # generator, draws and decisions, so the same chains; without its per-step Python: the
     # moves' numpy and the sampler's bookkeeping cost more than the compiled model)
     return run_steps(sub, pos, system, st, n_steps, thin, rng, proposal)
-
-
-def integrated_time_blocks(x: np.ndarray, c: float = 5.0) -> np.ndarray:
-    """Integrated autocorrelation times of many chains at once, as emcee estimates them.
-
-    :func:`emcee.autocorr.integrated_time` (``tol=0``) for every pulse and parameter in one
-    FFT along the steps: the normalised autocorrelation function of each walker's series,
-    averaged over the walkers, summed to ``taus = 2 cumsum(f) - 1`` and cut at Sokal's window
-    (the first lag ``M >= c taus[M]``). emcee loops over walkers and parameters in Python,
-    which cost more than the model once the model was compiled.
-
-    Parameters
-    ----------
-    x : (n_steps, n_walkers, P, 9) ndarray
-        Stored chains.
-    c : float
-        Sokal's window constant (emcee's default 5).
-
-    Returns
-    -------
-    (P, 9) ndarray
-        In stored steps; NaN where a series is constant (emcee gives NaN there too).
-    """
-    n_t = x.shape[0]
-    n_fft = 1 << max(int(n_t - 1).bit_length(), 0)  # emcee's next power of two
-    y = np.moveaxis(x - x.mean(axis=0), 0, -1).copy()  # steps last: contiguous transforms
-    f = np.fft.rfft(y, n=2 * n_fft, axis=-1)
-    acf = np.fft.irfft(f.real**2 + f.imag**2, n=2 * n_fft, axis=-1)[..., :n_t]
-    with np.errstate(invalid="ignore", divide="ignore"):  # a stuck chain: acf 0/0
-        acf = acf / acf[..., :1]
-    taus = 2.0 * np.cumsum(np.moveaxis(acf.mean(axis=0), -1, 0), axis=0) - 1.0  # (n_t, P, 9)
-    m = np.arange(n_t)[:, None, None] < c * taus
-    window = np.where(m.any(axis=0), np.argmin(m, axis=0), n_t - 1)
-    return np.take_along_axis(taus, window[None], axis=0)[0]
 
 
 _BATCH_FIELDS = (

@@ -29,10 +29,10 @@ import numpy as np
 from pipeline.errors import NumericalError
 from pipeline.uncertainty.posterior_moves import BlockIndependenceMove
 from pipeline.uncertainty.posterior_target import PulseBatch, log_prob_blocks
-from pipeline.uncertainty.waveform_kernel import log_post_rows
+from pipeline.uncertainty.waveform_kernel import log_post_rows_bounded
 from pipeline.uncertainty.waveform_model import N_PARAMS
 
-__all__ = ["run_steps"]
+__all__ = ["run_steps", "term_bounds"]
 
 _DE, _IND = 0, 1
 #: emcee's DEMove defaults (as :class:`~pipeline.uncertainty.posterior_moves.BlockDEMove`).
@@ -80,7 +80,11 @@ def run_steps(data: PulseBatch, pos, system, st, n_steps: int, thin: int, rng, p
         system.floor_variance,
         system.excess_noise_factor * system.counts_per_photoelectron,
     )
-    args = (data.samples, data.n_valid, data.cos_water, box, data.ln_k_prior, sysv, data.exposure)
+    rest, b_abs = term_bounds(data, system)
+    args = (
+        rest, b_abs, data.samples, data.n_valid, data.cos_water, box, data.ln_k_prior, sysv,
+        data.exposure,
+    )  # fmt: skip
     counts = np.zeros((2, n_p))  # accepted by DE, independence
     proposed = np.zeros(2, dtype=np.int64)
     per_step = nw * n_p * (N_PARAMS + 3)
@@ -155,12 +159,61 @@ def _draw_block(rnd, n: int, kinds, weights, nw: int, n_p: int, ind: BlockIndepe
         z, chi = np.stack(z_all), np.stack(chi_all)
         w = np.sqrt(ind.dof / chi)
         q = ind.centre + (ind.chol @ z[..., None])[..., 0] * w
-        lg_q = np.stack([ind._log_g(x) for x in q])
+        lg_q = _log_g_steps(ind, q)
         ind_u = np.log(np.stack(u_all))
     else:
         q = np.zeros((0, nw, n_p, N_PARAMS))
         lg_q, ind_u = np.zeros((0, nw, n_p)), np.zeros((0, nw, n_p))
     return kind, halves, j1s, j2s, jit, np.log(de_u), np.ascontiguousarray(q), lg_q, ind_u
+
+
+def _log_g_steps(ind: BlockIndependenceMove, x: np.ndarray) -> np.ndarray:
+    """:meth:`BlockIndependenceMove._log_g` of many steps' walkers ``x`` (k, nw, P, 9) at once.
+
+    The same operations (numpy's matrix product per block, the sum over the last axis), so
+    the same values as step by step.
+    """
+    z = (ind.inv_chol @ (x - ind.centre)[..., None])[..., 0]
+    d = ind.centre.shape[1]
+    return -0.5 * (ind.dof + d) * np.log1p(np.sum(z * z, axis=-1) / ind.dof)
+
+
+def term_bounds(data: PulseBatch, system) -> tuple[np.ndarray, np.ndarray]:
+    """Upper bounds of the log-likelihood terms from each sample on, for the early rejection.
+
+    Each sample's term is bounded over every mean ``mu`` it could take. Poisson:
+    ``y log(e mu) - e mu <= y log y - y`` (0 for ``y = 0``). Gaussian,
+    ``-((y - mu)^2 / v + log v) / 2`` with ``v = F + S max(mu - O, 0)``: for ``mu <= O``
+    (``v = F``) the largest is at ``mu = min(y, O)``; for ``mu >= O``, with
+    ``c = y - O + F / S`` the term is ``-(c^2 / v - 2 c / S + v / S^2 + log v) / 2``, whose
+    only maximum over ``v > 0`` is the root of ``v^2 / S^2 + v - c^2 = 0``,
+    ``v* = 2 c^2 / (1 + sqrt(1 + 4 c^2 / S^2))``, taken at ``max(v*, F)``.
+
+    Returns
+    -------
+    rest : (P, m + 1) ndarray
+        ``rest[p, i]``: sum of pulse ``p``'s bounds over its valid samples ``i`` and after
+        (0 at ``m``).
+    b_abs : (P,) ndarray
+        Sum of the bounds' magnitudes (the scale of the thresholds' slack).
+    """
+    y = data.samples
+    if system.poisson:
+        b = np.where(y > 0.0, y * np.log(np.where(y > 0.0, y, 1.0)) - y, 0.0)
+    else:
+        f, o = system.floor_variance, system.offset_counts
+        s = system.excess_noise_factor * system.counts_per_photoelectron
+        b = np.where(y <= o, -0.5 * math.log(f), -0.5 * ((y - o) ** 2 / f + math.log(f)))
+        if s > 0.0:
+            c = y - o + f / s
+            v = np.maximum(2.0 * c * c / (1.0 + np.sqrt(1.0 + 4.0 * c * c / s**2)), f)
+            b = np.maximum(b, -0.5 * ((c - v / s) ** 2 / v + np.log(v)))
+        else:
+            b = np.full(y.shape, -0.5 * math.log(f))
+    b = np.where(data.valid, b + 1e-9 * (1.0 + np.abs(b)), 0.0)
+    rest = np.zeros((y.shape[0], y.shape[1] + 1))
+    rest[:, :-1] = np.cumsum(b[:, ::-1], axis=1)[:, ::-1]
+    return rest, np.abs(b).sum(axis=1)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -181,7 +234,7 @@ def _log_g_one(x, centre, inv_chol, dof):
 def _advance(
     coords, lp, lg, lg_ok, kind, halves, j1s, j2s, jit, de_log_u, q_ind, lg_q, ind_log_u,
     centre, inv_chol, dof, chain, done, thin, counts, proposed,
-    samples, n_valid, cos_water, box, ln_k_prior, system, exposure,
+    rest, b_abs, samples, n_valid, cos_water, box, ln_k_prior, system, exposure,
 ):  # fmt: skip
     """Run the pre-drawn steps on ``coords`` (nw, P, 9) and ``lp`` (nw, P) in place.
 
@@ -222,8 +275,14 @@ def _advance(
                 bad = _bad_rows(q)
                 if bad >= 0:
                     return bad
-                new = log_post_rows(
-                    q, samples, n_valid, cos_water, box, ln_k_prior, system, exposure
+                # accepted iff log u < new - old: rows shown to fall below are cut short
+                thr = np.empty(ns * n_p)
+                for a in range(ns):
+                    for p in range(n_p):
+                        th_ = de_log_u[k_de, half, a, p] + lp[sel[a], p]
+                        thr[a * n_p + p] = th_ - _margin(th_, lp[sel[a], p], b_abs[p])
+                new = log_post_rows_bounded(
+                    q, thr, rest, samples, n_valid, cos_water, box, ln_k_prior, system, exposure
                 )
                 for a in range(ns):
                     wa = sel[a]
@@ -243,15 +302,23 @@ def _advance(
             bad = _bad_rows(qk)
             if bad >= 0:
                 return bad
-            new = log_post_rows(qk, samples, n_valid, cos_water, box, ln_k_prior, system, exposure)
+            # accepted iff log u < new - old + lg(x) - lg(q): rows shown below are cut short
+            thr = np.empty(nw * n_p)
+            for w in range(nw):
+                for p in range(n_p):
+                    if not lg_ok[w, p]:
+                        lg[w, p] = _log_g_one(coords[w, p], centre[p], inv_chol[p], dof)
+                        lg_ok[w, p] = True
+                    th_ = ind_log_u[k_ind, w, p] + lp[w, p] - lg[w, p] + lg_q[k_ind, w, p]
+                    thr[w * n_p + p] = th_ - _margin(th_, lp[w, p], b_abs[p] + abs(lg[w, p]))
+            new = log_post_rows_bounded(
+                qk, thr, rest, samples, n_valid, cos_water, box, ln_k_prior, system, exposure
+            )
             for w in range(nw):
                 for p in range(n_p):
                     v = new[w * n_p + p]
                     if math.isnan(v) or v == np.inf:
                         return w * n_p + p
-                    if not lg_ok[w, p]:
-                        lg[w, p] = _log_g_one(coords[w, p], centre[p], inv_chol[p], dof)
-                        lg_ok[w, p] = True
                     log_alpha = v - lp[w, p] + lg[w, p] - lg_q[k_ind, w, p]
                     if ind_log_u[k_ind, w, p] < log_alpha:
                         coords[w, p, :] = q_ind[k_ind, w, p]
@@ -264,6 +331,16 @@ def _advance(
         if step % thin == 0:
             chain[step // thin - 1] = coords
     return -1
+
+
+@numba.njit(cache=True, nogil=True)
+def _margin(thr, lp, scale):
+    """Slack under a Metropolis threshold for the early rejection.
+
+    Rounding moves the sums by ~1e-13 of these magnitudes; the slack is 1e-6 of them, so no
+    row that could pass is cut.
+    """
+    return 1e-6 * (1.0 + abs(thr) + abs(lp) + scale)
 
 
 @numba.njit(cache=True, nogil=True)
