@@ -246,7 +246,9 @@ def sample_batch(
                 centres[i], scales[i] = x.mean(axis=0), cov
     proposal = (centres, scales * st.proposal_scale**2)
     # production in chunks; converged pulses leave, the others continue from where they are
-    stored = [[] for _ in range(n_p)]
+    # the stored chains, (steps, walkers, P, 9), grown by doubling; n_stored per pulse
+    stored = np.empty((0, st.n_walkers, n_p, N_PARAMS))
+    n_stored = np.zeros(n_p, dtype=np.int64)
     acc_sum = np.zeros(n_p)
     n_steps = np.zeros(n_p, dtype=np.int64)
     tau = np.full((n_p, N_PARAMS), np.inf)
@@ -261,14 +263,18 @@ def sample_batch(
         pos[:, active] = new_pos
         n_steps[active] += chunk
         acc_sum[active] += acc * chunk
-        for k, i in enumerate(active):
-            stored[i].append(chain[:, :, k])
+        k0 = int(n_stored[active[0]])  # the active pulses started together: same lengths
+        if k0 + chain.shape[0] > stored.shape[0]:
+            grown = np.empty((max(2 * stored.shape[0], k0 + chain.shape[0]), *stored.shape[1:]))
+            grown[: stored.shape[0]] = stored
+            stored = grown
+        stored[k0 : k0 + chain.shape[0], :, active] = chain
+        n_stored[active] += chain.shape[0]
         # the active pulses started together: their chains are equally long, checked at once
         steps = int(n_steps[active[0]])
         if steps < st.min_steps and steps < st.max_steps:
             continue
-        x = np.stack([np.concatenate(stored[i], axis=0) for i in active], axis=2)
-        t_a = st.thin * integrated_time_blocks(x)
+        t_a = st.thin * integrated_time_blocks(stored, active, k0 + chain.shape[0])
         tau[active] = np.where(np.isfinite(t_a), t_a, np.inf)
         done = (steps >= st.tau_factor * tau[active].max(axis=1)) | (steps >= st.max_steps)
         active = active[~done]
@@ -278,7 +284,7 @@ def sample_batch(
     lo, hi = st.acceptance_range
     flags[(acc <= lo) | (acc >= hi)] |= np.uint16(PosteriorFlag.ACCEPTANCE)
     # the same number of draws for every pulse, evenly spread over each pulse's whole chain
-    flats = [np.concatenate(x, axis=0).reshape(-1, N_PARAMS) for x in stored]
+    flats = [stored[: n_stored[i], :, i].reshape(-1, N_PARAMS) for i in range(n_p)]
     n_draws = min(st.max_draws, *(f.shape[0] for f in flats))
     draws = np.stack([f[np.linspace(0, f.shape[0] - 1, n_draws).astype(np.int64)] for f in flats])
     d_lo = np.quantile(draws[:, :, 0], 0.025, axis=1)

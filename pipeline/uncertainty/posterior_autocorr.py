@@ -29,13 +29,19 @@ __all__ = ["integrated_time_blocks", "MAX_DIRECT_LAGS"]
 MAX_DIRECT_LAGS = 256
 
 
-def integrated_time_blocks(x: np.ndarray, c: float = 5.0) -> np.ndarray:
+def integrated_time_blocks(
+    x: np.ndarray, pulses: np.ndarray | None = None, n_steps: int | None = None, c: float = 5.0
+) -> np.ndarray:
     """Integrated autocorrelation times of many chains at once, as emcee estimates them.
 
     Parameters
     ----------
-    x : (n_steps, n_walkers, P, 9) ndarray
+    x : (n, n_walkers, P_all, 9) ndarray
         Stored chains.
+    pulses : (P,) int array, optional
+        The pulses (third axis of ``x``) wanted; default all.
+    n_steps : int, optional
+        Their stored steps (the leading ``n_steps`` of ``x``); default ``n``.
     c : float
         Sokal's window constant (emcee's default 5).
 
@@ -44,22 +50,27 @@ def integrated_time_blocks(x: np.ndarray, c: float = 5.0) -> np.ndarray:
     (P, 9) ndarray
         In stored steps; NaN where a series is constant (emcee gives NaN there too).
     """
-    tau = _tau_direct(np.ascontiguousarray(x), float(c), MAX_DIRECT_LAGS)
+    pulses = np.arange(x.shape[2]) if pulses is None else np.asarray(pulses, dtype=np.int64)
+    n_steps = x.shape[0] if n_steps is None else int(n_steps)
+    tau = _tau_direct(np.ascontiguousarray(x), pulses, n_steps, float(c), MAX_DIRECT_LAGS)
     far = np.isinf(tau)  # a window beyond the direct lags: those series by FFT
     if far.any():
-        tau[far] = _integrated_time_fft(x[:, :, far][:, :, :, None], c)[:, 0]
+        sub = x[:n_steps][:, :, pulses][:, :, far]
+        tau[far] = _integrated_time_fft(sub[:, :, :, None], c)[:, 0]
     return tau
 
 
 # reassociated sums (vectorised lag products; rounding-level changes), 0/0 = NaN as numpy
 @numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "contract"})
-def _tau_direct(x, c, max_lags):
-    """The emcee estimate per series of ``x`` (steps, walkers, P, 9) by direct lag sums.
+def _tau_direct(x, pulses, n_t, c, max_lags):
+    """The emcee estimate per series of ``x[:n_t, :, pulses]`` by direct lag sums.
 
+    ``x`` (steps, walkers, P_all, 9) as stored, read in place (no gathered copy).
     ``inf`` where no lag up to ``max_lags`` closes the window (the caller takes the FFT
     there); NaN where a walker's series is constant (its normalised function is 0/0).
     """
-    n_t, nw, n_p, n_j = x.shape
+    nw, n_j = x.shape[1], x.shape[3]
+    n_p = pulses.shape[0]
     out = np.empty((n_p, n_j))
     z = np.empty((nw, n_t))
     norm = np.empty(nw)
@@ -68,7 +79,7 @@ def _tau_direct(x, c, max_lags):
             for w in range(nw):
                 mean = 0.0
                 for t in range(n_t):
-                    z[w, t] = x[t, w, p, j]  # one strided read into a contiguous series
+                    z[w, t] = x[t, w, pulses[p], j]  # one strided read, a contiguous series
                     mean += z[w, t]
                 mean /= n_t
                 a0 = 0.0

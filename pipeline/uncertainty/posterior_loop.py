@@ -119,52 +119,43 @@ def _draw_block(rnd, n: int, kinds, weights, nw: int, n_p: int, ind: BlockIndepe
     cdf = weights.cumsum()
     cdf /= cdf[-1]
     n_half = [int(np.sum(np.arange(nw) % 2 == h)) for h in (0, 1)]
-    n_de = 0
-    de = []
-    z_all, chi_all, u_all = [], [], []
+    halves = np.zeros((n, nw), dtype=np.int64)
+    j1s = np.zeros((n, 2, nw, n_p), dtype=np.int64)
+    j2s = np.zeros((n, 2, nw, n_p), dtype=np.int64)
+    jit = np.zeros((n, 2, nw, n_p))
+    de_u = np.ones((n, 2, nw, n_p))
+    z = np.empty((n, nw, n_p, N_PARAMS))
+    chi = np.empty((n, nw, n_p, 1))
+    ind_u = np.empty((n, nw, n_p))
+    k_de = k_ind = 0
     for t in range(n):
         kd = kinds[int(cdf.searchsorted(rnd.random_sample(), side="right"))]
         kind[t] = kd
         if kd == _DE:  # BlockDEMove.propose's draws, in its order
-            halves = np.arange(nw) % 2
-            rnd.shuffle(halves)
-            step = [halves]
+            h = np.arange(nw) % 2
+            rnd.shuffle(h)
+            halves[k_de] = h
             for half in (0, 1):
                 ns = n_half[half]
                 nc = nw - ns
                 j1 = rnd.randint(nc, size=(ns, n_p))
-                j2 = (j1 + 1 + rnd.randint(nc - 1, size=(ns, n_p))) % nc
-                jit = _DE_SIGMA * rnd.randn(ns, n_p, 1)[:, :, 0]
-                step += [j1, j2, jit, rnd.rand(ns, n_p)]
-            de.append(step)
-            n_de += 1
+                j1s[k_de, half, :ns] = j1
+                j2s[k_de, half, :ns] = (j1 + 1 + rnd.randint(nc - 1, size=(ns, n_p))) % nc
+                jit[k_de, half, :ns] = _DE_SIGMA * rnd.randn(ns, n_p, 1)[:, :, 0]
+                de_u[k_de, half, :ns] = rnd.rand(ns, n_p)
+            k_de += 1
         else:  # BlockIndependenceMove.propose's draws, in its order
-            z_all.append(rnd.randn(nw, n_p, N_PARAMS))
-            chi_all.append(rnd.chisquare(ind.dof, size=(nw, n_p, 1)))
-            u_all.append(rnd.rand(nw, n_p))
-    halves = np.zeros((n_de, nw), dtype=np.int64)
-    j1s = np.zeros((n_de, 2, nw, n_p), dtype=np.int64)
-    j2s = np.zeros((n_de, 2, nw, n_p), dtype=np.int64)
-    jit = np.zeros((n_de, 2, nw, n_p))
-    de_u = np.ones((n_de, 2, nw, n_p))
-    for k, step in enumerate(de):
-        halves[k] = step[0]
-        for half in (0, 1):
-            ns = n_half[half]
-            a, b, c, u = step[1 + 4 * half : 5 + 4 * half]
-            j1s[k, half, :ns], j2s[k, half, :ns], jit[k, half, :ns], de_u[k, half, :ns] = a, b, c, u
-    if z_all:
-        # the proposal from its draws exactly as BlockIndependenceMove forms it (numpy's own
-        # matrix product and reductions: the same rounding)
-        z, chi = np.stack(z_all), np.stack(chi_all)
-        w = np.sqrt(ind.dof / chi)
-        q = ind.centre + (ind.chol @ z[..., None])[..., 0] * w
-        lg_q = _log_g_steps(ind, q)
-        ind_u = np.log(np.stack(u_all))
-    else:
-        q = np.zeros((0, nw, n_p, N_PARAMS))
-        lg_q, ind_u = np.zeros((0, nw, n_p)), np.zeros((0, nw, n_p))
-    return kind, halves, j1s, j2s, jit, np.log(de_u), np.ascontiguousarray(q), lg_q, ind_u
+            z[k_ind] = rnd.randn(nw, n_p, N_PARAMS)
+            chi[k_ind] = rnd.chisquare(ind.dof, size=(nw, n_p, 1))
+            ind_u[k_ind] = rnd.rand(nw, n_p)
+            k_ind += 1
+    # the proposal from its draws exactly as BlockIndependenceMove forms it (numpy's own
+    # matrix product and reductions: the same rounding)
+    w = np.sqrt(ind.dof / chi[:k_ind])
+    q = ind.centre + (ind.chol @ z[:k_ind, ..., None])[..., 0] * w
+    lg_q = _log_g_steps(ind, q)
+    de = (halves[:k_de], j1s[:k_de], j2s[:k_de], jit[:k_de], np.log(de_u[:k_de]))
+    return kind, *de, np.ascontiguousarray(q), lg_q, np.log(ind_u[:k_ind])
 
 
 def _log_g_steps(ind: BlockIndependenceMove, x: np.ndarray) -> np.ndarray:

@@ -161,13 +161,13 @@ def test_direct_autocorrelation_time_is_emcees(n_t, phi, monkeypatch):
     np.testing.assert_array_equal(np.isnan(got), np.isnan(ref))
     # (atol: a 3-step chain's window can close on a sum that is 0 to rounding)
     np.testing.assert_allclose(got[~np.isnan(ref)], ref[~np.isnan(ref)], rtol=1e-12, atol=1e-12)
-    direct = autocorr_module._tau_direct(x, 5.0, autocorr_module.MAX_DIRECT_LAGS)
+    direct = autocorr_module._tau_direct(x, np.arange(4), n_t, 5.0, autocorr_module.MAX_DIRECT_LAGS)
     if phi < 0.9 and n_t > 3:  # short windows: the direct sums did the work
         assert np.isfinite(direct[~np.isnan(ref)]).all()
     # the FFT fallback, forced on every window past 4 lags, agrees too
     monkeypatch.setattr(autocorr_module, "MAX_DIRECT_LAGS", 4)
     if phi > 0.9 and n_t > 40:
-        assert np.isinf(autocorr_module._tau_direct(x, 5.0, 4)).any()
+        assert np.isinf(autocorr_module._tau_direct(x, np.arange(4), n_t, 5.0, 4)).any()
     got = autocorr_module.integrated_time_blocks(x)
     np.testing.assert_array_equal(np.isnan(got), np.isnan(ref))
     np.testing.assert_allclose(got[~np.isnan(ref)], ref[~np.isnan(ref)], rtol=1e-12, atol=1e-12)
