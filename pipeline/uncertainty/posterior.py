@@ -6,9 +6,12 @@ Modules
 * :mod:`~pipeline.uncertainty.posterior_target`: the pulses' data, the priors and the log
   posterior;
 * :mod:`~pipeline.uncertainty.posterior_start`: detector starts, posterior modes, start balls;
-* :mod:`~pipeline.uncertainty.posterior_moves`: the block-wise emcee moves;
+* :mod:`~pipeline.uncertainty.posterior_moves`: the block-wise emcee moves (and emcee's loop
+  on them in Python, the reference);
+* :mod:`~pipeline.uncertainty.posterior_loop`: that loop compiled (the same chains);
+* :mod:`~pipeline.uncertainty.posterior_autocorr`: emcee's integrated autocorrelation times;
 * this module: the sampler and its convergence (:func:`sample_batch`); it re-exports the
-  public names of the four above;
+  public names of the modules above;
 * :mod:`~pipeline.uncertainty.seabed_posterior`: the draws carried to the refracted seabed point.
 
 Parameters and priors
@@ -23,9 +26,9 @@ Sampling
    Fisher scoring (:mod:`~pipeline.uncertainty.posterior_start`).
 2. Walkers: the mode plus a small ball of the Laplace covariance times ``init_scale``.
 3. emcee's ensemble loop (the :class:`emcee.EnsembleSampler` step: a move drawn by weight from
-   one ``RandomState``, then proposed; written out in :func:`_run` without the sampler's
-   per-step bookkeeping, same chains) with the pulses of a batch side by side in one walker
-   vector: two emcee moves act on each pulse's block independently
+   one ``RandomState``, then proposed; compiled in :mod:`~pipeline.uncertainty.posterior_loop`
+   with the same draws and decisions, so the same chains) with the pulses of a batch side by
+   side in one walker vector: two emcee moves act on each pulse's block independently
    (:class:`BlockDEMove`, differential evolution, and :class:`BlockIndependenceMove`, an
    independence Metropolis–Hastings move from a Student-t fitted to the burn-in), each with
    its own accept/reject from the pulse's own log posterior (the ``blobs`` of
@@ -35,8 +38,9 @@ Sampling
    independence proposal is adapted once, at their end, then fixed).
 4. Convergence, per pulse: production in chunks of ``chunk_steps`` until the chain is at
    least ``tau_factor`` (50) integrated autocorrelation times long (emcee's
-   ``integrated_time`` for all pulses at once, :func:`integrated_time_blocks`; the largest
-   over the parameters) or ``max_steps``; the mean
+   ``integrated_time`` for all pulses at once, :func:`~pipeline.uncertainty.
+   posterior_autocorr.integrated_time_blocks`; the largest over the parameters) or
+   ``max_steps``; the mean
    acceptance fraction must lie in ``acceptance_range`` (0.15, 0.8). Otherwise the pulse is
    flagged :attr:`PosteriorFlag.NOT_CONVERGED` / :attr:`PosteriorFlag.ACCEPTANCE` (its
    summaries are still given). Converged pulses leave the batch; the rest continue.
@@ -52,15 +56,21 @@ whose chains do not converge run to ``max_steps`` and dominate).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from pipeline.process.detect import DetectSettings
+from pipeline.uncertainty import posterior_target, waveform_kernel
 from pipeline.uncertainty.posterior_autocorr import integrated_time_blocks
 from pipeline.uncertainty.posterior_loop import run_steps
-from pipeline.uncertainty.posterior_moves import BlockDEMove, BlockIndependenceMove
+from pipeline.uncertainty.posterior_moves import (
+    BlockDEMove,
+    BlockIndependenceMove,
+    run_moves_python,
+)
 from pipeline.uncertainty.posterior_settings import PosteriorFlag, PosteriorSettings
 from pipeline.uncertainty.posterior_start import (
     _best_modes,
@@ -310,6 +320,11 @@ def _run(data: PulseBatch, pulses, pos, system, st, n_steps: int, thin: int, rng
         Fraction of proposals accepted per pulse (both moves).
     """
     sub = PulseBatch(*(getattr(data, f)[pulses] for f in _BATCH_FIELDS))
+    if log_prob_blocks is not posterior_target.log_prob_blocks or (
+        posterior_target.log_post_rows is not waveform_kernel.log_post_rows
+    ):  # another target (a test's known density, the numpy model): emcee's loop in Python
+        fn = functools.partial(log_prob_blocks, data=sub, system=system)
+        return run_moves_python(fn, pos, st, n_steps, thin, rng, proposal)
     # emcee's EnsembleSampler loop on these moves, compiled (posterior_loop: the same
     # generator, draws and decisions, so the same chains; without its per-step Python: the
     # moves' numpy and the sampler's bookkeeping cost more than the compiled model)
