@@ -9,7 +9,7 @@ or a flagged point), then evenly among the rest, and their emcee posteriors are 
 carried through refraction onto the seabed point
 (:func:`pipeline.uncertainty.seabed_posterior.seabed_posteriors`), marginalised over the TPU
 terms the waveform does not hold (:func:`nuisance_depth_sigma_m`). Cost: the budget times
-about 0.1 CPU s (``benchmarks/RESULTS_posterior.md``; about 3 CPU min per km² at the default
+about 0.06 CPU s (``benchmarks/RESULTS_posterior.md``; about 2 CPU min per km² at the default
 2000/km²), linear in the area, bounded per km².
 
 Photon counting (no waveform per pulse): the chunk loop keeps the events of a share of the
