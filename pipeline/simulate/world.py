@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -146,30 +147,22 @@ class Truth:
     frame: object
     pulse_time_s: object = None
 
-    @property
+    @cached_property
     def depth_at_pulses_m(self):
-        """Truth callable ``(x, y[, pulse_id])``: depth below the sea at each pulse's time."""
-        return _PulseDepth(self)
+        """Truth callable ``(x, y[, pulse_id])``: depth below the sea at each pulse's time.
+
+        One instance per truth, which remembers the sea heights it has met
+        (:class:`~pipeline.simulate.pulse_truth.PulseDepth`).
+        """
+        from pipeline.simulate.pulse_truth import PulseDepth
+
+        return PulseDepth(self)
 
     def depth_m(self, x_m, y_m, t_s=0.0):
         """True water depth (positive down) at local points, below the surface at ``t_s``."""
         if hasattr(self.water, "evolving"):  # a moving sea: its surface at the given time
             return self.water.height_m(x_m, y_m, t_s) - self.seabed.height_m(x_m, y_m)
         return self.water.height_m(x_m, y_m) - self.seabed.height_m(x_m, y_m)
-
-
-class _PulseDepth:
-    """``Truth.depth_m`` at each point's pulse time (pipeline.evaluate's per-pulse truth)."""
-
-    per_pulse = True
-
-    def __init__(self, truth: Truth) -> None:
-        self.truth = truth
-
-    def __call__(self, x_m, y_m, pulse_id=None):
-        if pulse_id is None or self.truth.pulse_time_s is None:
-            return self.truth.depth_m(x_m, y_m)
-        return self.truth.depth_m(x_m, y_m, self.truth.pulse_time_s(np.asarray(pulse_id)))
 
 
 def _feature(f: FeatureSettings):
