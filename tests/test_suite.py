@@ -345,7 +345,8 @@ def test_ci_figures_that_hold_today(ci_suite, half_name):
     assert abs(fig["points"]["bias_m"]) <= 0.03
     # measured 0.049 / 0.069 m; 0.15 m is the floor for winds above 5 m/s
     assert fig["points"]["rmse_m"] <= 0.15
-    # measured 98.6 / 96.5 %: within a few points of the floor, not off by an order
+    # measured 96.5 / 95.6 % (tpustrata: timing from the scatter without the relief and the
+    # sea between the pairs, forward-scatter relative sigma 0.2; before 98.6 / 96.5 %)
     assert fig["tpu"]["cov95"] >= 0.6
     assert fig["points"]["n"] >= 2000
 
@@ -357,13 +358,13 @@ def test_ci_no_gross_error_held_out(ci_suite):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="measured: TPU 95 % coverage 98.6 % tuning, 96.5 % held-out")
 def test_ci_tpu_95_coverage_floor(ci_suite):
+    # measured 96.5 % tuning, 95.6 % held-out (2026-11-24, tpustrata)
     for h in ("tuning", "heldout"):
         assert 0.93 <= ci_suite["strata"][("all", "all")][h]["tpu"]["cov95"] <= 0.97
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="measured: TPU 68 % coverage 81.1 % tuning (too wide)")
+@pytest.mark.xfail(strict=True, reason="measured: TPU 68 % coverage 75.1 % tuning (too wide)")
 def test_ci_tpu_68_coverage_floor_tuning(ci_suite):
     assert 0.64 <= ci_suite["strata"][("all", "all")]["tuning"]["tpu"]["cov68"] <= 0.72
