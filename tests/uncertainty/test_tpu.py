@@ -428,7 +428,7 @@ def test_pair_scatter_leaves_out_the_seabed_relief_between_the_pairs():
     a smooth relief ``A sin(k x)`` (wavelength 40 m, A = 0.3 m: real seabed, no error) and iid
     noise of 1 cm. Successive soundings differ by the relief too: its semivariogram at the
     lag h = 1.5 m is ``A² (1 - cos(k h)) / 2`` (3.5 cm as a sigma), which the noise estimate must
-    not take for timing noise. Before: sqrt(1² + 3.5²) = 3.6 cm."""
+    not take for timing noise. Before: 2.3 cm (the local plane takes part of the relief)."""
     rng = np.random.default_rng(11)
     h, n_line, per_line = 1.5, 40, 60
     x = np.tile(np.arange(per_line) * h, n_line)
