@@ -61,14 +61,25 @@ MIN_EVENTS = 10
 
 
 def _live_count(ev_win, z_m, tau_h_m, grid_win, grid_z_m):
-    """Recorded events of each grid point's window in ``(z, z + tau_h]`` (channels blind there)."""
-    lo = min(float(z_m.min()), float(grid_z_m.min()))
-    span = max(float(z_m.max()), float(grid_z_m.max())) - lo + float(tau_h_m) + 1.0
-    order = np.sort(ev_win * span + (z_m - lo))
-    key = grid_win * span + (grid_z_m - lo)
-    return np.searchsorted(order, key + tau_h_m, side="right") - np.searchsorted(
-        order, key, side="right"
+    """Recorded events of each grid point's window in ``(z, z + tau_h]`` (channels blind there).
+
+    Keys are ``window + i z`` as complex numbers, which sort by window, then height, exactly:
+    no rounding that depends on which windows share the batch (so any chunking agrees).
+    """
+    order = np.sort(ev_win.astype(np.float64) + 1j * z_m)
+    win = grid_win.astype(np.float64)
+    return np.searchsorted(order, win + 1j * (grid_z_m + tau_h_m), side="right") - np.searchsorted(
+        order, win + 1j * grid_z_m, side="right"
     )
+
+
+def _event_sum(x: np.ndarray) -> np.ndarray:
+    """Sum over the last (padded events) axis, in event order whatever the padding.
+
+    ``np.sum`` sums pairwise in blocks set by the axis length, so the padded width (the busiest
+    window of the batch) would change the last bits; a running sum does not.
+    """
+    return np.cumsum(x, axis=-1)[..., -1]
 
 
 def echo_height_ml(
@@ -77,7 +88,7 @@ def echo_height_ml(
     z_guess_m: np.ndarray,
     fit: np.ndarray,
     sigma_h_m: np.ndarray,
-    tau_h_m: float,
+    tau_h_m: float | np.ndarray,
     n_live: np.ndarray,
     background_per_m: np.ndarray,
     floor_m: np.ndarray | None = None,
@@ -97,9 +108,9 @@ def echo_height_ml(
         Windows to fit (those with the echo).
     sigma_h_m : (n_windows,) float
         The system response's sigma as a height, per window (> 0).
-    tau_h_m : float
+    tau_h_m : float or (n_windows,) float
         Height span of the dead time below an event (:func:`~pipeline.process.photon_livetime.
-        dead_height_m`).
+        dead_height_m`), one for all or per window.
     n_live : (n_windows,) float
         Shot-channels of each window (shots times channels per beam).
     background_per_m : (n_windows,) float
@@ -114,6 +125,7 @@ def echo_height_ml(
         :data:`MIN_EVENTS` events in its span.
     """
     out = np.asarray(z_guess_m, dtype=np.float64).copy()
+    tau_w = np.broadcast_to(np.asarray(tau_h_m, dtype=np.float64), out.shape)
     todo = np.flatnonzero(fit & (sigma_h_m > 0))
     if todo.size == 0 or z_m.size == 0:
         return out
@@ -133,7 +145,7 @@ def echo_height_ml(
         first, last = np.searchsorted(ev_win, [idx[0], idx[-1] + 1])
         # the blind spans come from every event of these windows
         ev = (ev_win[first:last], z_m[first:last])
-        out[idx] = _fit_batch(*ev, out[idx], idx, sigma_h_m[idx], tau_h_m, (bot[idx], top[idx]),
+        out[idx] = _fit_batch(*ev, out[idx], idx, sigma_h_m[idx], tau_w[idx], (bot[idx], top[idx]),
                               n_live[idx], background_per_m[idx])  # fmt: skip
     return out
 
@@ -167,7 +179,7 @@ def _fit_batch(ev_win, z_m, guess, idx, sig, tau_h_m, span, n_live, background_p
     n_grid = int(np.ceil((2 * SEARCH_SIGMAS + SPAN_ABOVE_SIGMAS + SPAN_BELOW_SIGMAS) / STEP_SIGMAS))
     dz = (top - bot) / n_grid
     g = bot[:, None] + (np.arange(n_grid) + 0.5)[None, :] * dz[:, None]
-    dead = _live_count(ev_win, z_m, tau_h_m, np.repeat(idx, n_grid), g.ravel())
+    dead = _live_count(ev_win, z_m, np.repeat(tau_h_m, n_grid), np.repeat(idx, n_grid), g.ravel())
     live = np.maximum(n_live[:, None] - dead.reshape(idx.size, n_grid), 0.0)
     # candidates (n_fit, n_cand)
     n_cand = int(round(2 * SEARCH_SIGMAS / STEP_SIGMAS)) + 1
@@ -188,9 +200,9 @@ def _fit_batch(ev_win, z_m, guess, idx, sig, tau_h_m, span, n_live, background_p
     amp = amp / expo
     for _ in range(EM_ITERATIONS):
         share = amp[:, :, None] * phi / np.maximum(amp[:, :, None] * phi + beta, 1e-300)
-        amp = np.maximum(np.sum(np.where(valid[:, None, :], share, 0.0), axis=2), 1e-12) / expo
+        amp = np.maximum(_event_sum(np.where(valid[:, None, :], share, 0.0)), 1e-12) / expo
     rate = np.where(valid[:, None, :], amp[:, :, None] * phi + beta, 1.0)
-    loglik = np.sum(np.log(np.maximum(rate, 1e-300)), axis=2) - amp * expo
+    loglik = _event_sum(np.log(np.maximum(rate, 1e-300))) - amp * expo
     best = np.argmax(loglik, axis=1)
     # parabola through the best candidate and its neighbours (not at the grid's edge)
     inner = (best > 0) & (best < n_cand - 1)
@@ -238,7 +250,11 @@ def surface_and_bottom_ml(events, window, direction, pulse_sigma_s, n_air, n_cha
     n_live = shots * max(int(n_channels), 1)
     u_z = np.bincount(window, weights=np.abs(direction[:, 2]), minlength=n_win) / shots
     sig_h = pulse_sigma_s * SPEED_OF_LIGHT_M_S * u_z / (2.0 * n_air)
-    tau = float(np.median(tau_h)) if np.size(tau_h) else 0.0
+    # each window's own dead-time span (the mean over its events, summed in event order): a
+    # statistic over the chunk's events would tie a window's fit to its chunk-mates
+    n_ev = np.bincount(ev_win, minlength=n_win)
+    tau_sum = np.bincount(ev_win, weights=np.broadcast_to(tau_h, np.shape(ev_win)), minlength=n_win)
+    tau = tau_sum / np.maximum(n_ev, 1)
     fit = (ev_win, z_m)
     floor = np.where(found["has_b"], found["edge_b"], -np.inf)
     z_s = echo_height_ml(*fit, found["z_s"], found["has_s"], sig_h, tau, n_live, found["bg_s"],

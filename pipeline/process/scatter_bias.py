@@ -44,7 +44,8 @@ from scipy.special import erfc, erfcx
 from pipeline import water_optics as wo
 from pipeline.config import setting
 from pipeline.constants import FWHM_TO_SIGMA
-from pipeline.forward_scatter import bottom_delay, water_tables
+from pipeline.forward_scatter import bottom_delay
+from pipeline.forward_scatter_mc import water_tables
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.detect import flank_trend
 from pipeline.process.detect_timing import parabolic_peak
@@ -344,7 +345,10 @@ def range_bias_m(
     ok = length > 0.0
     path = np.where(ok, length, 0.0)
     radius = model.fov_half_tan * (np.asarray(r_air_m) + path * air_index / phase_index)
-    delay = bottom_delay(path, np.maximum(radius, 0.0), model.scattering_per_m(), water_tables())
+    absorption = (1.0 - model.single_scattering_albedo) * model.beam_attenuation_per_m
+    delay = bottom_delay(
+        path, np.maximum(radius, 0.0), model.scattering_per_m(), water_tables(), absorption
+    )
     # the system response in two-way path units (a delay dt is an excess path dt c / n_g)
     sig_path = model.system_sigma_s * _C / group_index
     two_way = peak_shift(

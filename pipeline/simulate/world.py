@@ -110,7 +110,14 @@ class WaterSurfaceSettings:
     )
     evolving: bool = setting(True, doc="the sea moves (False: frozen at t = 0 for all pulses)")
     time_tolerance_m: float = setting(
-        0.002, gt=0.0, le=0.1, doc="surface error of the linear-in-time slabs (sets their length)"
+        0.002, gt=0.0, le=0.1, doc="height error of the sea's time interpolation (slab length)"
+    )
+    slope_variance_tolerance: float = setting(
+        0.001,
+        gt=0.0,
+        lt=0.5,
+        doc="relative mean-square-slope loss of the time interpolation at mid-slab (slab length;"
+        " the glint at 20 deg moves ~10x as much at low wind)",
     )
     dispersion_depth_m: float | None = setting(
         None, gt=0.0, le=11000.0, doc="finite-depth dispersion w^2 = g k tanh(k h) (None: deep)"
@@ -248,11 +255,11 @@ def wave_surface(scene):
     terrain.evolving_sea.EvolvingSea
         The wave field at any time (frozen at t = 0 when ``water_surface.evolving`` is false).
     """
-    from terrain.evolving_sea import EvolvingSea, slab_for_tolerance_s
+    from terrain.evolving_sea import EvolvingSea, slab_for_tolerances_s
 
     ws = scene.water_surface
     field = _wave_field(scene)
-    slab = slab_for_tolerance_s(field.acceleration_rms_m_s2, ws.time_tolerance_m)
+    slab = slab_for_tolerances_s(field, ws.time_tolerance_m, ws.slope_variance_tolerance)
     return EvolvingSea(field, slab, evolving=ws.evolving)
 
 
