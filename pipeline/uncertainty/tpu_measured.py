@@ -49,7 +49,7 @@ Measured data only: surface points, their emission times, the fitted planes.
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -100,12 +100,22 @@ class SurfaceVariogram:
         variance ``s_r²``; NaN where the band has no lag with enough pairs.
     pairs : int
         Pairs used.
+    rise_per_m2 : float
+        ``a`` of ``gamma(h) = n + a h²`` over the shortest pooled lags (``>= 0``): half the
+        mean-square slope of the heights above the pulses' own planes along the pairs'
+        directions, i.e. of the slope the planes do not follow (0: no rise measured).
+    pair_axes : (2, 2) float64
+        Mean ``u u^T`` of those pairs' horizontal unit directions ``u`` (which slope ``a``
+        saw: along a profiler's track ``[[0, 0], [0, 1]]`` for a northward line; isotropic
+        ``I / 2``).
     """
 
     lag_m: np.ndarray
     gamma_m2: np.ndarray
     nugget_m2: np.ndarray
     pairs: int
+    rise_per_m2: float = 0.0
+    pair_axes: np.ndarray = field(default_factory=lambda: 0.5 * np.eye(2))
 
     @classmethod
     def empty(cls) -> SurfaceVariogram:
@@ -127,19 +137,25 @@ def _robust_semivariance(d: np.ndarray) -> float:
     return float(np.mean(np.sqrt(np.abs(d))) ** 4 / (2.0 * (_CH_A + _CH_B / n)))
 
 
-def _nugget(h: np.ndarray, g: np.ndarray) -> float:
-    """``gamma(0)`` of ``gamma(h) = n + a h²`` fitted to the shortest lags (``a >= 0``).
+def _nugget_and_rise(h: np.ndarray, g: np.ndarray) -> tuple[float, float]:
+    """``(n, a)`` of ``gamma(h) = n + a h²`` fitted to the shortest lags (``a >= 0``).
 
-    A smooth wave field rises as ``h²`` from the origin (its slope variance); the intercept
-    ``n`` is the part no lag removes, the ranging error. At most ``g[0]``, at least 0; one lag,
-    or a falling variogram (no wave rise to remove): the mean.
+    A smooth wave field rises as ``h²`` from the origin (half its slope variance along the
+    lag); the intercept ``n`` is the part no lag removes, the ranging error. ``n`` at most
+    ``g[0]``, at least 0; one lag, or a falling variogram (no wave rise to remove): the mean,
+    and ``a = 0``.
     """
     if h.size >= 2:
         a_mat = np.column_stack([np.ones_like(h), h**2])
         (n, a), *_ = np.linalg.lstsq(a_mat, g, rcond=None)
         if a >= 0.0:
-            return float(np.clip(n, 0.0, g[0]))
-    return float(np.mean(g))
+            return float(np.clip(n, 0.0, g[0])), float(a)
+    return float(np.mean(g)) if g.size else float("nan"), 0.0
+
+
+def _nugget(h: np.ndarray, g: np.ndarray) -> float:
+    """``gamma(0)`` of :func:`_nugget_and_rise`."""
+    return _nugget_and_rise(h, g)[0]
 
 
 def surface_variogram(
@@ -183,12 +199,22 @@ def surface_variogram(
     d, lag, inc_pair = d[like], lag[like], 0.5 * (inc_i + inc_j)[like]
     edges = np.asarray(LAG_EDGES_M)
     lag_bin = np.digitize(lag, edges) - 1
-    lags, gammas = [], []
+    lags, gammas, short = [], [], np.zeros(lag.size, dtype=bool)
     for b in range(edges.size - 1):
         m = lag_bin == b
         if np.count_nonzero(m) >= min_pairs:
             lags.append(float(np.mean(lag[m])))
             gammas.append(_robust_semivariance(d[m]))
+            if len(lags) <= _NUGGET_BINS:
+                short |= m
+    # the rise at the shortest lags and the directions it was seen along
+    rise = _nugget_and_rise(np.array(lags[:_NUGGET_BINS]), np.array(gammas[:_NUGGET_BINS]))[1]
+    axes = 0.5 * np.eye(2)
+    if np.any(short):
+        pi = surface.surface_point_m[pairs.row_i[like][short], :2]
+        pj = surface.surface_point_m[pairs.row_j[like][short], :2]
+        u = (pj - pi) / np.maximum(np.hypot(*(pj - pi).T), 1e-12)[:, None]
+        axes = u.T @ u / u.shape[0]
     bands = np.asarray(INCIDENCE_BANDS_DEG)
     inc_bin = np.digitize(inc_pair, bands) - 1
     nugget = np.full(bands.size - 1, np.nan)
@@ -204,7 +230,9 @@ def surface_variogram(
                 break
         if hs:
             nugget[b] = _nugget(np.array(hs), np.array(gs))
-    return SurfaceVariogram(np.array(lags), np.array(gammas), nugget, int(pairs.row_i.size))
+    return SurfaceVariogram(
+        np.array(lags), np.array(gammas), nugget, int(pairs.row_i.size), rise, axes
+    )
 
 
 def _incidence_deg(returns, surface, rows):
