@@ -36,6 +36,7 @@ within the footprint, and their mean over it is small.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 import numpy as np
 
@@ -204,5 +205,14 @@ def with_wave_facet(
         n_water,
     )
     rows = {name: jac[:, a, :] * sig[:, a : a + 1] for a, name in enumerate(FACET_TERMS)}
-    rows = {k: np.where(np.isfinite(v), v, 0.0) for k, v in rows.items()}
+    # a row without water has no facet (sigma 0) and may have no entry or plane: no term
+    ok = np.all([np.isfinite(v).all(axis=1) for v in rows.values()], axis=0)
+    if np.any(~ok & np.any(sig > 0.0, axis=1)):  # never a silent NaN: said, and no term there
+        warnings.warn(
+            f"wave facet term not finite for {int(np.sum(~ok & np.any(sig > 0, axis=1)))} "
+            "soundings with water; left at 0",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    rows = {k: np.where(ok[:, None], v, 0.0) for k, v in rows.items()}
     return _with_random_rows(tpu, rows)
