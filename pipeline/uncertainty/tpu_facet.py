@@ -17,17 +17,15 @@ below the plane above the point), times the slope sigma ``s_u``.
 ``s_u`` is measured by the survey, never assumed: the surface returns' height variogram above
 each pulse's own plane (:func:`~pipeline.uncertainty.tpu_measured.surface_variogram`) rises
 as ``gamma(h) = n + a h²`` at short lags, ``2 a`` the mean-square slope of the sea that the
-planes do not follow along the pairs' directions ``u_p`` (``M = E[u_p u_p^T]``). The fitted
-planes' own slopes ``q`` (covariance ``Q`` over the water pulses, less their fit noise) are
-what they follow. The sea's slope variance along one axis is then ``2 a + <Q, M>`` (isotropic
-sea assumed: a profiler measures it along its track only), and what is left per axis
-``s_u² = 2 a + <Q, M> - Q_uu - t_u²``, ``t_u`` the plane's per-axis tilt sigma the
-``surface_tilt_*`` terms already carry (the fit's standard error or the tilt measured over the
-sounding, :func:`~pipeline.uncertainty.tpu_neighbours.surface_tilt_sigma`): never a double
-count. A profiler along ``y``: ``M = [[0, 0], [0, 1]]``, ``Q_xx = 0``, so ``s_x² = 2 a + Q_yy``
-(the sea's whole slope across the track) and ``s_y² = 2 a`` (what the plane misses along it).
-Flat water: ``a = 0``, no term. A user's ``process.tpu.wave_slope_sigma_rad > 0`` wins (its
-``wave_slope_*`` terms stand for it and this term is not added).
+planes do not follow along the pairs' directions. Isotropic sea: the same along both axes,
+``s_u² = 2 a - t_u²``, ``t_u`` the plane's per-axis tilt sigma the ``surface_tilt_*`` terms
+already carry (the fit's standard error or the tilt measured over the sounding,
+:func:`~pipeline.uncertainty.tpu_neighbours.surface_tilt_sigma`): never a double count. Across
+a profiler's track the planes follow no slope at all, so what they miss there is ``2 a`` plus
+the along-track slope they do follow; that part is not added (the planes' slope scatter is fit
+noise on flat water, see :func:`unresolved_slope_sigma_rad`). Flat water: ``a = 0``, no term. A
+user's ``process.tpu.wave_slope_sigma_rad > 0`` wins (its ``wave_slope_*`` terms stand for it
+and this term is not added).
 
 Slopes shorter than the variogram's shortest lags (capillaries) are not in ``a``: they vary
 within the footprint, and their mean over it is small.
@@ -59,9 +57,9 @@ def unresolved_slope_sigma_rad(
     Parameters
     ----------
     vg : SurfaceVariogram
-        The survey's surface variogram (its ``rise_per_m2`` and ``pair_axes``).
+        The survey's surface variogram (its ``rise_per_m2``).
     surface : WaterSurface
-        The fitted planes of every pulse: their slopes' covariance over the water pulses.
+        The fitted planes of every pulse (which enter water; the fit's tilt sigma).
     tilt_sigma_rad : (k,) array_like, optional
         Each row's plane tilt sigma (both axes) that the ``surface_tilt_*`` terms carry; its
         per-axis share ``/ sqrt 2`` is taken off. Default: the fit's ``normal_sigma_rad``.
@@ -69,21 +67,15 @@ def unresolved_slope_sigma_rad(
         Pulses (rows of ``surface``) to give; default all.
     """
     rows = np.arange(len(surface)) if rows is None else np.asarray(rows, dtype=np.int64)
-    water = surface.is_water & np.isfinite(surface.normal).all(axis=1)
-    nrm = surface.normal[water]
-    q_cov = np.zeros((2, 2))
-    if nrm.shape[0] >= 3:
-        q = -nrm[:, :2] / nrm[:, 2:3]
-        q_cov = np.cov(q.T)
-        # the fit's own noise is in the planes' scatter but is no slope they follow
-        noise = np.mean(np.nan_to_num(surface.normal_sigma_rad[water]) ** 2) / 2.0
-        q_cov = q_cov - noise * np.eye(2)
-        q_cov[np.diag_indices(2)] = np.maximum(np.diag(q_cov), 0.0)
-    sea = 2.0 * max(vg.rise_per_m2, 0.0) + float(np.sum(q_cov * vg.pair_axes))
-    left = np.maximum(sea - np.diag(q_cov), 0.0)  # (2,)
+    # the slope the planes miss along the pairs, the same along every axis (isotropic sea). The
+    # planes' own slope scatter is not added back across the axes they cannot follow: on flat
+    # water it is fit noise (suite tuning scene 24: 4e-4 across a Palmer line, where the fit's
+    # sigma says 1e-5 and the sea has 2e-5), and where it is sea it was small (scene 13: 2e-5
+    # along a profiler's track against 2 a = 8e-3)
+    left = 2.0 * max(vg.rise_per_m2, 0.0)
     tilt = surface.normal_sigma_rad[rows] if tilt_sigma_rad is None else tilt_sigma_rad
     tilt2 = np.nan_to_num(np.asarray(tilt, dtype=np.float64)) ** 2 / 2.0
-    var = np.maximum(left[None, :] - tilt2[:, None], 0.0)
+    var = np.maximum(left - tilt2, 0.0)[:, None] * np.ones((1, 2))
     return np.where(surface.is_water[rows, None], np.sqrt(var), 0.0)
 
 
