@@ -49,7 +49,7 @@ Measured data only: surface points, their emission times, the fitted planes.
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -104,10 +104,6 @@ class SurfaceVariogram:
         ``a`` of ``gamma(h) = n + a h²`` over the shortest pooled lags (``>= 0``): half the
         mean-square slope of the heights above the pulses' own planes along the pairs'
         directions, i.e. of the slope the planes do not follow (0: no rise measured).
-    pair_axes : (2, 2) float64
-        Mean ``u u^T`` of those pairs' horizontal unit directions ``u`` (which slope ``a``
-        saw: along a profiler's track ``[[0, 0], [0, 1]]`` for a northward line; isotropic
-        ``I / 2``).
     """
 
     lag_m: np.ndarray
@@ -115,7 +111,6 @@ class SurfaceVariogram:
     nugget_m2: np.ndarray
     pairs: int
     rise_per_m2: float = 0.0
-    pair_axes: np.ndarray = field(default_factory=lambda: 0.5 * np.eye(2))
 
     @classmethod
     def empty(cls) -> SurfaceVariogram:
@@ -199,22 +194,14 @@ def surface_variogram(
     d, lag, inc_pair = d[like], lag[like], 0.5 * (inc_i + inc_j)[like]
     edges = np.asarray(LAG_EDGES_M)
     lag_bin = np.digitize(lag, edges) - 1
-    lags, gammas, short = [], [], np.zeros(lag.size, dtype=bool)
+    lags, gammas = [], []
     for b in range(edges.size - 1):
         m = lag_bin == b
         if np.count_nonzero(m) >= min_pairs:
             lags.append(float(np.mean(lag[m])))
             gammas.append(_robust_semivariance(d[m]))
-            if len(lags) <= _NUGGET_BINS:
-                short |= m
-    # the rise at the shortest lags and the directions it was seen along
+    # the rise at the shortest lags: the slope the planes do not follow (tpu_facet)
     rise = _nugget_and_rise(np.array(lags[:_NUGGET_BINS]), np.array(gammas[:_NUGGET_BINS]))[1]
-    axes = 0.5 * np.eye(2)
-    if np.any(short):
-        pi = surface.surface_point_m[pairs.row_i[like][short], :2]
-        pj = surface.surface_point_m[pairs.row_j[like][short], :2]
-        u = (pj - pi) / np.maximum(np.hypot(*(pj - pi).T), 1e-12)[:, None]
-        axes = u.T @ u / u.shape[0]
     bands = np.asarray(INCIDENCE_BANDS_DEG)
     inc_bin = np.digitize(inc_pair, bands) - 1
     nugget = np.full(bands.size - 1, np.nan)
@@ -230,9 +217,7 @@ def surface_variogram(
                 break
         if hs:
             nugget[b] = _nugget(np.array(hs), np.array(gs))
-    return SurfaceVariogram(
-        np.array(lags), np.array(gammas), nugget, int(pairs.row_i.size), rise, axes
-    )
+    return SurfaceVariogram(np.array(lags), np.array(gammas), nugget, int(pairs.row_i.size), rise)
 
 
 def _incidence_deg(returns, surface, rows):
