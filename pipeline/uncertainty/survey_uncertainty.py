@@ -13,7 +13,9 @@ shows more (:func:`~pipeline.uncertainty.tpu.pair_scatter`,
 counting) the scatter sets them.
 The surface returns' height variogram (:mod:`pipeline.uncertainty.tpu_measured`) raises the
 surface timing sigmas to the ranging error they show and adds the waves between each pulse's
-water entry and its sounding that the fitted plane's tilt does not hold.
+water entry and its sounding that the fitted plane's tilt does not hold; its rise at short
+lags, the sea's slope the planes do not follow, sizes the wave facet each beam refracted
+through (:mod:`pipeline.uncertainty.tpu_facet`).
 A photon-counting window's shots share one detection: they count as one sounding, and each
 shot carries the spread of the seabed under the window's shots
 (:mod:`pipeline.uncertainty.tpu_window`). Pulses the
@@ -44,6 +46,7 @@ from pipeline.uncertainty.tpu import (
     surface_tilt_sigma,
     timing_from_scatter,
 )
+from pipeline.uncertainty.tpu_facet import with_wave_facet
 from pipeline.uncertainty.tpu_measured import (
     surface_variogram,
     with_surface_ranging,
@@ -186,6 +189,20 @@ def survey_uncertainty(
     # beyond what the fitted plane's measured tilt already holds)
     surf = processed.surface
     tpu40 = with_wave_entry(tpu40, vg, surf.entry_m[tpu40.row, :2], surf.sea_correlation)
+    if st.wave_slope_sigma_rad == 0.0:  # a user's facet slope (wave_slope_* terms) wins
+        # the wave facet each beam refracted through that the fitted planes do not follow
+        bottom_rows = np.flatnonzero(returns.has_bottom)
+        plane_tilt = surf.normal_sigma_rad.copy()  # what the surface_tilt_* terms carried
+        plane_tilt[bottom_rows] = np.maximum(plane_tilt[bottom_rows], np.nan_to_num(tilt))
+        tpu40 = with_wave_facet(
+            tpu40,
+            returns.direction_meas,
+            surf,
+            vg,
+            grad[np.searchsorted(bottom_rows, tpu40.row)],
+            refr.phase_index,
+            tilt_sigma_rad=plane_tilt,
+        )
     cells = cell_uncertainty(grid, tpu40)
     return SurveyUncertainty(
         tpu40=tpu40,

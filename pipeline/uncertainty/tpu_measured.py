@@ -100,12 +100,17 @@ class SurfaceVariogram:
         variance ``s_r²``; NaN where the band has no lag with enough pairs.
     pairs : int
         Pairs used.
+    rise_per_m2 : float
+        ``a`` of ``gamma(h) = n + a h²`` over the shortest pooled lags (``>= 0``): half the
+        mean-square slope of the heights above the pulses' own planes along the pairs'
+        directions, i.e. of the slope the planes do not follow (0: no rise measured).
     """
 
     lag_m: np.ndarray
     gamma_m2: np.ndarray
     nugget_m2: np.ndarray
     pairs: int
+    rise_per_m2: float = 0.0
 
     @classmethod
     def empty(cls) -> SurfaceVariogram:
@@ -127,19 +132,25 @@ def _robust_semivariance(d: np.ndarray) -> float:
     return float(np.mean(np.sqrt(np.abs(d))) ** 4 / (2.0 * (_CH_A + _CH_B / n)))
 
 
-def _nugget(h: np.ndarray, g: np.ndarray) -> float:
-    """``gamma(0)`` of ``gamma(h) = n + a h²`` fitted to the shortest lags (``a >= 0``).
+def _nugget_and_rise(h: np.ndarray, g: np.ndarray) -> tuple[float, float]:
+    """``(n, a)`` of ``gamma(h) = n + a h²`` fitted to the shortest lags (``a >= 0``).
 
-    A smooth wave field rises as ``h²`` from the origin (its slope variance); the intercept
-    ``n`` is the part no lag removes, the ranging error. At most ``g[0]``, at least 0; one lag,
-    or a falling variogram (no wave rise to remove): the mean.
+    A smooth wave field rises as ``h²`` from the origin (half its slope variance along the
+    lag); the intercept ``n`` is the part no lag removes, the ranging error. ``n`` at most
+    ``g[0]``, at least 0; one lag, or a falling variogram (no wave rise to remove): the mean,
+    and ``a = 0``.
     """
     if h.size >= 2:
         a_mat = np.column_stack([np.ones_like(h), h**2])
         (n, a), *_ = np.linalg.lstsq(a_mat, g, rcond=None)
         if a >= 0.0:
-            return float(np.clip(n, 0.0, g[0]))
-    return float(np.mean(g))
+            return float(np.clip(n, 0.0, g[0])), float(a)
+    return float(np.mean(g)) if g.size else float("nan"), 0.0
+
+
+def _nugget(h: np.ndarray, g: np.ndarray) -> float:
+    """``gamma(0)`` of :func:`_nugget_and_rise`."""
+    return _nugget_and_rise(h, g)[0]
 
 
 def surface_variogram(
@@ -189,6 +200,8 @@ def surface_variogram(
         if np.count_nonzero(m) >= min_pairs:
             lags.append(float(np.mean(lag[m])))
             gammas.append(_robust_semivariance(d[m]))
+    # the rise at the shortest lags: the slope the planes do not follow (tpu_facet)
+    rise = _nugget_and_rise(np.array(lags[:_NUGGET_BINS]), np.array(gammas[:_NUGGET_BINS]))[1]
     bands = np.asarray(INCIDENCE_BANDS_DEG)
     inc_bin = np.digitize(inc_pair, bands) - 1
     nugget = np.full(bands.size - 1, np.nan)
@@ -204,7 +217,7 @@ def surface_variogram(
                 break
         if hs:
             nugget[b] = _nugget(np.array(hs), np.array(gs))
-    return SurfaceVariogram(np.array(lags), np.array(gammas), nugget, int(pairs.row_i.size))
+    return SurfaceVariogram(np.array(lags), np.array(gammas), nugget, int(pairs.row_i.size), rise)
 
 
 def _incidence_deg(returns, surface, rows):

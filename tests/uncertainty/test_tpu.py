@@ -421,3 +421,22 @@ def test_detector_sigmas_are_used():
     # moves the entry by c dt / (2 n_air) and the path by c dt / (2 n_g)
     dz_s = C * 3e-10 / 2 * (1 / N_AIR - 1 / N_G)
     assert abs(tpu.terms["timing_surface"][0, 2]) == pytest.approx(dz_s, rel=1e-3)
+
+
+def test_pair_scatter_leaves_out_the_seabed_relief_between_the_pairs():
+    """Scan lines of soundings 1.5 m apart (an oscillating scanner's spacing) over a plane with
+    a smooth relief ``A sin(k x)`` (wavelength 40 m, A = 0.3 m: real seabed, no error) and iid
+    noise of 1 cm. Successive soundings differ by the relief too: its semivariogram at the
+    lag h = 1.5 m is ``A² (1 - cos(k h)) / 2`` (3.5 cm as a sigma), which the noise estimate must
+    not take for timing noise. Before: 2.3 cm (the local plane takes part of the relief)."""
+    rng = np.random.default_rng(11)
+    h, n_line, per_line = 1.5, 40, 60
+    x = np.tile(np.arange(per_line) * h, n_line)
+    y = np.repeat(np.arange(n_line) * 2.0, per_line)
+    k = 2.0 * np.pi / 40.0
+    sigma = 0.01
+    depth = 6.0 + 0.05 * x + 0.3 * np.sin(k * x + 0.7 * y) + rng.normal(0, sigma, x.size)
+    est = pair_scatter(np.column_stack([x, y]), depth, order=np.arange(x.size))
+    relief = np.sqrt(0.3**2 * (1.0 - np.cos(k * h)) / 2.0)
+    assert relief > 3.0 * sigma  # the relief would dominate
+    assert np.median(est) == pytest.approx(sigma, rel=0.25)

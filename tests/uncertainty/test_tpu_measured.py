@@ -202,3 +202,70 @@ def test_wave_term_is_the_error_of_the_sea_predicted_at_the_sounding():
     assert wave_entry_sigma_m(vg, np.array([4.0]))[0] ** 2 == pytest.approx(
         np.var(s_b - s_e), rel=0.02
     )
+
+
+def _snell_depth_sd(slope_sigma_rad, length_m, gradient, n_water):
+    """Depth error sd of a nadir beam through a facet of Gaussian slope (sigma per axis) over
+    a seabed of depth gradient ``gradient`` across the facet's slope, by Snell's law written
+    out: the facet at ``atan beta`` from level, the beam in water at ``asin(sin(atan beta) /
+    n)`` from that normal, so ``delta = atan beta - asin(...)`` from the vertical; the sounding
+    moves ``L sin delta`` sideways and ``L (1 - cos delta)`` up; Gauss-Hermite over beta."""
+    x, w = np.polynomial.hermite_e.hermegauss(60)
+    beta = slope_sigma_rad * x
+    th_a = np.arctan(beta)
+    delta = th_a - np.arcsin(np.sin(th_a) / n_water)
+    err = gradient * length_m * np.sin(delta) + length_m * (1.0 - np.cos(delta))
+    w = w / w.sum()
+    mean = np.sum(w * err)
+    return math.sqrt(np.sum(w * (err - mean) ** 2))
+
+
+def test_nadir_beam_through_the_unresolved_wave_facet_over_a_slope():
+    """A profiler along x over a random-phase sea (wavelengths 10-40 m) whose planes are level
+    (they follow no wave): every beam is at nadir and refracts through the sea's facet at its
+    entry, which no plane holds. The along-track slope variance of the sea is
+    ``sum a_i² k_i² / 2`` (isotropic sea: the same across); over a seabed sloping 18.9° across
+    the track, 5 m of water, the depth error sd is Snell's (``_snell_depth_sd``). The TPU
+    must carry it, sized from the measured surface variogram alone."""
+    from pipeline.process.refraction import RefractionSettings
+    from pipeline.uncertainty.tpu_facet import FACET_TERMS, with_wave_facet
+
+    rng = np.random.default_rng(8)
+    lam = rng.uniform(10.0, 40.0, 40)
+    k = 2 * math.pi / lam
+    a = np.full(40, 0.3 * math.sqrt(2.0 / 40))  # sea sigma 0.3 m, slope sigma ~0.1
+    phi = rng.uniform(0.0, 2 * math.pi, 40)
+
+    def sea(x):
+        return np.sum(a * np.sin(np.outer(x, k) + phi), axis=1)
+
+    ret, surf = track(sea, 0.005, n=12000)
+    mss_axis = float(np.sum(a**2 * k**2) / 2.0)
+    vg = surface_variogram(ret, surf)
+    g = math.tan(math.radians(18.9))
+    grad = np.tile([0.0, g], (len(ret), 1))
+    rst = RefractionSettings(phase_index=1.34, group_index=N_G)
+    tpu = point_tpu(ret, surf, rst, seabed_gradient=grad)
+    before = tpu.sigma_depth_m.copy()
+    tpu = with_wave_facet(tpu, ret.direction_meas, surf, vg, grad[tpu.row], 1.34)
+    want = _snell_depth_sd(math.sqrt(mss_axis), 5.0, g, 1.34 / N_AIR)
+    facet = np.sqrt(sum(tpu.terms[t][:, DEPTH] ** 2 for t in FACET_TERMS))
+    assert want > 1.5 * np.median(before)  # what the TPU had without the facet
+    assert np.median(facet) == pytest.approx(want, rel=0.1)
+    assert np.median(tpu.sigma_depth_m) == pytest.approx(
+        math.hypot(want, np.median(before)), rel=0.1
+    )
+
+
+def test_no_wave_facet_on_a_flat_sea():
+    """A flat sea (ranging noise only): the variogram does not rise, no facet term."""
+    from pipeline.process.refraction import RefractionSettings
+    from pipeline.uncertainty.tpu_facet import FACET_TERMS, with_wave_facet
+
+    ret, surf = track(lambda x: np.zeros_like(x), 0.02)
+    vg = surface_variogram(ret, surf)
+    grad = np.tile([0.0, 0.3], (len(ret), 1))
+    tpu = point_tpu(ret, surf, RefractionSettings(), seabed_gradient=grad)
+    tpu = with_wave_facet(tpu, ret.direction_meas, surf, vg, grad[tpu.row], 1.34)
+    facet = np.sqrt(sum(tpu.terms[t][:, DEPTH] ** 2 for t in FACET_TERMS))
+    assert np.median(facet) < 0.1 * 0.02
