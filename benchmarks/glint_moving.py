@@ -22,29 +22,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "simulate"))
 
+from test_glint_convergence import EXTENT, OFF_NADIR, _Pulses  # noqa: E402
 from waveform_support import common_pe  # noqa: E402
 
 from pipeline.scene import parse_scene  # noqa: E402
 from pipeline.simulate.budget import return_budget  # noqa: E402
 from pipeline.simulate.trace import TraceSettings, trace  # noqa: E402
 from pipeline.simulate.world import build_truth, build_world  # noqa: E402
-
-OFF_NADIR = math.radians(20.0)
-EXTENT = (0.0, 300.0, 0.0, 600.0)
-
-
-class _Pulses:
-    def __init__(self, n: int, seed: int, t_max_s: float) -> None:
-        rng = np.random.default_rng(seed)
-        self.pulse_id = np.arange(n)
-        self.origin_m = np.column_stack(
-            [rng.uniform(50, 250, n), rng.uniform(50, 550, n), np.full(n, 400.0)]
-        )
-        az = rng.uniform(0, 2 * np.pi, n)
-        s, c = math.sin(OFF_NADIR), math.cos(OFF_NADIR)
-        self.direction = np.column_stack([s * np.sin(az), s * np.cos(az), np.full(n, -c)])
-        self.yaw_rad = np.zeros(n)
-        self.t_s = np.sort(rng.uniform(0.0, t_max_s, n)) if t_max_s else np.zeros(n)
 
 
 def cox_munk_echo(scene) -> float:
@@ -79,7 +63,8 @@ def main() -> None:
         expected = cox_munk_echo(scene)
         out = []
         for label, t_max in (("frozen", 0.0), ("moving", 20.0)):
-            pulses = _Pulses(n, 13, t_max)
+            pulses = _Pulses(n, 13)  # the test's pulses: times uniform over 2 s, rescaled
+            pulses.t_s = pulses.t_s * (t_max / 2.0)
             t0 = time.process_time()
             div = scene.scanner.beam_divergence_mrad * 1e-3
             paths = trace(pulses, world, TraceSettings(subrays=1), div)
