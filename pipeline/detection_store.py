@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S
+from pipeline.process.column_stack import ColumnStack
 from pipeline.process.returns import DetectedReturns
 from pipeline.uncertainty.posterior_selection import kept_for_posterior
 
@@ -225,6 +226,8 @@ class SurveyAggregates:
         Full waveform: sampled bottom losses (the excess-decay fit) and column decays.
     nb_counts : dict of str to int
         Exact counts of the no-bottom inputs.
+    nb_stack : ColumnStack or None
+        Full waveform: the stacked column of every chunk, added chunk by chunk (exact).
     """
 
     n_pulses_total: int
@@ -238,6 +241,7 @@ class SurveyAggregates:
     nb_loss: list = field(default_factory=list)
     nb_alpha: list = field(default_factory=list)
     nb_counts: dict = field(default_factory=lambda: {"bottoms": 0, "no_column": 0})
+    nb_stack: ColumnStack | None = None
 
     def __post_init__(self) -> None:
         self.fraction = min(1.0, SAMPLE_PULSES / max(self.n_pulses_total, 1))
@@ -276,6 +280,8 @@ class SurveyAggregates:
             self.nb_alpha.append(nb["alpha"][nb["ok"] & s])
             self.nb_counts["bottoms"] += int(nb["t_b"].size)
             self.nb_counts["no_column"] += int(np.count_nonzero(nb["none"] & ~nb["ok"]))
+            stack = nb["column_stack"]
+            self.nb_stack = stack if self.nb_stack is None else self.nb_stack + stack
 
     def median_surface_range_m(self) -> float | None:
         """Median slant range to the surface returns (sampled); None without any."""

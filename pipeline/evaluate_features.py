@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.evaluate import error_stats, truth_at
+from pipeline.evaluate import cell_truth, error_stats, truth_at
 from pipeline.process.classify import SEABED_CLASSES, SUBMERGED_OBJECT
 
 __all__ = [
@@ -167,10 +167,12 @@ def feature_summary(cubes: list[dict], points, features) -> dict[str, Any]:
 
 
 def grid_elevation_errors_m(grid, truth_z_m) -> np.ndarray:
-    """Non-empty cells' elevation minus the true seabed height at their centres, (k,) m."""
-    xx, yy = np.meshgrid(grid.x_m, grid.y_m)
+    """Non-empty cells' elevation minus the true seabed height at their centres, (k,) m.
+
+    A designated cell (a feature's least depth) against the highest true seabed in the cell.
+    """
     full = grid.count > 0
-    return grid.z_m[full] - np.asarray(truth_z_m(xx[full], yy[full]), dtype=np.float64)
+    return grid.z_m[full] - cell_truth(grid, truth_z_m, shoal=np.maximum)[full]
 
 
 def features_report(scene, points, truth_depth_m, grid, grid_truth_depth_m, truth_z_m):

@@ -19,6 +19,10 @@ Arrays (``n`` rows per group; a group is empty when the run has none):
   (:mod:`pipeline.uncertainty.seabed_posterior`).
 * ``cell_*`` - non-empty grid cells: ``cell_x_m``, ``cell_y_m``, ``cell_depth_m`` (below the
   datum), ``cell_true_depth_m`` (below the true mean level), ``cell_error_m``, ``cell_count``.
+* ``rej_*`` - the bathymetric points processing rejected as gross errors (class 7, withheld:
+  :mod:`pipeline.process.seabed_outliers`): ``rej_true_depth_m``, ``rej_error_m``,
+  ``rej_tvu`` (rejected for its TPU), ``rej_surface`` (for an implausible water surface;
+  neither: a seabed outlier).
 * ``nb_depth_m`` - measured depths of the class-45 (no-bottom-found-at) points: each is a
   pulse's own detection limit (:mod:`pipeline.process.detection_limit`), the run's measured
   extinction depth.
@@ -33,8 +37,10 @@ import numpy as np
 from pipeline.evaluate import grid_errors_m, point_errors_m, truth_at
 from pipeline.outputs.atomic import atomic_path
 from pipeline.process.classify import NO_BOTTOM_FOUND_AT, SEABED_CLASSES
+from pipeline.process.returns import PointFlag
+from pipeline.process.seabed_outliers import REJECTED
 
-__all__ = ["point_arrays", "write_evaluation_points"]
+__all__ = ["point_arrays", "write_evaluation_points", "rejected_arrays", "rejected_report"]
 
 
 def point_arrays(processed, grid, unc, post, truth_depth_m, grid_truth_depth_m, group=None):
@@ -87,7 +93,36 @@ def point_arrays(processed, grid, unc, post, truth_depth_m, grid_truth_depth_m, 
         cell_count=grid.count[full],
     )
     out["nb_depth_m"] = pts.depth_m[pts.classification == NO_BOTTOM_FOUND_AT]
+    out.update(rejected_arrays(pts, truth_depth_m))
     return out
+
+
+def rejected_arrays(points, truth_depth_m) -> dict[str, np.ndarray]:
+    """``rej_true_depth_m``, ``rej_error_m``, ``rej_tvu`` of the rejected soundings."""
+    rej = points.select((points.flags & np.uint16(REJECTED)) != 0)
+    err, true_d = point_errors_m(rej, truth_depth_m=truth_depth_m)
+    tvu = (rej.flags & np.uint16(PointFlag.TVU_EXCEEDED)) != 0
+    surf = (rej.flags & np.uint16(PointFlag.SURFACE_IMPLAUSIBLE)) != 0
+    return {"rej_true_depth_m": true_d, "rej_error_m": err, "rej_tvu": tvu, "rej_surface": surf}
+
+
+def rejected_report(points, truth_depth_m) -> dict[str, int | float | None]:
+    """``evaluation.json``'s ``seabed_rejected``: the rejected soundings against the truth.
+
+    Per rule, and how many were gross errors (``|error| > 1 m``) and how many were good
+    (``|error| <= 0.5 m``: the test's cost).
+    """
+    a = rejected_arrays(points, truth_depth_m)
+    e = np.abs(a["rej_error_m"])
+    return {
+        "n": int(e.size),
+        "tvu_exceeded": int(a["rej_tvu"].sum()),
+        "surface_implausible": int(a["rej_surface"].sum()),
+        "seabed_outlier": int((~a["rej_tvu"] & ~a["rej_surface"]).sum()),
+        "over_1m": int(np.sum(e > 1.0)),
+        "within_0.5m": int(np.sum(e <= 0.5)),
+        "max_abs_error_m": float(e.max()) if e.size else None,
+    }
 
 
 def _posterior_arrays(post, truth_depth_m) -> dict[str, np.ndarray]:

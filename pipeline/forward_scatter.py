@@ -28,9 +28,12 @@ and the probability of no accepted scattering is ``exp(-b L H_0(R/L))``. ``G_m``
 tabulated once per phase function (the water's: :mod:`pipeline.water_optics`). Two ways:
 the down and up legs are independent and alike (reciprocity; a Lambertian seabed forgets the
 direction), so the cumulants double. The approximation (events judged alone, sideways moves
-not added as vectors) overestimates the delay when several scatterings are accepted; against
-the Monte Carlo of the tests (Henyey-Greenstein g = 0.9, b = 0.12 1/m, R = 2 m) the mean excess is
-5 % high at b L = 0.6 and 10 % high at b L = 2.4.
+not added as vectors) is exact while scattering is rare and errs when several scatterings are
+accepted: against the Monte Carlo of the tests (Henyey-Greenstein g = 0.9, b = 0.12 1/m) the mean
+excess was 5 % high at R = 2 m, b L = 0.6, 10 % high at b L = 2.4, and 43 % low at R / L = 0.025.
+The same cumulants are therefore taken from tables traced photon by photon where ``b L`` is not
+small (:mod:`pipeline.forward_scatter_mc`, which keeps these single-event tables as its limit);
+``bottom_delay`` takes either kind.
 
 Echo shape: the delay distribution is represented by its first two cumulants as a mixture of
 the undelayed pulse (weight ``1 - w``) and the pulse convolved with an exponential of mean
@@ -44,13 +47,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 
-from pipeline import water_optics as wo
-
-__all__ = ["ScatterTables", "water_tables", "DelayShape", "bottom_delay"]
+__all__ = ["ScatterTables", "DelayShape", "bottom_delay"]
 
 _LOG_T = np.linspace(math.log(1e-9), math.log(1e9), 6001)  # tan(theta) grid of G_m
 _LOG_RHO = np.linspace(math.log(1e-7), math.log(1e5), 961)  # R / L grid of H_m
@@ -93,20 +93,19 @@ class ScatterTables:
             h[m] = dw * (vals.sum(axis=1) - 0.5 * (vals[:, 0] + vals[:, -1]))
         return cls(log_rho=_LOG_RHO.copy(), h=h)
 
+    def at(self, tau, rho, alpha=0.0) -> np.ndarray:
+        """``(3, ...)`` values at ``rho``.
+
+        Single events depend neither on ``tau = b L`` nor, to first order, on the absorption
+        ``alpha = a / b``.
+        """
+        return self(np.broadcast_arrays(np.asarray(tau, dtype=np.float64), rho)[1])
+
     def __call__(self, rho) -> np.ndarray:
         """``(3, ...)`` values of ``H_0, H_1, H_2`` at ``rho`` (clamped to the grid)."""
         lr = np.log(np.clip(np.asarray(rho, dtype=np.float64), 1e-300, None))
         lr = np.clip(lr, self.log_rho[0], self.log_rho[-1])
         return np.stack([np.interp(lr, self.log_rho, hm) for hm in self.h])
-
-
-@lru_cache(maxsize=2)
-def water_tables() -> tuple[ScatterTables, ScatterTables]:
-    """Tables of the particles' (Fournier-Forand, Petzold fit) and sea water's phase functions."""
-    return (
-        ScatterTables.from_phase(wo.ff_phase_per_sr),
-        ScatterTables.from_phase(wo.seawater_phase_per_sr),
-    )
 
 
 @dataclass(frozen=True)
@@ -130,7 +129,7 @@ class DelayShape:
     tail_mean_m: np.ndarray
 
 
-def bottom_delay(path_m, radius_m, scattering, tables) -> DelayShape:
+def bottom_delay(path_m, radius_m, scattering, tables, absorption_per_m=0.0) -> DelayShape:
     """Excess-path cumulants and echo mixture of the bottom return (see module).
 
     Parameters
@@ -141,7 +140,11 @@ def bottom_delay(path_m, radius_m, scattering, tables) -> DelayShape:
         Field-of-view radius at the seabed (>= 0).
     scattering : sequence of float
         Scattering coefficient (1/m) of each phase function in ``tables``.
-    tables : sequence of ScatterTables
+    tables : sequence of ScatterTables or TracedTables
+        Per phase function (:func:`pipeline.forward_scatter_mc.water_tables`).
+    absorption_per_m : float
+        Absorption coefficient ``a`` (1/m): a delayed photon is absorbed along its excess path
+        too, which weights the traced tables' landings by ``exp(-a excess)``.
     """
     path = np.asarray(path_m, dtype=np.float64)
     ok = path > 0.0
@@ -151,7 +154,7 @@ def bottom_delay(path_m, radius_m, scattering, tables) -> DelayShape:
     k1 = np.zeros(path.shape)
     k2 = np.zeros(path.shape)
     for b, tab in zip(scattering, tables, strict=True):
-        h = tab(rho)
+        h = tab.at(b * length, rho, absorption_per_m / b if b > 0.0 else 0.0)
         lam += b * length * h[0]
         k1 += b * length**2 * h[1]
         k2 += b * length**3 * h[2]

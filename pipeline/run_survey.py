@@ -34,6 +34,7 @@ from pipeline.process.returns import DetectedReturns, DetectorFlag
 from pipeline.stages import Plan, StageClock
 from pipeline.survey_chunks import ChunkJob, run_chunk
 from pipeline.survey_tiles import grid_by_tiles, tile_layout, write_points_by_tiles
+from pipeline.uncertainty.photon_posterior import KeptPhotons
 from pipeline.uncertainty.posterior_selection import KeptWaveforms, posterior_budget
 
 __all__ = ["SimulatedSurvey", "survey_extent_m", "simulate_detections", "run_survey"]
@@ -47,8 +48,8 @@ class SimulatedSurvey:
     ----------
     returns : DetectedReturns
         Measured navigation and detections of every pulse, ``(n_pulses,)`` per field.
-    kept : KeptWaveforms or None
-        Waveforms kept for posteriors.
+    kept : KeptWaveforms or KeptPhotons or None
+        Waveforms (photon counting: the events of the windows) kept for posteriors.
     truth : Truth
         The exact world: read by the evaluate stage alone.
     lines : FlightLines
@@ -64,7 +65,7 @@ class SimulatedSurvey:
     """
 
     returns: DetectedReturns
-    kept: KeptWaveforms | None
+    kept: KeptWaveforms | KeptPhotons | None
     truth: Any
     lines: Any
     extent_m: tuple[float, float, float, float]
@@ -157,11 +158,15 @@ def simulate_detections(
         chunk = max(ins.shots_per_window, chunk // ins.shots_per_window * ins.shots_per_window)
     # waveforms of a bounded share of the pulses are kept for posteriors (a few times the
     # pulses sampled, so the cells that matter can be chosen among them)
+    # (photon counting: the events of a share of the windows, one posterior per window)
     keep_fraction = 0.0
     if plan.runs("posterior"):
         xmin, xmax, ymin, ymax = extent
-        n_post = posterior_budget(ps, False, (xmax - xmin) * (ymax - ymin) / 1e6)
-        keep_fraction = min(1.0, 4.0 * n_post / max(lines.n_pulses_total, 1))
+        n_post = posterior_budget(ps, (xmax - xmin) * (ymax - ymin) / 1e6)
+        n_units = lines.n_pulses_total
+        if ins.photon_counting:
+            n_units = -(-n_units // ins.shots_per_window)
+        keep_fraction = min(1.0, 4.0 * n_post / max(n_units, 1))
     job = ChunkJob(
         scene=scene,
         ctx=ctx,
@@ -174,7 +179,7 @@ def simulate_detections(
     )
     sub_flags: dict[str, int] = {}
     pulse_flags: dict[str, int] = {}
-    kept: list[KeptWaveforms] = []
+    kept: list = []
     agg = SurveyAggregates(lines.n_pulses_total, scene.scene.seed, ins.air_index)
     beyond = int(DetectorFlag.BEYOND_DETECTION_LIMIT)
     n_chunk = survey.n_chunks(lines, chunk)
@@ -224,7 +229,7 @@ def simulate_detections(
         )
     return SimulatedSurvey(
         returns=store.returns(),
-        kept=KeptWaveforms.concatenate(kept),
+        kept=(KeptPhotons if not job.waveform else KeptWaveforms).concatenate(kept),
         truth=truth,
         lines=lines,
         extent_m=extent,
@@ -244,7 +249,9 @@ def _no_bottom_limits(store: DetectionStore, agg: SurveyAggregates, ctx, detect)
     from pipeline.process.no_bottom import excess_decay_summary, limit_times_s
 
     t_b, loss, alpha = agg.no_bottom_sample()
-    delta, summary = excess_decay_summary(t_b, loss, alpha, agg.nb_counts, ctx, detect)
+    delta, summary = excess_decay_summary(
+        t_b, loss, alpha, agg.nb_stack, agg.nb_counts, ctx, detect
+    )
     n_limit = 0
     for c in range(len(store.chunks)):
         d = store.load_chunk(c, ["t_surface_s", *(f"nb_{k}" for k in _NB_FIELDS)])
@@ -313,7 +320,11 @@ def run_survey(
         # depth below the local fitted surface would carry the wave heights into the grid
         datum = survey_datum(processed.points, ps.datum)
         layout = tile_layout(scene, bounds)
-        grid = grid_by_tiles(processed.points, layout, origin, fr.crs, datum.water_level_m, ps)
+
+        def make_grid(points):
+            return grid_by_tiles(points, layout, origin, fr.crs, datum.water_level_m, ps)
+
+        grid = make_grid(processed.points)
         covered = area_coverage(
             processed.points.xyz_m[:, :2], scene.flight.area_m, ps.grid_resolution_m
         )
@@ -328,12 +339,13 @@ def run_survey(
         unc = survey_uncertainty(sim.returns, processed, ctx, grid)
         processed = dataclasses.replace(processed, points=with_tpu(processed.points, unc))
     with clock.stage("process"):
-        # class 43: seabed points standing above the local seabed by k sigma of their TPU
-        from pipeline.process.objects import classify_objects
+        from pipeline.survey_cleanup import objects_and_rejections
 
-        pts, n_obj = classify_objects(processed.points, ps.objects)
-        processed = dataclasses.replace(processed, points=pts)
+        processed, unc, grid, n_obj, rejected = objects_and_rejections(
+            processed, unc, grid, make_grid, ps, datum.water_level_m
+        )
     log(f"  submerged objects: {n_obj} seabed points stand above the local seabed (class 43)")
+    log(f"  rejected bathymetric points (class 7, withheld): {rejected}")
     post = None
     if plan.runs("posterior"):
         with clock.stage("posterior"):
@@ -353,10 +365,11 @@ def run_survey(
         from pipeline.outputs.netcdf import write_grid_nc
         from pipeline.outputs.raster import write_grid_tif
 
+        las_path, las_order = write_points_by_tiles(
+            out / "points.laz", processed.points, sim.returns, layout, ctx, origin, fr.crs
+        )
         files = {
-            "points": write_points_by_tiles(
-                out / "points.laz", processed.points, sim.returns, layout, ctx, origin, fr.crs
-            ),
+            "points": las_path,
             "grid": write_grid_tif(out / "grid.tif", grid, unc.cells),
             "grid_nc": write_grid_nc(out / "grid.nc", grid, unc.cells),
         }
@@ -365,7 +378,10 @@ def run_survey(
         # costs only the views (one warning line)
         from pipeline.outputs.view3d import write_views
 
-        vtp, pictures = write_views(out / "view", processed.points, sim, origin, fr.crs, log)
+        # in the LAS's order: a view's point i is the LAS's point i
+        vtp, pictures = write_views(
+            out / "view", processed.points.select(las_order), sim, origin, fr.crs, log
+        )
         files.update({f"view_{k}": p for k, p in vtp.items()})
     with clock.stage("evaluate"):
         from pipeline.survey_report import evaluate_survey

@@ -66,8 +66,6 @@ def _water_column(scene) -> str | None:
 
 
 def _posterior(scene) -> str | None:
-    if scene.detector.mode != "full_waveform":
-        return "photon counting: no waveform to sample (photon-window posteriors: benchmark only)"
     ps = scene.process
     if ps.posterior_pulses_per_km2 <= 0.0 and ps.posterior_min_pulses <= 0:
         return "process.posterior_pulses_per_km2 = 0 and posterior_min_pulses = 0"
@@ -104,7 +102,11 @@ STAGES: tuple[Stage, ...] = (
     Stage("water_column", "class 64 points of in-column returns", _survey_and(_water_column)),
     Stage("grid", "datum and bathymetry grid", _survey),
     Stage("tpu", "propagated uncertainty, per cell, IHO orders", _survey),
-    Stage("posterior", "emcee depth posteriors of a bounded sample", _survey_and(_posterior)),
+    Stage(
+        "posterior",
+        "emcee depth posteriors of a bounded sample (photon counting: of window histograms)",
+        _survey_and(_posterior),
+    ),
     Stage("outputs", "points.laz, grid.tif (COG), grid.nc (CF)", _survey),
     Stage("views", "3D scene: view/*.vtp for ParaView, pictures for the report", _survey),
     Stage("evaluate", "points and grid against the truth; report.html", _survey),

@@ -296,6 +296,13 @@ CASES: tuple[StressCase, ...] = (
         expect=("posteriors:8",),
     ),
     StressCase(
+        "photon_posteriors",
+        "the photon-counting base with depth posteriors on its window histograms",
+        base="photon",
+        overrides=(("process.posterior_min_pulses", 4),),
+        expect=("class:40", "posteriors:2"),
+    ),
+    StressCase(
         "bad_mesh_extent",
         "20 km altitude with the base's 1 m seabed mesh over the 18.6 km extent: 44 GB",
         overrides=(("flight.altitude_m", 20000.0),),

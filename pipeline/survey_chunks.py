@@ -16,8 +16,10 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.constants import FWHM_TO_SIGMA
 from pipeline.process.context import ProcessingContext
 from pipeline.stages import StageClock
+from pipeline.uncertainty.photon_posterior import KeptPhotons, keep_windows
 from pipeline.uncertainty.posterior_selection import KeptWaveforms, kept_for_posterior
 
 __all__ = ["ChunkJob", "ChunkResult", "run_chunk"]
@@ -37,7 +39,8 @@ class ChunkJob:
     chunk_pulses : int
         Pulses per chunk (the last one may be shorter).
     keep_fraction : float
-        Share of pulses whose waveforms are kept for posteriors.
+        Share of pulses whose waveforms are kept for posteriors (photon counting: share of the
+        accumulation windows whose events are kept).
     waveform : bool
         Full-waveform receiver (else photon counting).
     no_bottom : bool
@@ -62,7 +65,8 @@ class ChunkResult:
     ----------
     part : dict of str to ndarray
         Measured navigation and detections, ``(n,)`` or ``(n, 3)`` per field.
-    kept : KeptWaveforms or None
+    kept : KeptWaveforms or KeptPhotons or None
+        Full waveform: the waveforms kept; photon counting: the kept windows' events.
     nb : dict or None
         No-bottom-limit inputs of the chunk.
     subray_flags, pulse_flags : dict of str to int
@@ -71,7 +75,7 @@ class ChunkResult:
     """
 
     part: dict[str, np.ndarray]
-    kept: KeptWaveforms | None
+    kept: KeptWaveforms | KeptPhotons | None
     nb: dict[str, np.ndarray] | None
     subray_flags: dict[str, int]
     pulse_flags: dict[str, int]
@@ -115,7 +119,7 @@ def run_chunk(job: ChunkJob, c: int) -> ChunkResult:
     if job.waveform:
         found, kept, nb = _waveform_chunk(job, clock, paths)
     else:
-        found, flags = _photon_chunk(job, clock, paths, pulses)
+        found, flags, kept = _photon_chunk(job, clock, paths, pulses)
         pulse_flags = describe_pulse_flags(flags)
     part = {
         "pulse_id": pulses.pulse_id,
@@ -179,7 +183,7 @@ def _waveform_chunk(job: ChunkJob, clock: StageClock, paths):
 
 
 def _photon_chunk(job: ChunkJob, clock: StageClock, paths, pulses):
-    """Photon events of one chunk and their window detections; the receiver's flags."""
+    """Photon events of one chunk, their window detections, flags and the windows kept."""
     from pipeline.process.detect_photons import detect_photon_events
     from pipeline.simulate.waveform import simulate_photon_events
 
@@ -202,5 +206,19 @@ def _photon_chunk(job: ChunkJob, clock: StageClock, paths, pulses):
             # the detection limit's assumptions (class 45), as the full-waveform one's
             no_bottom=scene.process.no_bottom,
             group_index=job.ctx.refraction.group_index,
+            # the system response processing assumes (pulse and detector): the surface's pulse
+            pulse_sigma_s=job.ctx.instrument.system_fwhm_s * FWHM_TO_SIGMA,
         )
-    return found, ev.flags
+    kept = keep_windows(
+        pulses.pulse_id,
+        ev.offsets,
+        ev.times_s,
+        pulses.origin_meas_m,
+        pulses.direction_meas,
+        job.ctx.instrument.air_index,
+        scene.process.photon_detect.shots_per_window,
+        scene.detector.dead_time_s,
+        job.keep_fraction,
+        scene.scene.seed,
+    )
+    return found, ev.flags, kept

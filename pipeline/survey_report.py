@@ -11,10 +11,12 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.evaluate import evaluate, tpu_coverage, water_column_report
+from pipeline.evaluate import evaluate, water_column_report
+from pipeline.evaluate_coverage import tpu_coverage
 from pipeline.evaluate_features import features_report
 from pipeline.outputs.atomic import write_json
 from pipeline.process.classify import SEABED_CLASSES
+from pipeline.process.no_bottom import extinction_depth_summary
 
 __all__ = ["evaluate_survey"]
 
@@ -85,7 +87,7 @@ def evaluate_survey(
     coverage = tpu_coverage(
         unc.points40, unc.tpu40.sigma_depth_m, truth_depth_m=truth.depth_at_pulses_m, group=group
     )
-    from pipeline.evaluation_points import point_arrays, write_evaluation_points
+    from pipeline.evaluation_points import point_arrays, rejected_report, write_evaluation_points
 
     # per-point residuals and sigmas, so a scene suite can pool strata across runs
     write_evaluation_points(
@@ -102,7 +104,7 @@ def evaluate_survey(
     )
     post_eval = None
     if post is not None:
-        from pipeline.evaluate import posterior_coverage
+        from pipeline.evaluate_coverage import posterior_coverage
 
         post_eval = {"n": 0}
         if post.posteriors is not None:
@@ -120,11 +122,15 @@ def evaluate_survey(
         "receiver": scene.detector.mode,
         "bottom_detected_fraction": float(np.mean(sim.returns.has_bottom)),
         "datum": {**datum.to_dict(), "true_mean_water_level_m": true_level_m},
-        "no_bottom": sim.no_bottom,
+        # the detection limits, and the depths of the class-45 points they placed: the
+        # survey's measured extinction depth
+        "no_bottom": {**(sim.no_bottom or {}), **extinction_depth_summary(processed.points)},
         "water_column": water_column_report(processed.points, scene.water.layer_depth_m),
         "subray_flags": sim.subray_flags,
         "receiver_pulse_flags": sim.pulse_flags,
         "error": report,
+        # the soundings processing rejected as gross errors (class 7, withheld), per rule
+        "seabed_rejected": rejected_report(processed.points, truth.depth_at_pulses_m),
         # per IHO cube: detected by soundings on its top / a grid cell / class 43; the grid
         # as seabed elevation against the true seabed
         **features_report(

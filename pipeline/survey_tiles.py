@@ -53,6 +53,7 @@ __all__ = [
     "GridAccumulator",
     "tile_layout",
     "grid_by_tiles",
+    "points_tile_order",
     "write_points_by_tiles",
 ]
 
@@ -234,15 +235,21 @@ def grid_by_tiles(points, layout: TileLayout, origin_m, crs, datum_m, ps) -> Gri
     return grid if datum_m is None else dataclasses.replace(grid, datum_m=float(datum_m))
 
 
-def write_points_by_tiles(path, points, returns, layout: TileLayout, ctx, origin_m, crs):
-    """``points.laz`` appended tile by tile (:class:`~pipeline.outputs.las.LazTileWriter`).
+def points_tile_order(
+    points, returns, layout: TileLayout, air_index: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The order :func:`write_points_by_tiles` writes ``points`` in, and where tiles start.
 
     A pulse's points go with the tile of its position (:func:`~pipeline.detection_store.
-    pulse_position_m`), so every pulse is numbered whole.
-    """
-    from pipeline.outputs.las import LazTileWriter, las_header
+    pulse_position_m`), so every pulse is numbered whole; tile by tile, each tile's points in
+    their own order (a stable sort by tile).
 
-    ins = ctx.instrument
+    Returns
+    -------
+    order : (n_points,) int64
+    starts : (n_tiles_used + 1,) int64
+        ``order[starts[i]:starts[i + 1]]`` are the points of the ``i``-th tile written.
+    """
     pos = pulse_position_m(
         {
             "origin_meas_m": returns.origin_meas_m,
@@ -257,14 +264,33 @@ def write_points_by_tiles(path, points, returns, layout: TileLayout, ctx, origin
                 if returns.has_column is not None
             },
         },
-        ins.air_index,
+        air_index,
     )
     pulse_tile = layout.tile_of_xy(pos[:, 0], pos[:, 1])
     by_id = np.argsort(returns.pulse_id)
     row = by_id[np.searchsorted(returns.pulse_id[by_id], points.pulse_id)]
     tiles = pulse_tile[row]
+    order = np.argsort(tiles, kind="stable")
+    ts = tiles[order]
+    starts = np.flatnonzero(np.r_[True, ts[1:] != ts[:-1], True]) if ts.size else np.zeros(1)
+    return order, starts.astype(np.int64)
+
+
+def write_points_by_tiles(path, points, returns, layout: TileLayout, ctx, origin_m, crs):
+    """``points.laz`` appended tile by tile (:class:`~pipeline.outputs.las.LazTileWriter`).
+
+    Returns
+    -------
+    path : Path
+    order : (n_points,) int64
+        The written order (:func:`points_tile_order`; the views write their points in it).
+    """
+    from pipeline.outputs.las import LazTileWriter, las_header
+
+    ins = ctx.instrument
+    order, starts = points_tile_order(points, returns, layout, ins.air_index)
     header = las_header(points.classification, points.amplitude is not None, crs, origin_m)
     with LazTileWriter(path, header, ins.amplitude_full_scale) as w:
-        for t in np.unique(tiles):
-            w.write(points.select(tiles == t), returns)
-    return path
+        for i in range(starts.size - 1):
+            w.write(points.select(order[starts[i] : starts[i + 1]]), returns)
+    return path, order

@@ -160,8 +160,7 @@ class WaveField:
         ``std(m0) / m0 = sqrt(sum E**2) / sum E`` over independent modes and Hs = 4 sqrt(m0)
         halves it. About ``0.2 / (patch side in peak wavelengths)`` for PM with cos-2s.
     acceleration_rms_m_s2 : float
-        Expected rms vertical acceleration ``sqrt(sum w**4 Psi dk)``, m/s**2 (sets how long the
-        surface may be interpolated linearly in time; :mod:`terrain.evolving_sea`).
+        Expected rms vertical acceleration ``sqrt(sum w**4 Psi dk)``, m/s**2.
     """
 
     def __init__(
@@ -295,10 +294,37 @@ class WaveField:
 
     def at_time(self, t_s: float = 0.0) -> GridSurface:
         """The surface frozen at time ``t_s`` (s): periodic GridSurface over ``extent``."""
+        return self._grid(self._modes(t_s), self.mean_level_m)
+
+    def rate_at_time(self, t_s: float = 0.0) -> GridSurface:
+        """The vertical rate ``d eta / dt`` (m/s) at time ``t_s``: periodic GridSurface, mean 0.
+
+        Mode by mode ``-i w [h0(k) e^{-i w t} - conj(h0(-k)) e^{i w t}]``, the exact time
+        derivative of :meth:`at_time`'s field (:mod:`terrain.evolving_sea` interpolates in time
+        with it).
+        """
+        t = check_number("t_s", t_s)
+        phase = np.exp(-1j * self._omega * t)
+        rate = -1j * self._omega * (self._h_plus * phase - self._h_minus * np.conj(phase))
+        return self._grid(rate, 0.0)
+
+    def _grid(self, modes: np.ndarray, level_m: float) -> GridSurface:
         ny, nx = self.shape
-        eta = scipy.fft.irfft2(self._modes(t_s) * (nx * ny), s=(ny, nx))
+        eta = scipy.fft.irfft2(modes * (nx * ny), s=(ny, nx))
         dy, dx = self.spacing_m
-        return GridSurface(self.extent[0], self.extent[2], dx, dy, eta + self.mean_level_m, True)
+        return GridSurface(self.extent[0], self.extent[2], dx, dy, eta + level_m, True)
+
+    def mode_energies(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Realised energy ``|h+|**2 + |h-|**2`` (m**2), ``|k|**2`` and ``w`` of each mode.
+
+        Returns
+        -------
+        energy_m2, k2_rad2_m2, omega_rad_s : (ny, nx // 2 + 1) float64
+            The energies carry the half-plane weights, so ``sum(energy)`` is the height variance
+            and ``sum(k2 * energy)`` the mean-square slope, in the ensemble over time.
+        """
+        energy = self._weight * (np.abs(self._h_plus) ** 2 + np.abs(self._h_minus) ** 2)
+        return energy, self._kx**2 + self._ky**2, self._omega
 
     def slope_variance(self, t_s: float = 0.0) -> tuple[float, float]:
         """Realised ``(upwind, crosswind)`` slope variances of the Fourier field at ``t_s``."""

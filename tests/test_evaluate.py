@@ -12,9 +12,9 @@ from pipeline.evaluate import (
     evaluate,
     grid_errors_m,
     iho_fractions,
-    tpu_coverage,
     tvu_allowance_m,
 )
+from pipeline.evaluate_coverage import tpu_coverage
 from pipeline.process.grid import grid_points
 from pipeline.process.returns import Points
 

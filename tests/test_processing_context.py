@@ -102,7 +102,11 @@ def test_bathy_run_uses_and_records_the_users_values(tmp_path):
     from pipeline.outputs.las import read_points_laz
 
     pts = read_points_laz(tmp_path / "points.laz").points
-    b = pts.classification == 40
+    # a 0.7 m vertical navigation sigma alone gives a 95 % TVU of 1.96 x 0.7 = 1.37 m, over
+    # IHO order 2's sqrt(1 + (0.023 d)^2) = 1.00-1.01 m at these 2-5 m depths: every bottom
+    # sounding is rejected (class 7, withheld) and keeps its position, depth and TPU
+    assert np.sum(pts.classification == 40) == 0
+    b = pts.classification == 7
     assert b.sum() > 1000
     # the TPU received the 5 m navigation sigma: no horizontal uncertainty below it
     assert np.all(pts.uncertainty_h_m[b] >= 5.0)

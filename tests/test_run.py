@@ -99,7 +99,7 @@ def test_survey_scene_end_to_end(tmp_path, small_survey):
         # bottom now fades at the field-of-view attenuation, as the column does, with no
         # stretching, so the survey's extra decay is ~0 and the limits of pulses near the
         # penetration edge overstate what was seen (c = 0.5: 5.2 % more than 0.5 m deep)
-        pytest.xfail(f"class-45 limits below the seabed: {1 - holds:.0%} (issue 12)")
+        pytest.xfail(f"class-45 limits below the seabed: {1 - holds:.0%} (issue 13)")
 
 
 def test_photon_counting_profiler_end_to_end(tmp_path):
@@ -143,4 +143,4 @@ def test_tpu_depth_sigma_is_calibrated_end_to_end(tmp_path):
         # known since issue 12 (RESULTS_realism.md): without the old symmetric stretch of
         # deep echoes the TPU over-covers (78 % within 1 sigma with no delay); with the delay
         # corrected and its forward_scatter term (half the correction) 86 % / 99 %
-        pytest.xfail(f"TPU coverage {f68:.3f} / {f95:.3f} of 0.683 / 0.95 (issue 12)")
+        pytest.xfail(f"TPU coverage {f68:.3f} / {f95:.3f} of 0.683 / 0.95 (issue 13)")

@@ -30,7 +30,8 @@ def test_shipped_scenes_get_plans_that_differ_where_the_scenes_differ():
     assert "water_column" in plans["water_column_layer"]
     assert "water_column" not in plans["palmer_survey"]
     assert plans["reference_profiler"] == ("photon_budget", "photon_histograms", "profiler_figures")
-    assert "posterior" in plans["default"] and "posterior" not in plans["photon_profiler"]
+    # photon counting samples its window histograms (pipeline.uncertainty.photon_posterior)
+    assert "posterior" in plans["default"] and "posterior" in plans["photon_profiler"]
 
 
 def test_every_stage_left_out_says_why():

@@ -340,29 +340,32 @@ def test_ci_points_file_matches_the_run_level_evaluation(ci_suite):
 @pytest.mark.parametrize("half_name", ["tuning", "heldout"])
 def test_ci_figures_that_hold_today(ci_suite, half_name):
     fig = ci_suite["strata"][("all", "all")][half_name]
-    # measured +0.009 / +0.011 m; the scenes had -0.13 m: 0.03 m is the floor itself
+    # measured +0.004 / +0.010 m (tuning / held-out, 2026-11-24); the scenes had
+    # -0.13 m: 0.03 m is the floor itself
     assert abs(fig["points"]["bias_m"]) <= 0.03
-    # measured 0.055 / 0.108 m; 0.15 m is the floor for winds above 5 m/s
+    # measured 0.049 / 0.071 m; 0.15 m is the floor for winds above 5 m/s
     assert fig["points"]["rmse_m"] <= 0.15
-    # measured 73.5 / 77.1 %: the TPU is too small, but not by an order of magnitude
+    # measured 96.7 / 96.1 % (tpustrata after the merge of main: timing from the scatter
+    # without the relief and the sea between the pairs, forward-scatter relative sigma 0.5,
+    # the wave facet term; 98.6 / 96.5 % before the branch)
     assert fig["tpu"]["cov95"] >= 0.6
     assert fig["points"]["n"] >= 2000
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="measured: held-out max |error| 1.56 m (> 1 m floor)")
+@pytest.mark.xfail(strict=True, reason="measured: held-out max |error| 1.99 m (> 1 m floor)")
 def test_ci_no_gross_error_held_out(ci_suite):
     assert ci_suite["strata"][("all", "all")]["heldout"]["n_over_1m"] == 0
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="measured: TPU 95 % coverage 73.5 % tuning, 77.1 % held-out")
 def test_ci_tpu_95_coverage_floor(ci_suite):
+    # measured 96.7 % tuning, 96.1 % held-out (2026-11-24, tpustrata with the wave facet)
     for h in ("tuning", "heldout"):
         assert 0.93 <= ci_suite["strata"][("all", "all")][h]["tpu"]["cov95"] <= 0.97
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="measured: TPU 68 % coverage 42.8 % tuning")
+@pytest.mark.xfail(strict=True, reason="measured: TPU 68 % coverage 75.3 % tuning (too wide)")
 def test_ci_tpu_68_coverage_floor_tuning(ci_suite):
     assert 0.64 <= ci_suite["strata"][("all", "all")]["tuning"]["tpu"]["cov68"] <= 0.72

@@ -50,8 +50,7 @@ def test_posterior_budget_is_per_km2_with_a_floor():
     scene = load_scene(ROOT / "pipeline" / "scenes" / "default.toml")
     assert scene.process.posterior_pulses_per_km2 == 0.0  # the demo: the minimum only
     ps = dataclasses.replace(scene.process, posterior_pulses_per_km2=2000.0)
-    assert posterior_budget(ps, False, 1.0) == 2000
-    assert posterior_budget(ps, False, 0.01) == 48  # 20 by density: the floor
+    assert posterior_budget(ps, 1.0) == 2000  # photon counting: windows, the same numbers
+    assert posterior_budget(ps, 0.01) == 48  # 20 by density: the floor
     none = dataclasses.replace(ps, posterior_pulses_per_km2=0.0, posterior_min_pulses=0)
-    assert posterior_budget(none, False, 1.0) == 0
-    assert posterior_budget(ps, True, 1.0) == 0  # photon counting: no waveform
+    assert posterior_budget(none, 1.0) == 0

@@ -18,13 +18,15 @@ Layout
 * Standard fields: classification (ASPRS codes of :mod:`pipeline.process.classify`); return
   number / number of returns 1..n in time order over *all* the points of a pulse, class 45 and
   64 and derived points included (:mod:`pipeline.process.return_order`); synthetic flag on
-  every derived point (``PointFlag.SYNTHETIC``, class 45, derived surface). Given the
+  every derived point (``PointFlag.SYNTHETIC``, class 45, derived surface); withheld flag on
+  the rejected soundings (``TVU_EXCEEDED``, ``SURFACE_IMPLAUSIBLE``, ``SEABED_OUTLIER``: class 7,
+  :mod:`pipeline.process.seabed_outliers`). Given the
   detections (``returns``): GPS time, intensity, scan angle and point source ID (flight line)
   of :mod:`pipeline.outputs.las_fields`; without them those four are 0.
-* Extra bytes (LAS 1.4 extra-bytes VLR): ``depth_m`` (f8; below the *local fitted* water
-  surface, as its description says; the grid's datum is in ``grid.tif`` and
-  ``evaluation.json``), ``uncertainty_v_m``, ``uncertainty_h_m``, ``confidence`` (f4),
-  ``pulse_id`` (i8), ``kind`` (u1),
+* Extra bytes (LAS 1.4 extra-bytes VLR): ``depth_m`` (f8; below the *local* sea at the
+  pulse's time (fitted plane and sea correlation), as its description says; the grid's
+  datum is in ``grid.tif`` and ``evaluation.json``), ``uncertainty_v_m``, ``uncertainty_h_m``,
+  ``confidence`` (f4), ``pulse_id`` (i8), ``kind`` (u1),
   ``process_flags``, ``detector_flags`` (u2), and ``amplitude`` (f4) when present.
 """
 
@@ -80,7 +82,7 @@ _VLR_RECORD = 1
 _EXTRA = (
     # the point's own reference: below the water surface fitted around it (under waves it moves
     # with them); grid.tif's depth is below the survey's datum (pipeline.process.datum)
-    ("depth_m", "f8", "below local fitted water surf. m"),
+    ("depth_m", "f8", "below local sea at pulse time, m"),
     ("uncertainty_v_m", "f4", "vertical 1-sigma uncertainty (m)"),
     ("uncertainty_h_m", "f4", "horiz. 1-sigma uncertainty (m)"),
     ("confidence", "f4", "detection confidence 0-1"),
@@ -255,6 +257,10 @@ def las_records(
         | (points.kind == ReturnKind.DERIVED_SURFACE)
         | (points.classification == NO_BOTTOM_FOUND_AT)
     )
+    # rejected soundings (class 7) stay in the file, withheld as LAS 1.4 defines the bit: a
+    # point that should not be used in normal processing
+    rejected = PointFlag.TVU_EXCEEDED | PointFlag.SEABED_OUTLIER | PointFlag.SURFACE_IMPLAUSIBLE
+    las.withheld = (points.flags & np.uint16(rejected)) != 0
     if returns is not None:
         pf = pulse_fields(points, returns, amplitude_full_scale)
         las.gps_time = pf.gps_time_s

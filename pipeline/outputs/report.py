@@ -19,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.evaluate import error_stats, grid_errors_m, point_errors_m, tpu_coverage
+from pipeline.evaluate import error_stats, grid_errors_m, point_errors_m
+from pipeline.evaluate_coverage import tpu_coverage
 from pipeline.iho import tvu_allowance_m
 from pipeline.outputs import report_figures as F
 from pipeline.outputs.atomic import atomic_path

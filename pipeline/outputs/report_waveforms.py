@@ -56,6 +56,12 @@ def waveform_section(sim, ctx, pts, post=None, system=None) -> str:
     :class:`~pipeline.uncertainty.waveform_model.WaveformSystem` the posteriors used.
     """
     kept, r = sim.kept, sim.returns
+    if kept is not None and not hasattr(kept, "samples"):
+        return para(
+            "Photon counting: no waveform per pulse. The depth posteriors sampled the height "
+            "histograms of the accumulation windows kept by the chunk loop (their events in "
+            "time along one shot's beam, with each bin's live share under the dead time)."
+        )
     if kept is None or not kept.pulse_id.size:
         return para(
             "No waveform was kept in this run: the chunk loop keeps waveforms only for the "

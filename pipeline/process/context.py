@@ -258,8 +258,8 @@ def with_measured_attenuation(
     """The context with the forward-scattering correction at the measured water's ``c``.
 
     Only when the user gave no ``process.forward_scatter.beam_attenuation_per_m`` (theirs wins)
-    and the survey measured its column decay (``column_decay_per_m``, the median lidar decay
-    of the columns without a bottom, :mod:`pipeline.process.no_bottom`); ``c`` is the one
+    and the survey measured its column decay (``column_decay_per_m``, the lidar decay of the
+    stacked columns of its pulses, :mod:`pipeline.process.column_stack`); ``c`` is the one
     whose lidar decay at the median slant air range ``r_air_m`` matches it
     (:func:`~pipeline.process.scatter_bias.attenuation_from_column`).
     """

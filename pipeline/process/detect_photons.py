@@ -27,7 +27,9 @@ of ``shots_per_window`` consecutive shots:
    significance is reported back in normal σ.
 3. **Sub-bin height**: the background-subtracted centroid of the events within ±``centroid_bins``
    of the peak bin; with a bottom, surface and bottom centroids stop short of the emptiest bin
-   between them.
+   between them. Then (``echo_ml``, given the system pulse's sigma) each echo's
+   maximum-likelihood height under the dead time (:mod:`pipeline.process.photon_echo_ml`):
+   of a piled-up echo only the leading edge is recorded and the centroid lies early.
 Dead time: every count is live-time corrected first (:mod:`pipeline.process.photon_livetime`),
 and the bins the dead time left blind are neither a level nor a dip. A window's detection limit
 (:mod:`pipeline.process.photon_limit`) places its class-45 point and flags bottoms past it.
@@ -49,10 +51,12 @@ from pipeline import optics
 from pipeline.config import setting
 from pipeline.process.detect import WaveformDetections, flank_trend
 from pipeline.process.detection_limit import NoBottomSettings
+from pipeline.process.photon_echo_ml import surface_and_bottom_ml
 from pipeline.process.photon_limit import photon_detection_limit
 from pipeline.process.photon_livetime import (
     bin_live_fraction,
     dead_height_m,
+    event_heights_m,
     event_live_fraction,
     surface_pileup_pe,
 )
@@ -77,6 +81,12 @@ class PhotonDetectSettings:
     min_separation_m: float = setting(0.3, ge=0.0, le=100.0, doc="bottom below the surface by")
     centroid_bins: int = setting(2, ge=0, le=50, doc="bins each side used for the centroid")
     trend_bins: int = setting(20, ge=2, le=1000, doc="flank length of the column trend, bins")
+    echo_ml: bool = setting(
+        True,
+        doc="time surface and bottom by a maximum-likelihood fit of the system pulse under the "
+        "dead time (pipeline.process.photon_echo_ml): a piled-up echo's live-time corrected "
+        "centroid lies early by up to a pulse sigma; False: that centroid",
+    )
     saturation_pe: float = setting(
         3.0,
         gt=0.0,
@@ -157,6 +167,7 @@ def detect_photon_events(
     dead_time_s: float = 0.0,
     no_bottom: NoBottomSettings | None = None,
     group_index: float | None = None,
+    pulse_sigma_s: float = 0.0,
 ) -> WaveformDetections:
     """Surface and bottom per shot from photon events accumulated along track.
 
@@ -188,6 +199,11 @@ def detect_photon_events(
         column's extent, and a bottom found deeper than it, under
         twice the threshold, is flagged BEYOND_DETECTION_LIMIT (a bottom of the assumed
         reflectance would not be seen there: it cannot be told from an upward fluctuation).
+    pulse_sigma_s : float
+        Sigma of the system's response (pulse and detector; processing's assumption of the
+        instrument). With ``settings.echo_ml``, surface and bottom are the maximum-likelihood
+        heights of that pulse under the dead time (:mod:`pipeline.process.photon_echo_ml`); 0:
+        the live-time corrected centroids.
 
     Returns
     -------
@@ -197,10 +213,7 @@ def detect_photon_events(
     s = settings or PhotonDetectSettings()
     n = origin_m.shape[0]
     c = optics.SPEED_OF_LIGHT_M_S
-    counts = np.diff(offsets)
-    shot = np.repeat(np.arange(n), counts)
-    r = c * times_s / (2.0 * n_air)
-    z = origin_m[shot, 2] + r * direction[shot, 2]
+    shot, z = event_heights_m(offsets, times_s, origin_m, direction, n_air)
     ids = np.arange(n) if pulse_id is None else np.asarray(pulse_id)
     _, window = np.unique(ids // s.shots_per_window, return_inverse=True)
     n_win = int(window.max()) + 1 if n else 0
@@ -383,6 +396,15 @@ def detect_photon_events(
     z_s, amp_s = centroid(i_s, s_box)
     lam_s = surface_pileup_pe(shot, window, b, ev_win, s_box, n, n_win, n_channels)
     z_b, amp_b = centroid(i_b, b_box)
+    if s.echo_ml and pulse_sigma_s > 0:
+        # the centroid of a piled-up echo lies early: fit the known pulse to what was live
+        per_m = 1.0 / (np.maximum(shots_w, 1) * max(int(n_channels), 1) * s.bin_m)
+        z_s, z_b = surface_and_bottom_ml(
+            (ev_win, z, tau_h), window, direction, pulse_sigma_s, n_air, n_channels,
+            {"z_s": z_s, "z_b": z_b, "has_s": has_s, "has_b": has_b, "bg_s": bg * per_m,
+             "bg_b": local[rows, i_b] * per_m, "edge_s": (k0 + s_box[0]) * s.bin_m,
+             "edge_b": (k0 + b_box[1] + 1) * s.bin_m},
+        )  # fmt: skip
     # per shot: time at which its own measured beam reaches the window's detected heights
     dz = direction[:, 2]
     with np.errstate(divide="ignore"):

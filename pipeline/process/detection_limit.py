@@ -61,6 +61,7 @@ __all__ = [
     "column_margins",
     "bottom_losses",
     "excess_decay_per_s",
+    "filtered_waveforms",
     "limit_after_surface_s",
     "no_bottom_limit_s",
 ]
@@ -153,13 +154,23 @@ def _blocks(fn, n: int, *arrays):
     return tuple(np.concatenate([p[j] for p in parts]) for j in range(len(parts[0])))
 
 
+def filtered_waveforms(samples: np.ndarray, det: DetectorModel) -> np.ndarray:
+    """Baseline-free, matched-filtered waveforms, float64 (n, m).
+
+    The baseline is each pulse's median of its leading noise samples; the filter the system's
+    Gaussian (the detector's matched filter) over ``samples`` (n, m).
+    """
+    y = np.asarray(samples, dtype=np.float64)
+    m = y.shape[1]
+    k = min(max(int(det.noise_samples), 4), max(m - 1, 1))
+    base = np.median(y[:, :k], axis=1)[:, None]
+    return gaussian_filter1d(y - base, det.sigma_samples, axis=1, mode="nearest")
+
+
 def _column_fit(samples, t_surface_s, t_end_idx, noise_sigma, det, min_snr):
     """``(log C0, α, ok)`` of the filtered column between the surface echo and ``t_end_idx``."""
-    y = np.asarray(samples, dtype=np.float64)
-    n, m = y.shape
-    sg = det.sigma_samples
-    k = min(max(int(det.noise_samples), 4), max(m - 1, 1))
-    filt = gaussian_filter1d(y - np.median(y[:, :k], axis=1)[:, None], sg, axis=1, mode="nearest")
+    filt = filtered_waveforms(samples, det)
+    n, m = filt.shape
     i_s = np.asarray(t_surface_s, dtype=np.float64) / det.dt_s
     first = i_s + det.min_separation_fwhm * det.pulse_fwhm_s / det.dt_s
     cols = np.arange(m)[None, :]

@@ -21,6 +21,15 @@ among ten soundings moves the cell by 3 m. The median's breakdown point is 50 %:
 holds while fewer than half its points are outliers (the simplest of the robust cell
 estimators; CUBE, Calder & Mayer 2003, "Automatic processing of high-rate, high-density
 multibeam echosounder data", G3 4(6), tracks several depth hypotheses per node instead).
+
+Why the median is not the whole story: it also erases a real shoal smaller than a cell (an IHO
+cube's soundings are a minority of its cell). The hydrographic answer is the *designated
+sounding* (Smith, Alexander & Armstrong 2002, "The navigation surface: a multipurpose
+bathymetric database", Int. Hydrogr. Rev. 3(2); NOAA HSSD: a feature's grid node carries its
+least depth): :func:`designate_objects` sets the cells that hold submerged-object soundings
+(class 43, :mod:`pipeline.process.objects`) to the least depth among them, so a feature that
+processing found survives in the grid while outliers of the class-40 soundings still meet the
+median.
 """
 
 from __future__ import annotations
@@ -42,6 +51,7 @@ __all__ = [
     "GRID_STATISTICS",
     "cell_index",
     "cell_statistics",
+    "designate_objects",
     "grid_from_statistics",
     "grid_points",
     "grid_seabed",
@@ -82,6 +92,9 @@ class Grid:
         the depths are the points' own ``depth_m`` (below the local fitted surface).
     statistic : str
         What ``depth_m`` and ``z_m`` are per cell: ``"median"`` or ``"mean"``.
+    designated : (ny, nx) bool or None
+        Cells whose ``depth_m`` and ``z_m`` are a designated sounding, the least depth of the
+        submerged objects in them (:func:`designate_objects`); None: none designated.
     """
 
     depth_m: np.ndarray
@@ -98,6 +111,7 @@ class Grid:
     datum_m: float | None = None
     mean_depth_m: np.ndarray | None = None
     statistic: str = "median"
+    designated: np.ndarray | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -330,3 +344,46 @@ def seabed_values(
     xyz = points.xyz_m[keep]
     depth = points.depth_m[keep] if datum_m is None else float(datum_m) - xyz[:, 2]
     return xyz, depth
+
+
+def designate_objects(grid: Grid, points: Points, datum_m: float | None = None) -> Grid:
+    """Cells holding submerged-object soundings (class 43) take the least depth among them.
+
+    Designated soundings (module docstring): ``depth_m`` (and ``z_m``) of such a cell become
+    the shoalest class-43 point's depth (its highest elevation), and ``designated`` marks the
+    cell; ``median_depth_m``, ``mean_depth_m``, ``spread_m`` and ``count`` keep every
+    sounding's statistics.
+
+    Parameters
+    ----------
+    grid : Grid
+    points : Points
+        Classified points (``xyz_m``, ``depth_m``, ``classification``).
+    datum_m : float, optional
+        As :func:`grid_seabed`: depths below this local z; default the points' ``depth_m``.
+
+    Returns
+    -------
+    Grid
+        ``grid`` itself when no class-43 point falls in it.
+    """
+    obj = points.classification == SUBMERGED_OBJECT
+    xyz = points.xyz_m[obj]
+    ny, nx = grid.shape
+    cell, inside = cell_index(xyz[:, 0], xyz[:, 1], grid.bounds_m, grid.resolution_m)
+    if not inside.any():
+        return grid
+    z = xyz[inside, 2]
+    depth = points.depth_m[obj][inside] if datum_m is None else float(datum_m) - z
+    cell = cell[inside]
+    shoal = np.full(nx * ny, np.inf)
+    np.minimum.at(shoal, cell, depth)
+    high = np.full(nx * ny, -np.inf)
+    np.maximum.at(high, cell, z)
+    has = np.isfinite(shoal).reshape(ny, nx)
+    return dataclasses.replace(
+        grid,
+        depth_m=np.where(has, shoal.reshape(ny, nx), grid.depth_m),
+        z_m=np.where(has, high.reshape(ny, nx), grid.z_m),
+        designated=has,
+    )

@@ -9,11 +9,14 @@ chunking, and :func:`limit_times_s` then gives each chunk's ``t_no_bottom_s``.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S
+from pipeline.process.classify import NO_BOTTOM_FOUND_AT
+from pipeline.process.column_stack import ColumnStack, stack_column, stacked_decay_per_m
 from pipeline.process.context import ProcessingContext
 from pipeline.process.detect import DetectSettings
 from pipeline.process.detection_limit import (
@@ -25,9 +28,15 @@ from pipeline.process.detection_limit import (
     excess_decay_per_s,
     limit_after_surface_s,
 )
-from pipeline.process.returns import DetectedReturns, DetectorFlag
+from pipeline.process.returns import DetectedReturns, DetectorFlag, Points
 
-__all__ = ["detector_model", "chunk_inputs", "excess_decay_summary", "limit_times_s"]
+__all__ = [
+    "detector_model",
+    "chunk_inputs",
+    "excess_decay_summary",
+    "limit_times_s",
+    "extinction_depth_summary",
+]
 
 
 def detector_model(ctx: ProcessingContext, detect: DetectSettings) -> DetectorModel:
@@ -68,7 +77,9 @@ def chunk_inputs(
         The column margins of the pulses with a surface, no bottom and no saturation
         (:func:`~pipeline.process.detection_limit.column_margins`; zeros elsewhere) and the
         losses of the well-detected bottoms, SNR ≥ 2 × threshold
-        (:func:`~pipeline.process.detection_limit.bottom_losses`).
+        (:func:`~pipeline.process.detection_limit.bottom_losses`); ``column_stack``, the
+        :class:`~pipeline.process.column_stack.ColumnStack` of the columns of both sets of
+        pulses (added over the chunks, not concatenated).
     """
     det = detector_model(ctx, detect)
     n = found.has_surface.shape[0]
@@ -104,7 +115,18 @@ def chunk_inputs(
         det,
         settings,
     )
+    # the stacked column (the survey's water decay, pipeline.process.column_stack) of the same
+    # pulses, each up to its own end: the searched end, or one separation before its bottom or
+    # in-column echo (no echo enters the stack)
+    sep_s = det.min_separation_fwhm * det.pulse_fwhm_s
+    m = samples.shape[1]
+    searched_end_s = (m - max(2, math.ceil(1.5 * det.pulse_fwhm_s / det.dt_s))) * det.dt_s
+    t_end = np.where(strong, found.t_bottom_s - sep_s, searched_end_s)
+    t_end = np.where(found.has_column, np.minimum(t_end, found.t_column_s - sep_s), t_end)
+    stacked = none | strong
+    stack = stack_column(samples[stacked], found.t_surface_s[stacked], t_end[stacked], det)
     return {
+        "column_stack": stack,
         "none": none,
         "margin": margin,
         "alpha": alpha,
@@ -121,6 +143,7 @@ def excess_decay_summary(
     t_b: np.ndarray,
     loss: np.ndarray,
     alpha_ok: np.ndarray,
+    stack: ColumnStack | None,
     counts: dict[str, int],
     ctx: ProcessingContext,
     detect: DetectSettings,
@@ -135,6 +158,9 @@ def excess_decay_summary(
         SurveyAggregates`), in pulse order.
     alpha_ok : (k,) float
         The measured column decays (1/s) of the pulses whose column was measured (same sample).
+    stack : ColumnStack or None
+        The stacked column of every chunk (:func:`chunk_inputs`' ``column_stack``, added);
+        None: no chunk.
     counts : dict
         ``bottoms`` and ``no_column`` counted over every pulse.
 
@@ -143,16 +169,26 @@ def excess_decay_summary(
     delta : float
     summary : dict
         Without ``pulses_with_limit`` (counted by :func:`limit_times_s` chunk by chunk).
+        ``column_decay_per_m`` is the lidar decay of the survey's stacked column
+        (:func:`~pipeline.process.column_stack.stacked_decay_per_m`, None without a measurable
+        column); ``column_decay_median_fit_per_m`` the median of the per-pulse fits (biased
+        high in clear water; kept for the record, the limits use the per-pulse fits).
     """
     delta = excess_decay_per_s(t_b, loss)
-    g = ctx.refraction.group_index
+    det = detector_model(ctx, detect)
+    g = det.group_index
+    stack = ColumnStack.empty(det.dt_s) if stack is None else stack
     summary = {
         "excess_decay_per_m": delta * 2.0 * g / SPEED_OF_LIGHT_M_S,
         "bottoms_used": int(t_b.size),
         "pulses_with_limit": 0,
         "pulses_without_measurable_column": int(counts["no_column"]),
-        # the lidar attenuation k of the measured columns: C ~ exp(-2 k L), L = c t / (2 n_g)
-        "column_decay_per_m": (
+        # the lidar attenuation k of the measured columns: C ~ exp(-2 k L), L = c t / (2 n_g),
+        # from their stack (the per-pulse fits are biased high in clear water, where a pulse's
+        # column is a few noise-selected samples: pipeline.process.column_stack)
+        "column_decay_per_m": stacked_decay_per_m(stack, g),
+        # the median of the per-pulse fits, for the record
+        "column_decay_median_fit_per_m": (
             float(np.median(alpha_ok)) * g / SPEED_OF_LIGHT_M_S if alpha_ok.size else None
         ),
     }
@@ -187,3 +223,27 @@ def limit_times_s(
     )
     t = limit_after_surface_s(margins, delta_per_s)
     return np.where(t > 0.0, t_surface_s + t, 0.0)
+
+
+def extinction_depth_summary(points: Points) -> dict[str, Any]:
+    """The depths of the survey's class-45 points: how deep it could establish the seabed.
+
+    Each class-45 point stands at its pulse's detection limit (full waveform:
+    :mod:`pipeline.process.detection_limit`; photon counting: the window's limit), so, where
+    the survey lost the bottom in deep or turbid water, their median is its measured
+    extinction depth. Read it with the class-40 depths: over a shore, pulses whose bottom
+    merged with the surface also give shallow class-45 points and pull the median up (tuning
+    seed 54 of the suite: 4.2 m in c = 0.064 /m water, its 95th percentile 60 m).
+
+    Returns
+    -------
+    dict
+        ``class45_points`` and the 5th, 50th and 95th percentiles of their depths below the
+        local surface, ``class45_depth_m_p05``, ``class45_depth_m_median``,
+        ``class45_depth_m_p95`` (None without class-45 points).
+    """
+    d = points.depth_m[points.classification == NO_BOTTOM_FOUND_AT]
+    d = d[np.isfinite(d)]
+    q = np.percentile(d, [5.0, 50.0, 95.0]).tolist() if d.size else [None] * 3
+    keys = ("class45_depth_m_p05", "class45_depth_m_median", "class45_depth_m_p95")
+    return {"class45_points": int(d.size), **dict(zip(keys, q, strict=True))}

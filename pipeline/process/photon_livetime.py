@@ -28,6 +28,7 @@ import numpy as np
 from pipeline import optics
 
 __all__ = [
+    "event_heights_m",
     "dead_height_m",
     "event_live_fraction",
     "bin_live_fraction",
@@ -38,6 +39,30 @@ __all__ = [
 #: live share below which a rate is not estimated (its correction would be 1 / 0): the
 #: corrected counts are capped at this many times the recorded ones
 MIN_LIVE_FRACTION = 0.02
+
+
+def event_heights_m(offsets, times_s, origin_m, direction, n_air):
+    """Each event's shot and its height on the shot's measured beam (no refraction).
+
+    Parameters
+    ----------
+    offsets : (n_shots + 1,) int
+        Events of shot ``i`` are ``times_s[offsets[i]:offsets[i + 1]]``.
+    times_s : (n_events,) float
+        Event times after emission, seconds.
+    origin_m, direction : (n_shots, 3) float
+        Measured laser position and unit beam direction of each shot.
+    n_air : float
+        Phase index of air (range ``r = c t / (2 n_air)``).
+
+    Returns
+    -------
+    shot : (n_events,) int64
+    z_m : (n_events,) float64
+    """
+    shot = np.repeat(np.arange(origin_m.shape[0]), np.diff(offsets))
+    r = optics.SPEED_OF_LIGHT_M_S * np.asarray(times_s) / (2.0 * n_air)
+    return shot, origin_m[shot, 2] + r * direction[shot, 2]
 
 
 def dead_height_m(dead_time_s: float, n_air: float, direction_z: np.ndarray) -> np.ndarray:

@@ -84,6 +84,16 @@ class PointFlag(enum.IntFlag):
     #: Left out of the propagated uncertainty (:mod:`pipeline.uncertainty.tpu_screen`): its
     #: uncertainty is the a-priori one.
     NO_TPU = 1 << 9
+    #: A bathymetric point whose own 95 % TPU exceeds the TVU of the IHO order processing
+    #: requires (:mod:`pipeline.process.seabed_outliers`): class 7, withheld.
+    TVU_EXCEEDED = 1 << 10
+    #: A bathymetric point far below the robust local seabed of its neighbours, in sigmas of
+    #: its TPU (:mod:`pipeline.process.seabed_outliers`): class 7, withheld.
+    SEABED_OUTLIER = 1 << 11
+    #: A bathymetric point whose local water plane, where its depth is read, lies above or
+    #: below every measured water-surface return of the survey (an extrapolated plane:
+    #: :mod:`pipeline.process.seabed_outliers`): its depth is not measured; class 7, withheld.
+    SURFACE_IMPLAUSIBLE = 1 << 12
 
 
 class ReturnKind(enum.IntEnum):

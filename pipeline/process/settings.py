@@ -13,6 +13,7 @@ from pipeline.process.detection_limit import NoBottomSettings
 from pipeline.process.grid import GRID_STATISTICS
 from pipeline.process.objects import ObjectSettings
 from pipeline.process.scatter_bias import ForwardScatterSettings
+from pipeline.process.seabed_outliers import OutlierSettings
 from pipeline.process.surface_fit import SurfaceFitSettings
 from pipeline.uncertainty.posterior_settings import PosteriorSettings
 from pipeline.uncertainty.tpu import TpuSettings
@@ -71,10 +72,19 @@ class ProcessSettings:
     objects: ObjectSettings = setting(
         ObjectSettings(), doc="submerged objects (class 43): points standing above the seabed"
     )
+    outliers: OutlierSettings = setting(
+        OutlierSettings(),
+        doc="class-40 gross errors (TPU beyond the IHO order, far below the seabed): class 7",
+    )
     grid_statistic: str = setting(
         "median",
         choices=GRID_STATISTICS,
         doc="cell depth: median of its points (robust to outliers) or mean",
+    )
+    grid_object_least_depth: bool = setting(
+        True,
+        doc="cells holding a submerged-object point (class 43) take its least depth "
+        "(designated sounding: a feature narrower than a cell survives the median)",
     )
     no_bottom: NoBottomSettings = setting(
         NoBottomSettings(), doc="assumed bottom and water of the class-45 detection limit"
@@ -84,9 +94,16 @@ class ProcessSettings:
     )
     # ~0.3-0.5 s each on one core (benchmarks/RESULTS_posterior.md): 2000/km² is ~15 min/km²
     posterior_pulses_per_km2: float = setting(
-        2000.0, ge=0.0, le=1e7, doc="bathymetric points given an emcee depth posterior, per km²"
+        2000.0,
+        ge=0.0,
+        le=1e7,
+        doc="bathymetric points given an emcee depth posterior, per km² (photon counting: "
+        "accumulation windows, one posterior each)",
     )
     posterior_min_pulses: int = setting(
-        48, ge=0, le=100000, doc="posteriors at least, in a survey with a bathymetric point"
+        48,
+        ge=0,
+        le=100000,
+        doc="posteriors at least, in a survey with a bathymetric point (photon counting: windows)",
     )
     posterior: PosteriorSettings = setting(PosteriorSettings(), doc="emcee depth posteriors")

@@ -66,6 +66,7 @@ from pipeline.process.surface_land import (
     global_plane,
     land_surface_points,
     masked_median,
+    own_echo_weight,
     sea_sigma_m,
 )
 from pipeline.process.surface_settings import SurfaceFitSettings
@@ -114,6 +115,13 @@ class WaterSurface:
         Index of air used for every air range.
     time_window_s : float or None
         The fit's time window (neighbours this close in time); None: none.
+    own_weight : (n,) or None
+        Weight in [0, 1] of the pulse's own surface echo against its local plane in the height
+        the pulse met (:func:`~pipeline.process.surface_land.own_echo_weight`): 1 where the
+        detector gives no timing sigma. None (older objects): 1.
+    sea_correlation : SeaCorrelation or None
+        How far the own echo's sea tells the sea above the sounding
+        (:mod:`pipeline.process.sea_correlation`); None: not at all (the plane alone).
     """
 
     entry_m: np.ndarray
@@ -132,6 +140,8 @@ class WaterSurface:
     global_sigma_m: float
     air_index: float
     time_window_s: float | None = None
+    own_weight: np.ndarray | None = None
+    sea_correlation: object | None = None
 
     def __len__(self) -> int:
         return int(self.entry_m.shape[0])
@@ -391,6 +401,12 @@ def fit_water_surface(
     is_water = ~is_land & ~grazing
     if has_s.sum() < 3:
         flags[is_water] |= np.uint16(PointFlag.SURFACE_GLOBAL_FALLBACK)
+    # the echo's offset from the plane is wave where the fit scatters more than it ranges
+    own_weight = np.ones(n)
+    if returns.t_surface_sigma_s is not None:
+        cos_i = np.abs(np.sum(d * normal, axis=1))
+        ranging = c * returns.t_surface_sigma_s / (2.0 * st.air_index) * cos_i
+        own_weight = own_echo_weight(fit_sigma, ranging)
     return WaterSurface(
         entry_m=entry,
         range_to_entry_m=rng,
@@ -408,4 +424,5 @@ def fit_water_surface(
         global_sigma_m=float(gsigma),
         air_index=float(st.air_index),
         time_window_s=st.time_window_s if returns.t_emit_s is not None else None,
+        own_weight=own_weight,
     )

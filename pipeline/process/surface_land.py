@@ -64,14 +64,25 @@ __all__ = [
 _MAX_SIGMA_BANDS = 100.0
 
 
-def _plane_lstsq(x, y, z):
-    """Least-squares ``z = z0 + gx x + gy y`` (minimum-norm slope if degenerate) and sigma."""
+def _plane_lstsq(x, y, z, tilt_prior_rad=None):
+    """Least-squares ``z = z0 + gx x + gy y`` and the residual sigma.
+
+    ``tilt_prior_rad``: a zero-mean normal prior of this one-sigma on ``gx`` and ``gy``
+    (two pseudo-observations of weight ``sigma² / tilt_prior²``, ``sigma`` the unregularised
+    fit's): a tilt the points' spread cannot tell from the waves stays level. None: no prior
+    (minimum-norm slope if degenerate).
+    """
     xm, ym = x.mean(), y.mean()
     a = np.column_stack([np.ones_like(x), x - xm, y - ym])
     coef, *_ = np.linalg.lstsq(a, z, rcond=1e-10)
     resid = z - a @ coef
     dof = max(len(z) - 3, 1)
     sigma = float(np.sqrt(np.sum(resid**2) / dof))
+    if tilt_prior_rad is not None and sigma > 0.0:
+        w = sigma / tilt_prior_rad
+        prior = np.array([[0.0, w, 0.0], [0.0, 0.0, w]])
+        coef, *_ = np.linalg.lstsq(np.vstack([a, prior]), np.r_[z, 0.0, 0.0], rcond=1e-10)
+        sigma = float(np.sqrt(np.sum((z - a @ coef) ** 2) / dof))
     return np.array([coef[0] - coef[1] * xm - coef[2] * ym, coef[1], coef[2]]), sigma
 
 
@@ -106,12 +117,14 @@ def global_plane(ps: np.ndarray, st, wet: np.ndarray | None = None) -> tuple[np.
         level = 0.5 * (edges[i] + edges[i + 1])
     plane = np.array([level, 0.0, 0.0])
     sigma = 0.0
+    used = None
     for _ in range(6):
         res = z - (plane[0] + plane[1] * ps[:, 0] + plane[2] * ps[:, 1])
         band = (res > -st.below_margin_m) & (res < st.land_margin_m)
         if band.sum() < 3:
             break
         new, sigma = _plane_lstsq(ps[band, 0], ps[band, 1], z[band])
+        used = (ps[band, 0], ps[band, 1], z[band])
         # one robust pass: drop gross outliers of this fit, then refit
         r2 = z[band] - (new[0] + new[1] * ps[band, 0] + new[2] * ps[band, 1])
         keep = np.abs(r2) <= max(st.outlier_sigma * MAD_TO_SIGMA * np.median(np.abs(r2)), 1e-9)
@@ -119,10 +132,15 @@ def global_plane(ps: np.ndarray, st, wet: np.ndarray | None = None) -> tuple[np.
         if keep.sum() >= 3:
             xb, yb, zb = ps[band, 0][keep], ps[band, 1][keep], z[band][keep]
             new, sigma = _plane_lstsq(xb, yb, zb)
+            used = (xb, yb, zb)
         converged = np.allclose(new, plane, rtol=0.0, atol=1e-12)
         plane = new
         if converged:
             break
+    if used is not None:
+        # the band chosen, the tilt once more under its prior (the band iterations run without
+        # it: a steep synthetic plane would otherwise never enter its own band)
+        plane, sigma = _plane_lstsq(*used, st.global_tilt_prior_rad)
     return plane, sigma
 
 
@@ -267,3 +285,18 @@ def land_surface_points(
     # supported point (not a lone high point: on a calm sea the width bound is ~0)
     land[q] = np.isin(comp, comp[seed]) | (wide[comp] & np.isin(comp, comp[supported]))
     return land, sigma, sea_margin
+
+
+def own_echo_weight(fit_sigma_m: np.ndarray, ranging_sigma_m: np.ndarray) -> np.ndarray:
+    """How much of a pulse's own surface echo's offset from its local plane is the sea, (n,).
+
+    The plane's residual scatter ``fit_sigma_m`` holds the waves the plane cannot follow and
+    the surface points' ranging noise; with the echo's ranging sigma ``ranging_sigma_m`` (along
+    the normal) the wave variance is ``fit² - ranging²``, and the weight of the echo's offset
+    in the least-squares estimate of the height the pulse met (plane + weight * offset) is
+    ``wave² / (wave² + ranging²) = 1 - (ranging / fit)²``, clipped to [0, 1]; 0 where the fit
+    has no scatter (nothing is left to follow).
+    """
+    fit = np.asarray(fit_sigma_m, dtype=np.float64)
+    ratio = np.asarray(ranging_sigma_m, dtype=np.float64) / np.where(fit > 0.0, fit, 1.0)
+    return np.where(fit > 0.0, np.clip(1.0 - ratio**2, 0.0, 1.0), 0.0)

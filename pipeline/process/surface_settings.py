@@ -90,6 +90,14 @@ class SurfaceFitSettings:
     slope_prior_m: float = setting(
         0.05, ge=1e-3, le=100.0, doc="ridge towards the global slope, as an equivalent spread"
     )
+    global_tilt_prior_rad: float = setting(
+        1e-4,
+        gt=0.0,
+        le=1.0,
+        doc="one-sigma prior on the global water plane's tilt: the mean sea surface is level to "
+        "the deflection of the vertical (~1e-4 rad, 20 arcsec); a nearly collinear track "
+        "(profiler) cannot tilt it with the waves",
+    )
     min_spread_m: float = setting(
         0.25, ge=0.0, le=1000.0, doc="smaller neighbour spread across: flag ill-conditioned"
     )

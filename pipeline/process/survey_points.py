@@ -49,11 +49,13 @@ def process_detections(
     """
     from pipeline.process.water_column import add_water_column_points
 
+    ins = ctx.instrument
     processed = georeference(
         returns,
         surface_settings=ctx.surface_fit,
         refraction_settings=ctx.refraction,
         classify_settings=classify,
+        shots_per_window=ins.shots_per_window if ins.photon_counting else None,
     )
     # the class-45 points join their pulses' echo sequence: number every pulse again (LAS
     # return numbers 1..n in time order, the class-45 point after its surface)

@@ -57,7 +57,8 @@ from pipeline import lidar_equation as le
 from pipeline import optics
 from pipeline.config import setting
 from pipeline.constants import FWHM_TO_SIGMA
-from pipeline.forward_scatter import bottom_delay, water_tables
+from pipeline.forward_scatter import bottom_delay
+from pipeline.forward_scatter_mc import water_tables
 from pipeline.simulate import paths as P
 from pipeline.simulate.geometry import (
     LOG_ZERO,
@@ -316,7 +317,10 @@ def return_budget(paths, scene, detector, settings: ReturnSettings | None = None
     fs = rs.forward_scatter == "small_angle"
     if fs:
         b_p, b_w = scattering_split(scene)
-        delay = bottom_delay(length, radius0 + radius_rate * length, (b_p, b_w), water_tables())
+        a_w = max(scene.water.extinction_per_m - b_p - b_w, 0.0)  # absorption, 1/m
+        delay = bottom_delay(
+            length, radius0 + radius_rate * length, (b_p, b_w), water_tables(), a_w
+        )
         tail_w = np.where(bottom, delay.tail_weight, 0.0)
         tail_s = np.where(bottom, delay.tail_mean_m * n_g / C0, 0.0)
     else:
@@ -360,7 +364,7 @@ def return_budget(paths, scene, detector, settings: ReturnSettings | None = None
         d_mean = d_var = 0.0
         if fs:  # the layer's photons are delayed like the bottom's, as a Gaussian shift
             lay_r = radius0 + radius_rate * lay.path_mean_m
-            d = bottom_delay(lay.path_mean_m, lay_r, (b_p, b_w), water_tables())
+            d = bottom_delay(lay.path_mean_m, lay_r, (b_p, b_w), water_tables(), a_w)
             d_mean, d_var = 0.5 * to_time * d.mean_m, (0.5 * to_time) ** 2 * d.var_m2
         layer = {
             "log_layer": np.where(lay.present, np.maximum(log_lay, LOG_ZERO), LOG_ZERO),

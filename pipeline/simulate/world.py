@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -110,7 +111,14 @@ class WaterSurfaceSettings:
     )
     evolving: bool = setting(True, doc="the sea moves (False: frozen at t = 0 for all pulses)")
     time_tolerance_m: float = setting(
-        0.002, gt=0.0, le=0.1, doc="surface error of the linear-in-time slabs (sets their length)"
+        0.002, gt=0.0, le=0.1, doc="height error of the sea's time interpolation (slab length)"
+    )
+    slope_variance_tolerance: float = setting(
+        0.001,
+        gt=0.0,
+        lt=0.5,
+        doc="relative mean-square-slope loss of the time interpolation at mid-slab (slab length;"
+        " the glint at 20 deg moves ~10x as much at low wind)",
     )
     dispersion_depth_m: float | None = setting(
         None, gt=0.0, le=11000.0, doc="finite-depth dispersion w^2 = g k tanh(k h) (None: deep)"
@@ -139,30 +147,22 @@ class Truth:
     frame: object
     pulse_time_s: object = None
 
-    @property
+    @cached_property
     def depth_at_pulses_m(self):
-        """Truth callable ``(x, y[, pulse_id])``: depth below the sea at each pulse's time."""
-        return _PulseDepth(self)
+        """Truth callable ``(x, y[, pulse_id])``: depth below the sea at each pulse's time.
+
+        One instance per truth, which remembers the sea heights it has met
+        (:class:`~pipeline.simulate.pulse_truth.PulseDepth`).
+        """
+        from pipeline.simulate.pulse_truth import PulseDepth
+
+        return PulseDepth(self)
 
     def depth_m(self, x_m, y_m, t_s=0.0):
         """True water depth (positive down) at local points, below the surface at ``t_s``."""
         if hasattr(self.water, "evolving"):  # a moving sea: its surface at the given time
             return self.water.height_m(x_m, y_m, t_s) - self.seabed.height_m(x_m, y_m)
         return self.water.height_m(x_m, y_m) - self.seabed.height_m(x_m, y_m)
-
-
-class _PulseDepth:
-    """``Truth.depth_m`` at each point's pulse time (pipeline.evaluate's per-pulse truth)."""
-
-    per_pulse = True
-
-    def __init__(self, truth: Truth) -> None:
-        self.truth = truth
-
-    def __call__(self, x_m, y_m, pulse_id=None):
-        if pulse_id is None or self.truth.pulse_time_s is None:
-            return self.truth.depth_m(x_m, y_m)
-        return self.truth.depth_m(x_m, y_m, self.truth.pulse_time_s(np.asarray(pulse_id)))
 
 
 def _feature(f: FeatureSettings):
@@ -248,11 +248,11 @@ def wave_surface(scene):
     terrain.evolving_sea.EvolvingSea
         The wave field at any time (frozen at t = 0 when ``water_surface.evolving`` is false).
     """
-    from terrain.evolving_sea import EvolvingSea, slab_for_tolerance_s
+    from terrain.evolving_sea import EvolvingSea, slab_for_tolerances_s
 
     ws = scene.water_surface
     field = _wave_field(scene)
-    slab = slab_for_tolerance_s(field.acceleration_rms_m_s2, ws.time_tolerance_m)
+    slab = slab_for_tolerances_s(field, ws.time_tolerance_m, ws.slope_variance_tolerance)
     return EvolvingSea(field, slab, evolving=ws.evolving)
 
 
@@ -345,7 +345,11 @@ def build_world(scene, truth: Truth, extent_m):
 
     sb = scene.seabed
     ws = scene.water_surface
-    seabed_mesh = truth.seabed.to_mesh(sb.mesh_resolution_m, extent_m)
+    from terrain.box_mesh import seabed_mesh as mesh_with_boxes
+
+    # boxes (IHO cubes, wrecks) as exact tops and walls: a regular grid alone turns a cube
+    # narrower than two cells into a pyramid the truth does not have (terrain.box_mesh)
+    seabed_mesh = mesh_with_boxes(truth.seabed, sb.mesh_resolution_m, extent_m)
     seabed = MeshCaster.from_trimesh(seabed_mesh)
     if ws.kind == "flat":
         water = _plane_caster(ws.level_m, extent_m, pad_m=1000.0)

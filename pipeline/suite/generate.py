@@ -306,7 +306,8 @@ def _tables(d: Draw) -> dict[str, dict[str, Any]]:
     # the line centre sits at (0, L/2); the plane's depth_m is the depth at (0, 0), so shift
     # it by the along-line slope when the seabed deepens north
     dz = math.tan(math.radians(d.slope_deg)) * 0.5 * d.line_length_m if d.aspect_deg == 0 else 0
-    n_post = 0 if not fw else (8 if d.size == "ci" else 24)
+    # photon counting: windows (one posterior each, pipeline.uncertainty.photon_posterior)
+    n_post = 8 if d.size == "ci" else 24
     t: dict[str, dict[str, Any]] = {
         "scene": {
             "name": f"suite_{d.seed:05d}",

@@ -78,7 +78,7 @@ def _flat(fig: dict[str, Any]) -> dict[str, Any]:
         for k, v in (fig.get(g) or {}).items():
             row[f"{g}_{k}"] = v
     row["n_over_1m"] = fig.get("n_over_1m")
-    for g in ("tpu", "posterior"):
+    for g in ("tpu", "posterior", "rejected"):
         for k, v in (fig.get(g) or {}).items():
             row[f"{g}_{k}"] = v
     for size, c in (fig.get("cubes") or {}).items():
@@ -186,6 +186,7 @@ def _error_table(strata) -> list[str]:
     lines = _head(
         ["stratum", *(f"T {c}" for c in side), *(f"H {c}" for c in side)]
         + ["grid T RMSE / p95", "grid H RMSE / p95"]
+        + ["rejected T / H (> 1 m, good)"]
     )
     for s in strata:
         cells = [f"{s['dimension']}: {s['label']}"]
@@ -198,6 +199,10 @@ def _error_table(strata) -> list[str]:
             cells.append(
                 "-" if not c else f"{_f(c['rmse_m'], '{:.3f}')} / {_f(c['p95_m'], '{:.3f}')}"
             )
+        rej = [s[h].get("rejected") for h in ("tuning", "heldout")]
+        cells.append(
+            " / ".join("-" if r is None else f"{r['n']} ({r['over_1m']}, {r['good']})" for r in rej)
+        )
         lines.append(_row(cells))
     return lines
 
@@ -314,7 +319,10 @@ def write_markdown(
         f" failed runs: {failed or 'none'}. Generator, split, strata and floors:"
         " `pipeline/suite/` (module docstrings). T = tuning half, H = held-out half.",
         "Errors are measured minus true depth (positive: too deep), in metres, over class-40"
-        " points with true depth in [1 m, 0.8 D_ext) unless the stratum is a depth band.",
+        " points with true depth in [1 m, 0.8 D_ext) unless the stratum is a depth band."
+        " Rejected: soundings processing rejected as gross errors (class 7, withheld;"
+        " `pipeline/process/seabed_outliers.py`), in brackets how many were more than 1 m off"
+        " and how many within 0.5 m of the truth (the cost).",
         "",
         "## Floors (held-out verdict, tuning in brackets)",
         "",

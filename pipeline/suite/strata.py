@@ -61,7 +61,14 @@ _FLOOR_EXT_FRACTION = 0.8
 _CUBE_MARGIN_M = 1.0
 #: runs without ``features``: the base depth from the soundings within this of the centre
 _CUBE_DEPTH_RADIUS_M = 5.0
-_GROUPS = ("pt", "tpu", "post", "cell")
+_GROUPS = ("pt", "tpu", "post", "cell", "rej")
+#: the rejected soundings' arrays, empty for runs from before processing rejected any
+_REJ_EMPTY = {
+    "rej_true_depth_m": np.float64,
+    "rej_error_m": np.float64,
+    "rej_tvu": np.bool_,
+    "rej_surface": np.bool_,
+}
 
 
 def extinction_depth_m(
@@ -161,7 +168,8 @@ def pool_rows(rows: list[dict[str, Any]]) -> Pool:
     parts: dict[str, list[np.ndarray]] = {}
     scene: dict[str, list[np.ndarray]] = {g: [] for g in _GROUPS}
     for i, row in enumerate(rows):
-        d, a = row["draw"], row["arrays"]
+        d = row["draw"]
+        a = {**{k: np.zeros(0, t) for k, t in _REJ_EMPTY.items()}, **row["arrays"]}
         d_ext, src = extinction_depth_m(a["nb_depth_m"], d.attenuation_per_m, d.receiver)
         meta.append({**d.to_dict(), "d_ext_m": d_ext, "d_ext_source": src})
         for name, v in a.items():
@@ -214,7 +222,8 @@ def stratum_figures(pool: Pool, runs: np.ndarray, depth: tuple[float, float, flo
         ``max_m``), ``n_over_1m``, ``tpu`` (``n``, ``cov68``, ``cov95``), ``posterior``
         (``n``, ``cov68``, ``cov95``, ``converged``), ``cubes`` (per size: ``n``,
         ``detected``, ``n_dense``, ``detected_dense``: cubes at density >= 1 per m²),
-        ``scenes``.
+        ``rejected`` (``n``, ``over_1m``, ``good``: soundings processing rejected, by their
+        true depth), ``scenes``.
     """
     a = pool.arrays
     sel = {g: runs[pool.scene[g]] & _depth_ok(pool, g, *depth) for g in _GROUPS}
@@ -239,6 +248,14 @@ def stratum_figures(pool: Pool, runs: np.ndarray, depth: tuple[float, float, flo
         "converged": float(a["post_converged"][p].mean()) if p.any() else None,
     }
     out["cubes"] = _cube_figures(pool, runs, depth)
+    e = np.abs(a["rej_error_m"][sel["rej"]])
+    # the soundings processing rejected (class 7, withheld): how many were gross errors and
+    # how many good (|error| <= 0.5 m, the rejection's cost)
+    out["rejected"] = {
+        "n": int(e.size),
+        "over_1m": int(np.sum(e > 1.0)),
+        "good": int(np.sum(e <= 0.5)),
+    }
     return out
 
 

@@ -6,9 +6,12 @@ Modules
 * :mod:`~pipeline.uncertainty.posterior_target`: the pulses' data, the priors and the log
   posterior;
 * :mod:`~pipeline.uncertainty.posterior_start`: detector starts, posterior modes, start balls;
-* :mod:`~pipeline.uncertainty.posterior_moves`: the block-wise emcee moves;
+* :mod:`~pipeline.uncertainty.posterior_moves`: the block-wise emcee moves (and emcee's loop
+  on them in Python, the reference);
+* :mod:`~pipeline.uncertainty.posterior_loop`: that loop compiled (the same chains);
+* :mod:`~pipeline.uncertainty.posterior_autocorr`: emcee's integrated autocorrelation times;
 * this module: the sampler and its convergence (:func:`sample_batch`); it re-exports the
-  public names of the four above;
+  public names of the modules above;
 * :mod:`~pipeline.uncertainty.seabed_posterior`: the draws carried to the refracted seabed point.
 
 Parameters and priors
@@ -23,9 +26,9 @@ Sampling
    Fisher scoring (:mod:`~pipeline.uncertainty.posterior_start`).
 2. Walkers: the mode plus a small ball of the Laplace covariance times ``init_scale``.
 3. emcee's ensemble loop (the :class:`emcee.EnsembleSampler` step: a move drawn by weight from
-   one ``RandomState``, then proposed; written out in :func:`_run` without the sampler's
-   per-step bookkeeping, same chains) with the pulses of a batch side by side in one walker
-   vector: two emcee moves act on each pulse's block independently
+   one ``RandomState``, then proposed; compiled in :mod:`~pipeline.uncertainty.posterior_loop`
+   with the same draws and decisions, so the same chains) with the pulses of a batch side by
+   side in one walker vector: two emcee moves act on each pulse's block independently
    (:class:`BlockDEMove`, differential evolution, and :class:`BlockIndependenceMove`, an
    independence Metropolis–Hastings move from a Student-t fitted to the burn-in), each with
    its own accept/reject from the pulse's own log posterior (the ``blobs`` of
@@ -35,8 +38,9 @@ Sampling
    independence proposal is adapted once, at their end, then fixed).
 4. Convergence, per pulse: production in chunks of ``chunk_steps`` until the chain is at
    least ``tau_factor`` (50) integrated autocorrelation times long (emcee's
-   ``integrated_time`` for all pulses at once, :func:`integrated_time_blocks`; the largest
-   over the parameters) or ``max_steps``; the mean
+   ``integrated_time`` for all pulses at once, :func:`~pipeline.uncertainty.
+   posterior_autocorr.integrated_time_blocks`; the largest over the parameters) or
+   ``max_steps``; the mean
    acceptance fraction must lie in ``acceptance_range`` (0.15, 0.8). Otherwise the pulse is
    flagged :attr:`PosteriorFlag.NOT_CONVERGED` / :attr:`PosteriorFlag.ACCEPTANCE` (its
    summaries are still given). Converged pulses leave the batch; the rest continue.
@@ -52,14 +56,21 @@ whose chains do not converge run to ``max_steps`` and dominate).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
-import emcee
 import numpy as np
 
 from pipeline.process.detect import DetectSettings
-from pipeline.uncertainty.posterior_moves import BlockDEMove, BlockIndependenceMove
+from pipeline.uncertainty import posterior_target, waveform_kernel
+from pipeline.uncertainty.posterior_autocorr import integrated_time_blocks
+from pipeline.uncertainty.posterior_loop import run_steps
+from pipeline.uncertainty.posterior_moves import (
+    BlockDEMove,
+    BlockIndependenceMove,
+    run_moves_python,
+)
 from pipeline.uncertainty.posterior_settings import PosteriorFlag, PosteriorSettings
 from pipeline.uncertainty.posterior_start import (
     _best_modes,
@@ -90,6 +101,7 @@ __all__ = [
     "start_theta",
     "posterior_modes",
     "sample_batch",
+    "integrated_time_blocks",
     "interval_summary",
 ]
 
@@ -139,6 +151,7 @@ def sample_batch(
     seed: int = 0,
     detect_settings: DetectSettings | None = None,
     detect_noise: tuple[int | None, float] | None = None,
+    exposure: Any = None,
 ) -> PulseChains:
     """Sample the posteriors of a batch of waveforms with one emcee ensemble.
 
@@ -156,6 +169,9 @@ def sample_batch(
     detect_settings, detect_noise : optional
         The survey detector's settings and ``(noise_samples, shot_noise_counts)``, for the
         starts (:func:`start_theta`): the same detections the survey's points come from.
+    exposure : like ``waveforms``, optional
+        Live share of each sample (photon counting's dead time; see
+        :class:`~pipeline.uncertainty.posterior_target.PulseBatch`); default 1.
 
     Returns
     -------
@@ -163,7 +179,7 @@ def sample_batch(
         ``n_steps`` per pulse: a pulse stops at the first chunk boundary where it converged.
     """
     st = settings or PosteriorSettings()
-    data = make_pulse_batch(waveforms, system, st, cos_water)
+    data = make_pulse_batch(waveforms, system, st, cos_water, exposure)
     n_p = len(data)
     rng = np.random.default_rng(seed)
     starts = [None] * n_p if theta0 is None else list(np.asarray(theta0, dtype=np.float64))
@@ -172,7 +188,12 @@ def sample_batch(
         if starts[i] is None:
             one = data.pulse(i)
             starts[i], scanned = _start(
-                one.samples[0], system, float(one.cos_water[0]), detect_settings, detect_noise
+                one.samples[0],
+                system,
+                float(one.cos_water[0]),
+                detect_settings,
+                detect_noise,
+                exposure=one.exposure[0],
             )
             if scanned:
                 flags[i] |= np.uint16(PosteriorFlag.START_SCANNED)
@@ -187,6 +208,7 @@ def sample_batch(
                 cos_water=data.cos_water[has],
                 theta0=np.array([starts[i] for i in np.flatnonzero(has)]),
                 seed=seed,
+                exposure=[data.exposure[i, data.valid[i]] for i in np.flatnonzero(has)],
             )
             if has.any()
             else None
@@ -234,7 +256,9 @@ def sample_batch(
                 centres[i], scales[i] = x.mean(axis=0), cov
     proposal = (centres, scales * st.proposal_scale**2)
     # production in chunks; converged pulses leave, the others continue from where they are
-    stored = [[] for _ in range(n_p)]
+    # the stored chains, (steps, walkers, P, 9), grown by doubling; n_stored per pulse
+    stored = np.empty((0, st.n_walkers, n_p, N_PARAMS))
+    n_stored = np.zeros(n_p, dtype=np.int64)
     acc_sum = np.zeros(n_p)
     n_steps = np.zeros(n_p, dtype=np.int64)
     tau = np.full((n_p, N_PARAMS), np.inf)
@@ -249,14 +273,18 @@ def sample_batch(
         pos[:, active] = new_pos
         n_steps[active] += chunk
         acc_sum[active] += acc * chunk
-        for k, i in enumerate(active):
-            stored[i].append(chain[:, :, k])
+        k0 = int(n_stored[active[0]])  # the active pulses started together: same lengths
+        if k0 + chain.shape[0] > stored.shape[0]:
+            grown = np.empty((max(2 * stored.shape[0], k0 + chain.shape[0]), *stored.shape[1:]))
+            grown[: stored.shape[0]] = stored
+            stored = grown
+        stored[k0 : k0 + chain.shape[0], :, active] = chain
+        n_stored[active] += chain.shape[0]
         # the active pulses started together: their chains are equally long, checked at once
         steps = int(n_steps[active[0]])
         if steps < st.min_steps and steps < st.max_steps:
             continue
-        x = np.stack([np.concatenate(stored[i], axis=0) for i in active], axis=2)
-        t_a = st.thin * integrated_time_blocks(x)
+        t_a = st.thin * integrated_time_blocks(stored, active, k0 + chain.shape[0])
         tau[active] = np.where(np.isfinite(t_a), t_a, np.inf)
         done = (steps >= st.tau_factor * tau[active].max(axis=1)) | (steps >= st.max_steps)
         active = active[~done]
@@ -266,7 +294,7 @@ def sample_batch(
     lo, hi = st.acceptance_range
     flags[(acc <= lo) | (acc >= hi)] |= np.uint16(PosteriorFlag.ACCEPTANCE)
     # the same number of draws for every pulse, evenly spread over each pulse's whole chain
-    flats = [np.concatenate(x, axis=0).reshape(-1, N_PARAMS) for x in stored]
+    flats = [stored[: n_stored[i], :, i].reshape(-1, N_PARAMS) for i in range(n_p)]
     n_draws = min(st.max_draws, *(f.shape[0] for f in flats))
     draws = np.stack([f[np.linspace(0, f.shape[0] - 1, n_draws).astype(np.int64)] for f in flats])
     d_lo = np.quantile(draws[:, :, 0], 0.025, axis=1)
@@ -292,71 +320,27 @@ def _run(data: PulseBatch, pulses, pos, system, st, n_steps: int, thin: int, rng
         Fraction of proposals accepted per pulse (both moves).
     """
     sub = PulseBatch(*(getattr(data, f)[pulses] for f in _BATCH_FIELDS))
-    nw, n_p = pos.shape[0], len(pulses)
-    de = BlockDEMove(n_p, N_PARAMS)
-    ind = BlockIndependenceMove(proposal[0], proposal[1], st.proposal_dof)
-    w = st.independence_weight
-    moves = [(de, 1.0 - w), (ind, w)] if 0.0 < w < 1.0 else [(ind if w >= 1.0 else de, 1.0)]
-    weights = np.array([m[1] for m in moves])
-    weights /= weights.sum()
-    # emcee's EnsembleSampler loop, without its per-step bookkeeping (it copied the generator
-    # state and split every walker's blobs in Python each step, which cost as much as the
-    # compiled model): the same generator, move choice and moves, so the same chains
-    rnd = np.random.RandomState(int(rng.integers(2**31)))
-
-    def evaluate(coords):
-        out = log_prob_blocks(coords, sub, system)
-        return out[:, 0], out[:, 1:]
-
-    model = emcee.model.Model(None, evaluate, map, rnd)
-    coords = pos.reshape(nw, n_p * N_PARAMS).copy()
-    state = emcee.State(coords, *evaluate(coords))
-    chain = np.empty((n_steps // thin, nw, n_p * N_PARAMS))
-    for k in range(chain.shape[0]):
-        for _ in range(thin):
-            move = moves[rnd.choice(len(moves), p=weights)][0]
-            state, _ = move.propose(model, state)
-        chain[k] = state.coords
-    chain = chain.reshape(-1, nw, n_p, N_PARAMS)
-    acc = (de.accepted + ind.accepted) / max(de.proposed + ind.proposed, 1)
-    return state.coords.reshape(nw, n_p, N_PARAMS), (chain, acc)
+    if log_prob_blocks is not posterior_target.log_prob_blocks or (
+        posterior_target.log_post_rows is not waveform_kernel.log_post_rows
+    ):  # another target (a test's known density, the numpy model): emcee's loop in Python
+        fn = functools.partial(log_prob_blocks, data=sub, system=system)
+        return run_moves_python(fn, pos, st, n_steps, thin, rng, proposal)
+    # emcee's EnsembleSampler loop on these moves, compiled (posterior_loop: the same
+    # generator, draws and decisions, so the same chains; without its per-step Python: the
+    # moves' numpy and the sampler's bookkeeping cost more than the compiled model)
+    return run_steps(sub, pos, system, st, n_steps, thin, rng, proposal)
 
 
-def integrated_time_blocks(x: np.ndarray, c: float = 5.0) -> np.ndarray:
-    """Integrated autocorrelation times of many chains at once, as emcee estimates them.
-
-    :func:`emcee.autocorr.integrated_time` (``tol=0``) for every pulse and parameter in one
-    FFT along the steps: the normalised autocorrelation function of each walker's series,
-    averaged over the walkers, summed to ``taus = 2 cumsum(f) - 1`` and cut at Sokal's window
-    (the first lag ``M >= c taus[M]``). emcee loops over walkers and parameters in Python,
-    which cost more than the model once the model was compiled.
-
-    Parameters
-    ----------
-    x : (n_steps, n_walkers, P, 9) ndarray
-        Stored chains.
-    c : float
-        Sokal's window constant (emcee's default 5).
-
-    Returns
-    -------
-    (P, 9) ndarray
-        In stored steps; NaN where a series is constant (emcee gives NaN there too).
-    """
-    n_t = x.shape[0]
-    n_fft = 1 << max(int(n_t - 1).bit_length(), 0)  # emcee's next power of two
-    y = np.moveaxis(x - x.mean(axis=0), 0, -1).copy()  # steps last: contiguous transforms
-    f = np.fft.rfft(y, n=2 * n_fft, axis=-1)
-    acf = np.fft.irfft(f.real**2 + f.imag**2, n=2 * n_fft, axis=-1)[..., :n_t]
-    with np.errstate(invalid="ignore", divide="ignore"):  # a stuck chain: acf 0/0
-        acf = acf / acf[..., :1]
-    taus = 2.0 * np.cumsum(np.moveaxis(acf.mean(axis=0), -1, 0), axis=0) - 1.0  # (n_t, P, 9)
-    m = np.arange(n_t)[:, None, None] < c * taus
-    window = np.where(m.any(axis=0), np.argmin(m, axis=0), n_t - 1)
-    return np.take_along_axis(taus, window[None], axis=0)[0]
-
-
-_BATCH_FIELDS = ("samples", "valid", "cos_water", "lower", "upper", "t_last_s", "ln_k_prior")
+_BATCH_FIELDS = (
+    "samples",
+    "valid",
+    "cos_water",
+    "lower",
+    "upper",
+    "t_last_s",
+    "ln_k_prior",
+    "exposure",
+)
 
 
 def interval_summary(values: Any, axis: int = -1) -> dict[str, np.ndarray]:

@@ -14,7 +14,7 @@ import math
 import emcee
 import numpy as np
 
-__all__ = ["BlockDEMove", "BlockIndependenceMove"]
+__all__ = ["BlockDEMove", "BlockIndependenceMove", "run_moves_python"]
 
 
 class BlockDEMove(emcee.moves.Move):
@@ -145,3 +145,38 @@ class BlockIndependenceMove(emcee.moves.Move):
             coords, log_prob=blocks.sum(axis=1), blobs=blobs, random_state=state.random_state
         )
         return new_state, acc.any(axis=1)
+
+
+def run_moves_python(log_prob_fn, pos, st, n_steps: int, thin: int, rng, proposal):
+    """The ``emcee.EnsembleSampler`` loop on the block moves, in Python, on any block density.
+
+    The readable reference of :func:`pipeline.uncertainty.posterior_loop.run_steps` (same
+    generator, move choice, moves and results) for a target the compiled loop does not hold:
+    ``log_prob_fn(coords)`` gives ``(n_walkers, 1 + P)`` as
+    :func:`~pipeline.uncertainty.posterior_target.log_prob_blocks` (a test's known density, or
+    the numpy reference model). Arguments and returns as ``run_steps``.
+    """
+    nw, n_p = pos.shape[0], pos.shape[1]
+    de = BlockDEMove(n_p, pos.shape[2])
+    ind = BlockIndependenceMove(proposal[0], proposal[1], st.proposal_dof)
+    w = st.independence_weight
+    moves = [(de, 1.0 - w), (ind, w)] if 0.0 < w < 1.0 else [(ind if w >= 1.0 else de, 1.0)]
+    weights = np.array([m[1] for m in moves])
+    weights /= weights.sum()
+    rnd = np.random.RandomState(int(rng.integers(2**31)))
+
+    def evaluate(coords):
+        out = log_prob_fn(coords)
+        return out[:, 0], out[:, 1:]
+
+    model = emcee.model.Model(None, evaluate, map, rnd)
+    coords = pos.reshape(nw, -1).copy()
+    state = emcee.State(coords, *evaluate(coords))
+    chain = np.empty((n_steps // thin, nw, coords.shape[1]))
+    for k in range(chain.shape[0]):
+        for _ in range(thin):
+            move = moves[rnd.choice(len(moves), p=weights)][0]
+            state, _ = move.propose(model, state)
+        chain[k] = state.coords
+    acc = (de.accepted + ind.accepted) / max(de.proposed + ind.proposed, 1)
+    return state.coords.reshape(pos.shape), (chain.reshape(-1, *pos.shape), acc)

@@ -62,15 +62,14 @@ def kept_for_posterior(pulse_id: np.ndarray, fraction: float, seed: int) -> np.n
     return (h >> np.uint64(11)).astype(np.float64) / 2.0**53 < fraction
 
 
-def posterior_budget(ps: ProcessSettings, photon_counting: bool, area_km2: float) -> int:
+def posterior_budget(ps: ProcessSettings, area_km2: float) -> int:
     """Points to sample: ``posterior_pulses_per_km2`` over ``area_km2``, at least the minimum.
 
-    ``posterior_min_pulses`` is the minimum; 0 for photon counting (its windows have no
-    waveform). The chunk loop passes the survey's extent (an upper bound, to keep enough
-    waveforms), the sampling the area of the grid cells with soundings.
+    ``posterior_min_pulses`` is the minimum. Photon counting: both count accumulation windows
+    (one posterior per window, :mod:`pipeline.uncertainty.photon_posterior`). The chunk loop
+    passes the survey's extent (an upper bound, to keep enough waveforms), the sampling the
+    area of the grid cells with soundings.
     """
-    if photon_counting:
-        return 0
     area = max(float(area_km2), 0.0)
     return int(max(ps.posterior_min_pulses, round(ps.posterior_pulses_per_km2 * area)))
 

@@ -57,13 +57,18 @@ def start_theta(
     return _start(samples, system, cos_water, detect_settings)[0]
 
 
-def _start(samples, system, cos_water, detect_settings=None, detect_noise=None):
+def _start(samples, system, cos_water, detect_settings=None, detect_noise=None, exposure=None):
     """``(theta or None, scanned)``: see :func:`start_theta`.
 
     ``detect_noise``: ``(noise_samples, shot_noise_counts)`` of the survey's own detector run
     (leading samples that are noise only, and the shot-noise counts per photoelectron).
+    ``exposure``: live share per sample (photon counting): the start reads the live-time
+    corrected counts ``samples / exposure`` (the rate), the scan fits the recorded ones.
     """
     y = np.asarray(samples, dtype=np.float64)
+    ex = None if exposure is None or not system.poisson else np.asarray(exposure, np.float64)
+    if ex is not None:
+        y = y / ex
     n_noise, shot = detect_noise if detect_noise is not None else (None, 0.0)
     det = detect_full_waveform(
         y[None, :],
@@ -81,7 +86,8 @@ def _start(samples, system, cos_water, detect_settings=None, detect_noise=None):
     bg = max(base - (0.0 if system.poisson else system.offset_counts), 1e-3)
     ts = float(det.t_surface_s[0])
     if not det.has_bottom[0]:
-        th = _scan_start(y, system, cos_water, ts, bg)
+        y0 = y if ex is None else y * ex
+        th = _scan_start(y0, system, cos_water, ts, bg, ex)
         return th, th is not None
     tb = float(det.t_bottom_s[0])
     to_area = 2.0 * math.sqrt(math.pi) * system.pulse_sigma_s / dt
@@ -105,12 +111,13 @@ def _start(samples, system, cos_water, detect_settings=None, detect_noise=None):
     return np.array(th), False
 
 
-def _scan_start(y, system, cos_water, ts, bg):
+def _scan_start(y, system, cos_water, ts, bg, exposure=None):
     """Depth by a scan when the detector missed the bottom (None if nothing fits).
 
     For every candidate in-water delay on a half-sample grid, the four amplitudes (background,
     surface, column with ``k = 0.1``, bottom) are the linear least-squares fit of the waveform;
-    the candidate with the smallest residual and a positive bottom area wins.
+    the candidate with the smallest residual and a positive bottom area wins. ``exposure``
+    (photon counting, per sample) scales the basis as the likelihood scales the mean.
     """
     dt, s = system.sample_interval_s, system.pulse_sigma_s
     m = y.size
@@ -125,6 +132,8 @@ def _scan_start(y, system, cos_water, ts, bg):
         th[:, 0], th[:, j] = depths, 0.0
         basis.append(expected_waveform(th, m, system, cos_water) - system.offset_counts)
     a = np.stack([np.ones((taus.size, m)), *basis], axis=2)  # (K, m, 4)
+    if exposure is not None and system.poisson:
+        a = a * np.asarray(exposure, dtype=np.float64)[None, :, None]
     rhs = y - system.offset_counts
     ata = np.einsum("kmi,kmj->kij", a, a) + 1e-9 * np.eye(4)
     coef = np.linalg.solve(ata, np.einsum("kmi,m->ki", a, rhs)[:, :, None])[:, :, 0]
@@ -190,7 +199,7 @@ def posterior_modes(
             for i, t in enumerate(np.asarray(theta0, dtype=np.float64))
         ]
     )
-    res = score(data.samples, th, system, data.cos_water, data.valid)
+    res = score(data.samples, th, system, data.cos_water, data.valid, data.exposure)
     _, grad, info = _prior_score(res, th, data)
     lp = log_prob_blocks(th.reshape(1, -1), data, system)[0, 1:]
     lam = np.full(p, 1e-3)
@@ -207,7 +216,7 @@ def posterior_modes(
             gain = np.where(better, lp_t, 0.0) - np.where(better, lp, 0.0)
             th[better] = trial[better]
             sub = (data.samples[better], th[better], system, data.cos_water[better])
-            _, grad_n, info_n = score(*sub, data.valid[better])
+            _, grad_n, info_n = score(*sub, data.valid[better], data.exposure[better])
             _, grad_n, info_n = _prior_score((None, grad_n, info_n), th[better], data, better)
             lp[better], grad[better], info[better] = lp_t[better], grad_n, info_n
             active &= ~(better & (gain < 1e-6))
@@ -231,7 +240,8 @@ def _best_modes(data: PulseBatch, system: WaveformSystem, starts: np.ndarray):
     for i in range(len(data)):
         one = data.pulse(i)
         y = one.samples[0][one.valid[0]]
-        th = _scan_start(y, system, float(one.cos_water[0]), starts[i, 1] * 1e-9, starts[i, 6])
+        ex = one.exposure[0][one.valid[0]]
+        th = _scan_start(y, system, float(one.cos_water[0]), starts[i, 1] * 1e-9, starts[i, 6], ex)
         if th is not None:
             alt[i] = th
     modes_b, infos_b = posterior_modes(data, system, alt)

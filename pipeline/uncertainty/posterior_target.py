@@ -63,6 +63,9 @@ class PulseBatch:
         ``[0, t_last_s]``.
     ln_k_prior : (P, 2) float64
         Mean and sigma of a normal prior on ``ln k`` (sigma ``inf``: flat, log-uniform ``k``).
+    exposure : (P, m) float64
+        Live share of each sample (photon counting's dead time: the recorded counts are
+        Poisson of the model times it); 1 for a full waveform and where every channel was live.
     """
 
     samples: np.ndarray
@@ -72,6 +75,7 @@ class PulseBatch:
     upper: np.ndarray
     t_last_s: np.ndarray
     ln_k_prior: np.ndarray
+    exposure: np.ndarray
 
     def __len__(self) -> int:
         return int(self.samples.shape[0])
@@ -97,6 +101,7 @@ class PulseBatch:
             self.upper[i : i + 1],
             self.t_last_s[i : i + 1],
             self.ln_k_prior[i : i + 1],
+            self.exposure[i : i + 1, :m],
         )
 
 
@@ -105,6 +110,7 @@ def make_pulse_batch(
     system: WaveformSystem,
     settings: PosteriorSettings | None = None,
     cos_water: Any = 1.0,
+    exposure: Any = None,
 ) -> PulseBatch:
     """Validate waveforms and build their :class:`PulseBatch` with the prior of ``settings``.
 
@@ -115,12 +121,11 @@ def make_pulse_batch(
     settings : PosteriorSettings, optional
     cos_water : float or (P,) array_like
         In (0, 1].
+    exposure : like ``waveforms``, optional
+        Live share of each sample, in (0, 1] (:attr:`PulseBatch.exposure`); default 1.
     """
     st = settings or PosteriorSettings()
-    if isinstance(waveforms, np.ndarray) and waveforms.ndim <= 2:
-        rows = list(np.atleast_2d(np.asarray(waveforms, dtype=np.float64)))
-    else:
-        rows = [np.asarray(w, dtype=np.float64) for w in waveforms]
+    rows = _rows(waveforms)
     if not rows:
         raise ValueError("`waveforms` must hold at least one waveform")
     for i, w in enumerate(rows):
@@ -134,9 +139,16 @@ def make_pulse_batch(
         raise ValueError(f"`cos_water` must be in (0, 1]; got {cw[~(cw > 0) | (cw > 1)][0]!r}")
     samples = np.zeros((n, m))
     valid = np.zeros((n, m), dtype=bool)
+    live = np.ones((n, m))
     for i, w in enumerate(rows):
         samples[i, : w.size] = w
         valid[i, : w.size] = True
+    if exposure is not None:
+        ex = _rows(exposure)
+        for i, e in enumerate(ex):
+            if e.shape != rows[i].shape or not np.all((e > 0.0) & (e <= 1.0)):
+                raise ValueError(f"`exposure[{i}]` must match `waveforms[{i}]`, in (0, 1]")
+            live[i, : e.size] = e
     t_last = (valid.sum(axis=1) - 1) * system.sample_interval_s
     bg_min = 1e-9 if system.poisson else 0.0
     lower = np.array(
@@ -172,8 +184,15 @@ def make_pulse_batch(
     else:
         kp = (math.log(st.attenuation_prior[0]), st.attenuation_prior[1])
     return PulseBatch(
-        samples, valid, cw, np.tile(lower, (n, 1)), upper, t_last, np.tile(kp, (n, 1))
+        samples, valid, cw, np.tile(lower, (n, 1)), upper, t_last, np.tile(kp, (n, 1)), live
     )
+
+
+def _rows(waveforms: Any) -> list[np.ndarray]:
+    """A (P, m) array or a sequence of 1-D arrays as a list of float64 rows."""
+    if isinstance(waveforms, np.ndarray) and waveforms.ndim <= 2:
+        return list(np.atleast_2d(np.asarray(waveforms, dtype=np.float64)))
+    return [np.asarray(w, dtype=np.float64) for w in waveforms]
 
 
 def _rows_log_post(th: np.ndarray, data: PulseBatch, system) -> np.ndarray:
@@ -201,6 +220,7 @@ def _rows_log_post(th: np.ndarray, data: PulseBatch, system) -> np.ndarray:
             system.floor_variance,
             system.excess_noise_factor * system.counts_per_photoelectron,
         ),
+        data.exposure,
     )
     if np.isnan(out).any() or np.isposinf(out).any():
         bad = th[~(np.isfinite(out) | np.isneginf(out))][0]

@@ -76,17 +76,23 @@ _SURFACE_ROWS = (
     "normal_sigma_rad",
     "n_used",
     "flags",
+    "own_weight",
 )
 
 
 def take_surface(surface: WaterSurface, index: Any) -> WaterSurface:
     """The rows ``index`` of a fitted surface (repeats allowed), as a new object."""
-    kw = {name: getattr(surface, name)[index] for name in _SURFACE_ROWS}
+    kw = {
+        name: None if getattr(surface, name) is None else getattr(surface, name)[index]
+        for name in _SURFACE_ROWS
+    }
     return WaterSurface(
         **kw,
         global_plane=surface.global_plane,
         global_sigma_m=surface.global_sigma_m,
         air_index=surface.air_index,
+        time_window_s=surface.time_window_s,
+        sea_correlation=surface.sea_correlation,
     )
 
 
@@ -196,13 +202,16 @@ def seabed_posteriors(
     detect_noise: tuple[int | None, float] | None = None,
     progress: bool = False,
     nuisance_depth_sigma_m: Any = None,
+    exposure: Any = None,
+    theta0: Any = None,
 ) -> SeabedPosteriors:
     """Sample the depth posterior of pulses and carry it to the refracted seabed point.
 
     Parameters
     ----------
-    samples : (n_pulses, m) array_like
-        Waveforms, rows aligned with ``returns`` and ``surface``.
+    samples : (n_pulses, m) array_like, or sequence of n_pulses 1-D arrays
+        Waveforms (photon counting: window histograms, of their own lengths), rows aligned
+        with ``returns`` and ``surface``.
     t0_s : (n_pulses,) array_like
         Round-trip time of the centre of each waveform's sample 0, seconds.
     returns : DetectedReturns
@@ -226,6 +235,11 @@ def seabed_posteriors(
         One-sigma depth change of the terms the waveform does not hold (see the module
         docstring), rows aligned with ``returns``; each draw's depth gets an independent
         Gaussian of it (seeded per batch). Default: none (the waveform posterior alone).
+    exposure : like ``samples``, optional
+        Live share of each sample (photon counting's dead time, see
+        :mod:`pipeline.uncertainty.photon_posterior`); default 1.
+    theta0 : (n_pulses, 9) array_like, optional
+        Starting estimates (default: the full-waveform detector's, :func:`sample_batch`).
 
     Returns
     -------
@@ -238,13 +252,16 @@ def seabed_posteriors(
         # does, not where the detector does: its own forward-scattering correction
         fs = dataclasses.replace(rst.forward_scatter, estimator="gaussian_fit")
         rst = dataclasses.replace(rst, forward_scatter=fs)
-    y = np.asarray(samples, dtype=np.float64)
+    if isinstance(samples, np.ndarray) and samples.ndim != 2:
+        raise ValueError(f"`samples` must be 2-D or a sequence of rows; got {samples.shape}")
+    y = [np.asarray(w, dtype=np.float64) for w in samples]
+    ex = None if exposure is None else [np.asarray(e, dtype=np.float64) for e in exposure]
     t0 = np.asarray(t0_s, dtype=np.float64)
     n = len(returns)
-    if y.ndim != 2 or y.shape[0] != n or t0.shape != (n,) or len(surface) != n:
+    if len(y) != n or t0.shape != (n,) or len(surface) != n or (ex is not None and len(ex) != n):
         raise ValueError(
-            f"`samples` {y.shape}, `t0_s` {t0.shape}, `surface` ({len(surface)}) must have "
-            f"one row per pulse of `returns` ({n})"
+            f"`samples` ({len(y)}), `t0_s` {t0.shape}, `surface` ({len(surface)}) and "
+            f"`exposure` must have one row per pulse of `returns` ({n})"
         )
     rows = np.arange(n) if rows is None else np.asarray(rows, dtype=np.int64)
     nuis = np.zeros(n) if nuisance_depth_sigma_m is None else np.asarray(nuisance_depth_sigma_m)
@@ -263,13 +280,15 @@ def seabed_posteriors(
         part = rows[b0 : b0 + st.batch_size]
         rng = np.random.default_rng([seed, b0])  # the nuisance draws, apart from the chains
         chains = sample_batch(
-            y[part],
+            [y[i] for i in part],
             system,
             st,
             cos_water=cosw[part],
             seed=seed + b0,
             detect_settings=detect_settings,
             detect_noise=detect_noise,
+            exposure=None if ex is None else [ex[i] for i in part],
+            theta0=None if theta0 is None else np.asarray(theta0)[part],
         )
         for k, r in enumerate(part):
             j = b0 + k

@@ -9,8 +9,13 @@ or a flagged point), then evenly among the rest, and their emcee posteriors are 
 carried through refraction onto the seabed point
 (:func:`pipeline.uncertainty.seabed_posterior.seabed_posteriors`), marginalised over the TPU
 terms the waveform does not hold (:func:`nuisance_depth_sigma_m`). Cost: the budget times
-about 0.1 CPU s (``benchmarks/RESULTS_posterior.md``; about 3 CPU min per km² at the default
+about 0.06 CPU s (``benchmarks/RESULTS_posterior.md``; about 2 CPU min per km² at the default
 2000/km²), linear in the area, bounded per km².
+
+Photon counting (no waveform per pulse): the chunk loop keeps the events of a share of the
+accumulation windows, the budget counts windows, and one shot per kept window is sampled on
+the window's histogram along its beam, with each bin's live share under the dead time
+(:mod:`pipeline.uncertainty.photon_posterior`); the rest is the same.
 """
 
 from __future__ import annotations
@@ -25,13 +30,25 @@ from pipeline.process.grid import Grid
 from pipeline.process.refraction import ProcessedPoints
 from pipeline.process.returns import DetectedReturns
 from pipeline.uncertainty.cell_uncertainty import select_posterior_pulses
+from pipeline.uncertainty.photon_posterior import (
+    KeptPhotons,
+    photon_starts,
+    photon_system,
+    window_candidates,
+    window_histograms,
+)
 from pipeline.uncertainty.posterior_selection import (
     KeptWaveforms,
     choose_points,
     posterior_budget,
     sounded_area_km2,
 )
-from pipeline.uncertainty.seabed_posterior import SeabedPosteriors, seabed_posteriors, take_surface
+from pipeline.uncertainty.seabed_posterior import (
+    SeabedPosteriors,
+    seabed_posteriors,
+    take_surface,
+    water_cosine,
+)
 from pipeline.uncertainty.survey_uncertainty import SurveyUncertainty
 from pipeline.uncertainty.tpu_settings import DEPTH, TIMING_TERMS
 from pipeline.uncertainty.waveform_model import WaveformSystem
@@ -58,8 +75,16 @@ def waveform_system(scene, ctx: ProcessingContext) -> WaveformSystem:
 
     Nothing of the water or the seabed: those are the posterior's parameters, but for the
     group index, the one processing assumes (:class:`~pipeline.process.context.
-    ProcessingContext`).
+    ProcessingContext`). Photon counting: Poisson counts per detector height bin
+    (:func:`~pipeline.uncertainty.photon_posterior.photon_system`).
     """
+    if ctx.instrument.photon_counting:
+        return photon_system(
+            scene.process.photon_detect.bin_m,
+            ctx.instrument.air_index,
+            ctx.instrument.system_fwhm_s,
+            ctx.refraction.group_index,
+        )
     det = scene.detector
     return WaveformSystem(
         sample_interval_s=ctx.instrument.sample_interval_s,
@@ -75,7 +100,7 @@ def waveform_system(scene, ctx: ProcessingContext) -> WaveformSystem:
 def survey_posteriors(
     scene,
     returns: DetectedReturns,
-    kept: KeptWaveforms | None,
+    kept: KeptWaveforms | KeptPhotons | None,
     processed: ProcessedPoints,
     ctx: ProcessingContext,
     unc: SurveyUncertainty,
@@ -90,8 +115,9 @@ def survey_posteriors(
         Only ``process`` settings, ``detector`` records and the seed are read.
     returns : DetectedReturns
         The survey's detections, ``(n_pulses,)`` per field.
-    kept : KeptWaveforms or None
-        The waveforms the chunk loop kept.
+    kept : KeptWaveforms or KeptPhotons or None
+        The waveforms the chunk loop kept (photon counting: the kept windows' events; one
+        posterior per window, :mod:`pipeline.uncertainty.photon_posterior`).
     processed : ProcessedPoints
         Georeferenced points and the fitted surface (one row per pulse of ``returns``).
     ctx : ProcessingContext
@@ -110,9 +136,11 @@ def survey_posteriors(
         the posterior's model lacks.
     """
     ps = scene.process
-    n = posterior_budget(ps, ctx.instrument.photon_counting, sounded_area_km2(grid))
+    n = posterior_budget(ps, sounded_area_km2(grid))
     if kept is None or n == 0:
         return None
+    if isinstance(kept, KeptPhotons):
+        return _photon_posteriors(scene, returns, kept, processed, ctx, unc, grid, n, progress)
     pts = unc.points40
     ret = returns
     # the posterior's waveform model has no in-column echo (a scattering layer): pulses with
@@ -153,6 +181,63 @@ def survey_posteriors(
         nuisance_depth_sigma_m=nuisance,
     )
     return SurveyPosteriors(post, sel, time.perf_counter() - t0, n_column)
+
+
+def _photon_posteriors(scene, returns, kept, processed, ctx, unc, grid, n, progress):
+    """:func:`survey_posteriors` of a photon-counting survey: one shot per kept window.
+
+    The window's events histogrammed along the shot's beam with each sample's live share
+    (:mod:`pipeline.uncertainty.photon_posterior`); otherwise as for full waveforms.
+    """
+    ps, ins = scene.process, ctx.instrument
+    pts = unc.points40
+    cand = window_candidates(pts.pulse_id, kept, ins.shots_per_window)
+    if cand.size == 0:
+        return SurveyPosteriors(None, cand, 0.0, 0)
+    preferred = select_posterior_pulses(
+        grid, unc.cells, unc.tpu40, max_pulses=max(n, 1), seed=scene.scene.seed
+    )
+    sel = choose_points(cand, preferred, n, scene.scene.seed)
+    order = np.argsort(returns.pulse_id)
+    rows = order[np.searchsorted(returns.pulse_id[order], pts.pulse_id[sel])]
+    system = waveform_system(scene, ctx)
+    samples, exposure, t0 = window_histograms(
+        kept,
+        returns.pulse_id[rows] // ins.shots_per_window,
+        returns.origin_meas_m[rows, 2],
+        returns.direction_meas[rows, 2],
+        returns.t_surface_s[rows],
+        returns.t_bottom_s[rows],
+        system,
+        ins.air_index,
+        scene.detector.n_channels,
+    )
+    surface = take_surface(processed.surface, rows)
+    cosw = water_cosine(
+        returns.direction_meas[rows], surface.normal, surface.air_index, ctx.refraction.phase_index
+    )
+    theta0 = photon_starts(
+        samples, exposure, t0, returns.t_surface_s[rows], returns.t_bottom_s[rows], cosw, system
+    )
+    nuisance = np.zeros(len(rows))
+    if ps.posterior.marginalise_tpu:
+        nuisance = nuisance_depth_sigma_m(unc.tpu40.terms, sel)
+    t_start = time.perf_counter()
+    post = seabed_posteriors(
+        samples,
+        t0,
+        returns.select(rows),
+        surface,
+        system,
+        ps.posterior,
+        ctx.refraction,
+        seed=scene.scene.seed,
+        progress=progress,
+        nuisance_depth_sigma_m=nuisance,
+        exposure=exposure,
+        theta0=theta0,
+    )
+    return SurveyPosteriors(post, sel, time.perf_counter() - t_start, 0)
 
 
 def nuisance_depth_sigma_m(terms: dict[str, np.ndarray], index: np.ndarray) -> np.ndarray:

@@ -11,6 +11,11 @@ per-return sigmas (full waveform: the Cramér–Rao bound of each echo from its 
 shows more (:func:`~pipeline.uncertainty.tpu.pair_scatter`,
 :func:`~pipeline.uncertainty.tpu.timing_from_scatter`); without detector sigmas (photon
 counting) the scatter sets them.
+The surface returns' height variogram (:mod:`pipeline.uncertainty.tpu_measured`) raises the
+surface timing sigmas to the ranging error they show and adds the waves between each pulse's
+water entry and its sounding that the fitted plane's tilt does not hold; its rise at short
+lags, the sea's slope the planes do not follow, sizes the wave facet each beam refracted
+through (:mod:`pipeline.uncertainty.tpu_facet`).
 A photon-counting window's shots share one detection: they count as one sounding, and each
 shot carries the spread of the seabed under the window's shots
 (:mod:`pipeline.uncertainty.tpu_window`). Pulses the
@@ -41,13 +46,26 @@ from pipeline.uncertainty.tpu import (
     surface_tilt_sigma,
     timing_from_scatter,
 )
+from pipeline.uncertainty.tpu_facet import with_wave_facet
+from pipeline.uncertainty.tpu_measured import (
+    surface_variogram,
+    with_surface_ranging,
+    with_wave_entry,
+)
 from pipeline.uncertainty.tpu_window import (
     WINDOW_TERM,
     window_footprint_sigma_m,
     with_random_term,
 )
 
-__all__ = ["SurveyUncertainty", "survey_uncertainty", "with_tpu", "with_posteriors", "take_tpu"]
+__all__ = [
+    "SurveyUncertainty",
+    "survey_uncertainty",
+    "with_tpu",
+    "with_posteriors",
+    "take_tpu",
+    "without_points",
+]
 
 
 @dataclass(frozen=True)
@@ -136,6 +154,17 @@ def survey_uncertainty(
         max_sigma_s=ins.window_s / math.sqrt(12.0),
         raise_only=returns.t_bottom_sigma_s is not None,
     )
+    # the surface as its returns measure it: their height variogram's nugget (the ranging
+    # error of a surface point, e.g. a calm-water onset) raises each surface timing sigma
+    shots = ins.shots_per_window if ins.photon_counting else None
+    vg = surface_variogram(
+        returns,
+        processed.surface,
+        max_dt_s=st.surface_pair_max_dt_s,
+        min_pairs=st.surface_min_pairs,
+        group=None if shots is None else returns.pulse_id // shots,
+    )
+    returns = with_surface_ranging(returns, processed.surface, vg)
     tpu = point_tpu(
         returns, processed.surface, refr, st, seabed_gradient=grad, surface_tilt_sigma_rad=tilt
     )
@@ -156,6 +185,24 @@ def survey_uncertainty(
             points40.xyz_m[:, :2], points40.pulse_id // ins.shots_per_window, g40
         )
         tpu40 = with_random_term(tpu40, WINDOW_TERM, spread, spread)
+    # the waves between each pulse's water entry and its sounding (the variogram's wave part
+    # beyond what the fitted plane's measured tilt already holds)
+    surf = processed.surface
+    tpu40 = with_wave_entry(tpu40, vg, surf.entry_m[tpu40.row, :2], surf.sea_correlation)
+    if st.wave_slope_sigma_rad == 0.0:  # a user's facet slope (wave_slope_* terms) wins
+        # the wave facet each beam refracted through that the fitted planes do not follow
+        bottom_rows = np.flatnonzero(returns.has_bottom)
+        plane_tilt = surf.normal_sigma_rad.copy()  # what the surface_tilt_* terms carried
+        plane_tilt[bottom_rows] = np.maximum(plane_tilt[bottom_rows], np.nan_to_num(tilt))
+        tpu40 = with_wave_facet(
+            tpu40,
+            returns.direction_meas,
+            surf,
+            vg,
+            grad[np.searchsorted(bottom_rows, tpu40.row)],
+            refr.phase_index,
+            tilt_sigma_rad=plane_tilt,
+        )
     cells = cell_uncertainty(grid, tpu40)
     return SurveyUncertainty(
         tpu40=tpu40,
@@ -227,3 +274,32 @@ def take_tpu(tpu: PointTpu, index: np.ndarray) -> PointTpu:
         else:
             kw[f.name] = v
     return dataclasses.replace(tpu, **kw)
+
+
+def without_points(unc: SurveyUncertainty, keep: np.ndarray, grid: Grid) -> SurveyUncertainty:
+    """The uncertainty of the kept bathymetric points only, cells again on ``grid``.
+
+    Processing that rejects soundings after the TPU
+    (:mod:`pipeline.process.seabed_outliers`) leaves the other points' TPU as it was; the
+    rejected ones leave the TPU check and the cells (``grid``: gridded without them).
+
+    Parameters
+    ----------
+    unc : SurveyUncertainty
+    keep : (len(unc.points40),) bool
+        The bathymetric points that stay.
+    grid : Grid
+    """
+    keep = np.asarray(keep, dtype=bool)
+    tpu40 = take_tpu(unc.tpu40, np.flatnonzero(keep))
+    is40 = unc.is40.copy()
+    is40[np.flatnonzero(unc.is40)[~keep]] = False
+    cells = cell_uncertainty(grid, tpu40)
+    return dataclasses.replace(
+        unc,
+        tpu40=tpu40,
+        points40=unc.points40.select(keep),
+        is40=is40,
+        cells=cells,
+        summary=iho.order_summary(cells.order).to_dict(),
+    )

@@ -28,9 +28,10 @@ attitude               C   IMU roll/pitch (isotropic tilt ``s_tilt``, so the air
                            distance to the (rotated) plane is unchanged, only its vertical
                            projection, ``-depth (w x N)_z / N_z`` (zero under a level plane),
                            plus the slope coupling of ``dB``.
-surface fit height     C   standard error of the fitted plane at the entry point (depth: zero
-                           with the pulse's own surface return, whose time fixes the in-water
-                           range from wherever the surface is).
+surface fit height     C   standard error of the fitted plane at the entry point: moves the
+                           entry by ``1 - w`` of it (``w``: the own echo's weight,
+                           ``WaterSurface.own_weight``; 0 without an own return) and the path
+                           timed from it; the depth, below the plane, by the rest.
 surface fit tilt       C   tilt sigma of the fitted plane (``/ sqrt 2`` per axis), the plane
                            turned about the entry point: the fit's standard error
                            (``normal_sigma_rad``) or, if larger, the tilt measured over the
@@ -55,10 +56,14 @@ bottom)                    ``timing_sigma_s``; the full-waveform detector gives 
                            or sets it when the detector gives none (photon counting).
 pointing jitter        R   per-pulse beam direction noise (scanner encoder), two axes.
 wave height            R   the local water surface off its fitted plane: the fit's residual
-                           sigma in excess of its points' ranging noise (depth: as the fit
-                           height).
+                           sigma in excess of its points' ranging noise (as the fit height:
+                           with the own echo it is mostly in the depth below the plane).
 wave slope             R   facet slope under the footprint not in the fitted plane
                            (``wave_slope_sigma_rad`` per axis; :func:`cox_munk_slope_sigma`).
+                           Default 0: the survey then measures it (``wave_facet_x/y``,
+                           :mod:`pipeline.uncertainty.tpu_facet`: the sea's slope the fitted
+                           planes do not follow, from the surface variogram's ``a h²`` rise;
+                           refraction only, added after this function).
 footprint              R   the return's centroid within the beam footprint: per horizontal axis
                            ``D / 4`` (Gaussian beam, ``D`` its 1/e² diameter at the bottom
                            ``gamma (r_air + L / n_w)``), vertically ``D / 4 tan(seabed slope)``.
@@ -84,6 +89,11 @@ circular normal, ``sqrt((s_x^2 + s_y^2) / 2)``. The IHO 95 % values are ``1.96 s
 ``2.45 sigma_h``.
 :func:`monte_carlo_points` redraws every input and recomputes the points with
 :func:`~pipeline.process.refraction.seabed_points` (the check of the linearisation).
+The survey also measures the water surface from its own surface returns
+(:mod:`pipeline.uncertainty.tpu_measured`): the nugget of their height variogram raises each
+surface timing sigma (the ranging error a calm-water onset or a spread echo makes, which the
+per-echo bound misses), and its wave part at each sounding's entry offset adds one more random
+depth term, ``wave_entry``, beyond what the fitted plane's tilt terms hold.
 A photon-counting window's shots share one detected depth: the survey adds the spread of the
 seabed plane under them as one more random term
 (:mod:`pipeline.uncertainty.tpu_window`, :func:`~pipeline.uncertainty.tpu_window.

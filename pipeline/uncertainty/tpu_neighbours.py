@@ -139,6 +139,21 @@ def pair_scatter(
     the (grouped) soundings themselves: a group's shots share one depth, so only the groups
     show the slope.
 
+    The true depth also differs between two soundings beyond the plane: seabed relief, and the
+    sea above them (a depth is read below the sea over its sounding), both real and no error.
+    Their part of ``E[D²] / 2`` is the semivariogram of the true depth about the plane, which a
+    smooth field raises as ``a h²`` from the origin; the random error is its nugget. ``a`` is
+    measured once over the survey (with ``order``) from each sounding's pairs with its next and
+    its next but one (lags ``h_1``, ``h_2``; where both pairs exist the soundings' error
+    variance cancels in ``D_2² / 2 - D_1² / 2 = a (h_2² - h_1²)``, so a depth-varying noise
+    does not bias ``a``), as ``a = sum(D_2² / 2 - D_1² / 2) / sum(h_2² - h_1²)`` (at least 0;
+    the next but one within ``2 max_separation_m``; 0 unless ``sum h_2² > 2 sum h_1²``), and the
+    estimate is ``sqrt(max(mean(D² / 2 - a h²), 0))`` over the nearest pairs. A rise that is not
+    quadratic (relief or waves near the pairs' lag scale) is removed only in part. Without it,
+    pairs 1-2 m apart on a scanner over waves or a rough seabed put the sea's and the relief's
+    height differences into the timing (``benchmarks/RESULTS_tpu_calibration.md``, per-stratum
+    calibration).
+
     Returns
     -------
     (m,) float64
@@ -166,21 +181,36 @@ def pair_scatter(
         g = seabed_gradient(xy, dep)
     if key is None:
         _, idx = cKDTree(xy).query(xy, k=2, workers=-1)
-        i, j = np.arange(len(xy)), idx[:, 1]
+        i, j, j2 = np.arange(len(xy)), idx[:, 1], None  # no second lag along a scan
     else:
         seq = np.argsort(key, kind="stable")
-        i, j = seq[:-1], seq[1:]
-    sep = xy[i] - xy[j]
-    ok = np.hypot(sep[:, 0], sep[:, 1]) <= max_separation_m
-    i, j, sep = i[ok], j[ok], sep[ok]
-    if i.size == 0:
+        i, j, j2 = seq[:-1], seq[1:], np.append(seq[2:], seq[-1])
+    half_sq, sep_sq, ok = _pair_half_squares(xy, dep, g, i, j, max_separation_m)
+    if not np.any(ok):
         return out
-    diff = dep[i] - dep[j] - np.sum(0.5 * (g[i] + g[j]) * sep, axis=1)
-    half_sq = 0.5 * diff**2
+    # the true depth's own rise between the pairs (relief, the sea above the soundings): its
+    # curvature a from the same soundings' pairs at two lags (their noise cancels)
+    rise = 0.0
+    if j2 is not None:
+        half_sq2, sep_sq2, ok2 = _pair_half_squares(xy, dep, g, i, j2, 2.0 * max_separation_m)
+        both = ok & ok2 & (j2 != j)
+        den = float(np.sum(sep_sq2[both] - sep_sq[both]))
+        if den > float(np.sum(sep_sq[both])):  # lags apart enough to tell a rise
+            rise = max(float(np.sum(half_sq2[both] - half_sq[both])) / den, 0.0)
+    i, j = i[ok], j[ok]
+    half_sq = half_sq[ok] - rise * sep_sq[ok]
     k = min(neighbours, half_sq.size)
     _, near = cKDTree(0.5 * (xy[i] + xy[j])).query(q, k=k, workers=-1)
     near = np.asarray(near).reshape(len(q), k)
-    return np.sqrt(np.mean(half_sq[near], axis=1))
+    return np.sqrt(np.maximum(np.mean(half_sq[near], axis=1), 0.0))
+
+
+def _pair_half_squares(xy, dep, g, i, j, max_separation_m):
+    """``D² / 2`` of the pairs ``(i, j)`` (plane removed), their squared lags, and which count."""
+    sep = xy[i] - xy[j]
+    sep_sq = np.sum(sep**2, axis=1)
+    diff = dep[i] - dep[j] - np.sum(0.5 * (g[i] + g[j]) * sep, axis=1)
+    return 0.5 * diff**2, sep_sq, sep_sq <= max_separation_m**2
 
 
 def surface_over_sounding(
@@ -309,10 +339,10 @@ def timing_from_scatter(
 
     For a detector that reports no timing sigma: the timing terms' depth variance is set to the
     measured random scatter of the soundings (:func:`pair_scatter`) less the other random
-    terms', ``s_t² = max(scatter² - other², 0)``. With the pulse's own surface return the depth
-    depends on ``t_b - t_s`` only, so the split between the two returns does not change it; it
-    is made as for photon-limited timing, variance in proportion to ``1 / amplitude``
-    (equal without amplitudes). Rows with a NaN scatter keep the a-priori sigma.
+    terms', ``s_t² = max(scatter² - other², 0)``, split between the two returns (each through
+    its own depth derivative: the surface's moves the entry by its weight) as for
+    photon-limited timing, variance in proportion to ``1 / amplitude`` (equal without
+    amplitudes). Rows with a NaN scatter keep the a-priori sigma.
 
     The sigma is ``scatter / |d depth / d t|``, the derivative of the depth compared at the
     measured position: it tends to 0 where a beam runs along the local seabed gradient

@@ -107,6 +107,16 @@ class TpuSettings:
     scatter_neighbours: int = setting(
         64, ge=4, le=4096, doc="sounding pairs pooled per local scatter estimate"
     )
+    surface_pair_max_dt_s: float = setting(
+        0.2,
+        gt=0.0,
+        le=10.0,
+        doc="surface points paired in the surface-height variogram at most this far apart in"
+        " time (the sea moves: ~1 m at a 10 m/s wind sea's phase speed)",
+    )
+    surface_min_pairs: int = setting(
+        200, ge=10, le=1_000_000, doc="pairs a lag bin of the surface-height variogram needs"
+    )
 
 
 def timing_sigma_s(snr: Any, pulse_fwhm_s: float) -> np.ndarray:

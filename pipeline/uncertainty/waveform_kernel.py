@@ -112,15 +112,21 @@ def _c_part(u, r, s, band):
 
 
 @numba.njit(cache=True, nogil=True)
+def _echo_band(centre, sigma, dt, m):
+    """Samples ``[j0, j1)`` within ``BAND_Z`` sigmas of an echo at ``centre`` (s), of ``m``."""
+    j0 = max(int(math.floor((centre - BAND_Z * sigma) / dt + 0.5)), 0)
+    j1 = min(int(math.ceil((centre + BAND_Z * sigma) / dt + 0.5)), m)
+    return j0, j1
+
+
+@numba.njit(cache=True, nogil=True)
 def _add_echo(mu, centre, sigma, area, dt):
     """Add a Gaussian echo of ``area`` counts at ``centre`` (s) to the samples ``mu`` in place.
 
     Sample ``i`` integrates over ``[(i - 1/2) dt, (i + 1/2) dt)``; only the edges within
     ``BAND_Z`` sigmas of the centre are evaluated.
     """
-    m = mu.shape[0]
-    j0 = max(int(math.floor((centre - BAND_Z * sigma) / dt + 0.5)), 0)
-    j1 = min(int(math.ceil((centre + BAND_Z * sigma) / dt + 0.5)), m)
+    j0, j1 = _echo_band(centre, sigma, dt, mu.shape[0])
     if j1 <= j0:
         return
     prev = _phi(((j0 - 0.5) * dt - centre) / sigma)
@@ -131,19 +137,30 @@ def _add_echo(mu, centre, sigma, area, dt):
 
 
 @numba.njit(cache=True, nogil=True)
+def _row_setup(th, cos_water, s, group_index, offset):
+    """``(t_s, r, tau, fall, base, scale)`` of one parameter row.
+
+    Surface time (s), attenuation ``r`` (1/s), in-water delay ``tau`` (s), ``exp(-r tau)``,
+    baseline and the column's area scale.
+    """
+    t_s = th[1] * 1e-9
+    r = math.exp(th[5]) * _C / group_index
+    tau = 2.0 * group_index * th[0] / (_C * cos_water)
+    fall = math.exp(-r * tau)
+    base = offset + th[6]
+    scale = math.exp(th[3]) / -math.expm1(-r * tau)
+    return t_s, r, tau, fall, base, scale
+
+
+@numba.njit(cache=True, nogil=True)
 def model_row(th, cos_water, mu, dt, s, group_index, offset):
     """Mean samples of one parameter row ``th`` (9,) into ``mu`` (m,), offset included.
 
     Units and parameters as :func:`pipeline.uncertainty.waveform_model.expected_waveform`.
     """
     m = mu.shape[0]
-    t_s = th[1] * 1e-9
-    r = math.exp(th[5]) * _C / group_index
-    tau = 2.0 * group_index * th[0] / (_C * cos_water)
-    fall = math.exp(-r * tau)
+    t_s, r, tau, fall, base, scale = _row_setup(th, cos_water, s, group_index, offset)
     band = BAND_Z * s
-    base = offset + th[6]
-    scale = math.exp(th[3]) / -math.expm1(-r * tau)
     # cumulative column C_tau(u) = C(u) - exp(-r tau) C(u - tau) at the sample edges
     u = -0.5 * dt - t_s
     prev = _c_part(u, r, s, band) - fall * _c_part(u - tau, r, s, band)
@@ -170,19 +187,39 @@ def expected_rows(theta, cos_water, n_samples, dt, s, group_index, offset):
 
 
 @numba.njit(cache=True, nogil=True)
-def log_post_rows(theta, samples, n_valid, cos_water, box, ln_k_prior, system):
+def log_post_rows(theta, samples, n_valid, cos_water, box, ln_k_prior, system, exposure):
     """Log posterior of walker rows ``theta`` (N, 9), row ``k`` for pulse ``k % P``.
 
     ``box`` (P, 19): each pulse's prior lower and upper bounds (9 + 9) and the last sample's
     time ``t_last_s``; ``ln_k_prior`` (P, 2) the normal prior's mean and sigma on ``ln k``
     (``inf``: none). ``-inf`` outside the box or with the bottom after ``t_last_s``, else
     :func:`log_lik_rows` plus the prior (flat in the box). ``system`` as
-    :func:`log_lik_rows`' trailing arguments, in a tuple.
+    :func:`log_lik_rows`' trailing arguments, in a tuple; ``exposure`` (P, m) as there.
+    """
+    n = theta.shape[0]
+    thr = np.full(n, -np.inf)
+    rest = np.zeros((samples.shape[0], samples.shape[1] + 1))
+    return log_post_rows_bounded(
+        theta, thr, rest, samples, n_valid, cos_water, box, ln_k_prior, system, exposure
+    )
+
+
+@numba.njit(cache=True, nogil=True)
+def log_post_rows_bounded(
+    theta, thr, rest, samples, n_valid, cos_water, box, ln_k_prior, system, exposure
+):
+    """:func:`log_post_rows`, or ``-inf`` for rows shown early to stay below ``thr`` (N,).
+
+    ``rest`` (P, m + 1): ``rest[p, i]`` an upper bound of pulse ``p``'s log-likelihood terms
+    from sample ``i`` on (:func:`~pipeline.uncertainty.posterior_loop.term_bounds`). A row's
+    sum is given, to the bit, unless its partial sum plus that bound falls below its
+    threshold, when the full sum would too: a Metropolis test with that threshold rejects it
+    either way (early rejection: Solonen et al. 2012, *Bayesian Analysis* 7(3), 715-736), and
+    the rest of the row is not computed.
     """
     n, n_p = theta.shape[0], samples.shape[0]
     dt, s, group_index, offset, poisson, floor, shot = system
     out = np.full(n, -np.inf)
-    keep = np.zeros(n, dtype=np.bool_)
     for k in range(n):
         p = k % n_p
         inside = True
@@ -190,53 +227,105 @@ def log_post_rows(theta, samples, n_valid, cos_water, box, ln_k_prior, system):
             if not (box[p, j] <= theta[k, j] <= box[p, 9 + j]):
                 inside = False
         t_b = theta[k, 1] * 1e-9 + 2.0 * group_index * theta[k, 0] / (_C * cos_water[p])
-        keep[k] = inside and t_b <= box[p, 18]
-    idx = np.flatnonzero(keep)
-    ll = log_lik_rows(
-        theta[idx], idx % n_p, samples, n_valid, cos_water, dt, s, group_index, offset, poisson,
-        floor, shot,
-    )  # fmt: skip
-    for q in range(idx.size):
-        k = idx[q]
-        p = k % n_p
+        if not (inside and t_b <= box[p, 18]):
+            continue
         sig = ln_k_prior[p, 1]
         z = (theta[k, 5] - ln_k_prior[p, 0]) / sig if np.isfinite(sig) else 0.0
-        out[k] = ll[q] - 0.5 * z * z
+        ll = _log_lik_row(
+            theta[k], cos_water[p], samples[p], exposure[p], n_valid[p], dt, s, group_index,
+            offset, poisson, floor, shot, rest[p], thr[k] + 0.5 * z * z,
+        )  # fmt: skip
+        out[k] = ll - 0.5 * z * z
     return out
 
 
 @numba.njit(cache=True, nogil=True)
 def log_lik_rows(
-    theta, pulse, samples, n_valid, cos_water, dt, s, group_index, offset, poisson, floor, shot
-):
+    theta, pulse, samples, n_valid, cos_water, dt, s, group_index, offset, poisson, floor, shot,
+    exposure,
+):  # fmt: skip
     """Log-likelihood of rows ``theta`` (N, 9), row ``k`` against ``samples[pulse[k]]``.
 
     Only the first ``n_valid[p]`` samples of pulse ``p`` count (the rest is padding). Gaussian
     law: ``-((y - mu)^2 / v + log v) / 2`` with ``v = floor + shot max(mu - offset, 0)``;
-    Poisson: ``y log mu - mu`` (``-inf`` where ``mu <= 0 < y``). Data-only constants dropped,
-    as :func:`pipeline.uncertainty.waveform_model.log_likelihood`.
+    Poisson: ``y log(e mu) - e mu`` with ``e = exposure[p, i]`` the live share of sample ``i``
+    (dead time: a photon-counting record is Poisson of the rate times its live exposure;
+    1 where every channel was live; ``-inf`` where ``e mu <= 0 < y``; the Gaussian law ignores
+    it). Data-only constants dropped, as :func:`pipeline.uncertainty.waveform_model.
+    log_likelihood`.
     """
     n = theta.shape[0]
     out = np.empty(n)
-    mu = np.empty(samples.shape[1])
+    none = np.zeros(samples.shape[1] + 1)
     for k in range(n):
         p = pulse[k]
-        m = n_valid[p]
-        row = mu[:m]
-        model_row(theta[k], cos_water[p], row, dt, s, group_index, offset)
-        y = samples[p]
-        acc = 0.0
-        if poisson:
-            for i in range(m):
-                if row[i] > 0.0:
-                    acc += y[i] * math.log(row[i]) - row[i]
-                elif y[i] > 0.0:
-                    acc = -np.inf
-                    break
-        else:
-            for i in range(m):
-                v = floor + shot * max(row[i] - offset, 0.0)
-                d = y[i] - row[i]
-                acc -= 0.5 * (d * d / v + math.log(v))
-        out[k] = acc
+        out[k] = _log_lik_row(
+            theta[k], cos_water[p], samples[p], exposure[p], n_valid[p], dt, s, group_index,
+            offset, poisson, floor, shot, none, -np.inf,
+        )  # fmt: skip
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _log_lik_row(
+    th, cos_water, y, e, m, dt, s, group_index, offset, poisson, floor, shot, rest, thr
+):  # fmt: skip
+    """One row's log-likelihood (:func:`log_lik_rows`), the model formed sample by sample.
+
+    The samples' means are :func:`model_row`'s, added in its order (column, surface echo,
+    bottom echo), so the same bits; the terms are summed in sample order. Returns ``-inf``
+    once the partial sum plus ``rest[i + 1]`` (a bound of the terms after sample ``i``) is
+    below ``thr``.
+    """
+    t_s, r, tau, fall, base, scale = _row_setup(th, cos_water, s, group_index, offset)
+    band = BAND_Z * s
+    t_b = t_s + tau
+    sig_s, sig_b = s * math.exp(th[8]), s * math.exp(th[7])
+    a_s, a_b = math.exp(th[2]), math.exp(th[4])
+    j0s, j1s = _echo_band(t_s, sig_s, dt, m)
+    j0b, j1b = _echo_band(t_b, sig_b, dt, m)
+    ps = _phi(((j0s - 0.5) * dt - t_s) / sig_s)
+    pb = _phi(((j0b - 0.5) * dt - t_b) / sig_b)
+    u = -0.5 * dt - t_s
+    prev = _c_part(u, r, s, band) - fall * _c_part(u - tau, r, s, band)
+    acc = 0.0
+    # the logarithms are the cost: an empty sample needs none (0 log(lam) - lam is -lam
+    # exactly) and a repeated argument (the background before the surface and after the
+    # bottom, where the mean is the baseline) reuses the last one: the same sums, bit for bit
+    arg, log_arg = -1.0, 0.0
+    for i in range(m):
+        u = (i + 0.5) * dt - t_s
+        if u >= tau + band:
+            nxt = 1.0 - fall
+        else:
+            nxt = _c_part(u, r, s, band) - fall * _c_part(u - tau, r, s, band)
+        mu = base + (nxt - prev) * scale
+        prev = nxt
+        if j0s <= i < j1s:
+            q = _phi(((i + 0.5) * dt - t_s) / sig_s)
+            mu += a_s * (q - ps)
+            ps = q
+        if j0b <= i < j1b:
+            q = _phi(((i + 0.5) * dt - t_b) / sig_b)
+            mu += a_b * (q - pb)
+            pb = q
+        if poisson:
+            lam = e[i] * mu
+            if lam > 0.0:
+                if y[i] == 0.0:
+                    acc -= lam
+                else:
+                    if lam != arg:
+                        arg, log_arg = lam, math.log(lam)
+                    acc += y[i] * log_arg - lam
+            elif y[i] > 0.0:
+                return -np.inf
+        else:
+            v = floor + shot * max(mu - offset, 0.0)
+            d = y[i] - mu
+            if v != arg:
+                arg, log_arg = v, math.log(v)
+            acc -= 0.5 * (d * d / v + log_arg)
+        if acc + rest[i + 1] < thr:
+            return -np.inf
+    return acc

@@ -219,14 +219,20 @@ def noise_variance(mu: Any, system: WaveformSystem) -> np.ndarray:
     return system.floor_variance + shot * np.maximum(mu - system.offset_counts, 0.0)
 
 
-def log_likelihood(samples: Any, mu: Any, system: WaveformSystem, valid: Any = None) -> np.ndarray:
+def log_likelihood(
+    samples: Any, mu: Any, system: WaveformSystem, valid: Any = None, exposure: Any = None
+) -> np.ndarray:
     """Log-likelihood of ``samples`` given means ``mu``, summed over the last axis.
 
-    ``samples`` and ``mu`` broadcast together; only samples where ``valid`` (if given) count.
-    Constants that depend on the data only (``log y!``, ``log 2 pi``) are dropped.
+    ``samples`` and ``mu`` broadcast together; only samples where ``valid`` (if given) count;
+    ``exposure`` (Poisson law only) scales the mean by each sample's live share (see
+    :func:`score`). Constants that depend on the data only (``log y!``, ``log 2 pi``) are
+    dropped.
     """
     y = np.asarray(samples, dtype=np.float64)
     mu = np.asarray(mu, dtype=np.float64)
+    if exposure is not None and system.poisson:
+        mu = mu * np.asarray(exposure, dtype=np.float64)
     if system.poisson:
         pos = mu > 0.0
         term = np.where(pos, y * np.log(np.where(pos, mu, 1.0)) - mu, np.where(y > 0, -np.inf, 0))
@@ -324,15 +330,25 @@ def fisher_information(
 
 
 def score(
-    samples: Any, theta: Any, system: WaveformSystem, cos_water: Any = 1.0, valid: Any = None
+    samples: Any,
+    theta: Any,
+    system: WaveformSystem,
+    cos_water: Any = 1.0,
+    valid: Any = None,
+    exposure: Any = None,
 ) -> tuple[Any, np.ndarray, np.ndarray]:
     """Log-likelihood, its gradient and the Fisher information at ``theta``.
 
-    ``samples`` (m,) with ``theta`` (9,), or (P, m) with (P, 9); ``valid`` masks padding.
+    ``samples`` (m,) with ``theta`` (9,), or (P, m) with (P, 9); ``valid`` masks padding;
+    ``exposure`` (like ``samples``, Poisson law only) the live share of each sample: the
+    recorded counts are Poisson of ``exposure * mu`` (photon counting's dead time).
     Returns ``(ll, grad, info)``: a float, (9,), (9, 9), or (P,), (P, 9), (P, 9, 9).
     """
     y = np.asarray(samples, dtype=np.float64)
     mu, jac = jacobian(theta, y.shape[-1], system, cos_water)
+    if exposure is not None and system.poisson:
+        e = np.asarray(exposure, dtype=np.float64)
+        mu, jac = mu * e, jac * e[..., None]
     w, gauss = _weights(mu, system)
     if gauss is None:
         dl = y / np.maximum(mu, 1e-300) - 1.0

@@ -1,5 +1,7 @@
 """Gridding against a brute-force loop over the cells."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -123,3 +125,71 @@ def test_cell_depth_robust_to_outliers():
     np.testing.assert_allclose(g.z_m[full], -g.depth_m[full], atol=1e-12)
     # the mean is not: the same cells are off by metres
     assert np.max(np.abs(g.mean_depth_m - plane_depth(xx, yy))[full]) > 0.5
+
+
+def _seabed_with_a_cube():
+    """A flat seabed 5 m deep sounded on a 0.25 m lattice, a 1 m cube (top 4 m) at (5, 5).
+
+    2 m cells: the cube's 16 soundings are a quarter of the 64 in its cell (4..6 x 4..6), so
+    the median gives the seabed there; its soundings are class 43, one class-40 blunder 2 m
+    shoal sits in the cell (0..2 x 0..2).
+    """
+    g = np.arange(0.125, 10.0, 0.25)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    on = (np.abs(x - 5.0) <= 0.5) & (np.abs(y - 5.0) <= 0.5)
+    depth = np.where(on, 4.0, 5.0)
+    depth[np.flatnonzero((x < 2) & (y < 2))[0]] = 3.0
+    cls = np.where(on, 43, 40).astype(np.uint8)
+    return SimpleNamespace(xyz_m=np.c_[x, y, -depth], depth_m=depth, classification=cls)
+
+
+def test_designated_objects_keep_a_cube_the_median_erases():
+    from pipeline.process.grid import designate_objects
+
+    pts = _seabed_with_a_cube()
+    grid = grid_seabed(pts, 2.0, bounds_m=(0, 10, 0, 10))
+    assert np.all(grid.depth_m == 5.0)  # the median: no cube, no blunder
+    des = designate_objects(grid, pts)
+    row, col = 2, 2  # the cell y in (4, 6], x in [4, 6) holds the whole cube
+    assert des.depth_m[row, col] == 4.0 and des.z_m[row, col] == -4.0
+    others = np.ones(grid.shape, bool)
+    others[row, col] = False
+    assert np.all(des.depth_m[others] == 5.0)  # the class-40 blunder still meets the median
+    assert des.median_depth_m[row, col] == 5.0 and des.count[row, col] == 64
+    # below a datum 0.5 m above the points' reference: depths 0.5 m more
+    below = grid_seabed(pts, 2.0, bounds_m=(0, 10, 0, 10), datum_m=0.5)
+    des_d = designate_objects(below, pts, 0.5)
+    assert des_d.depth_m[row, col] == 4.5
+    # the evaluation's grid criterion (the cell stands above its neighbours by s/2) now holds
+    from pipeline.evaluate_features import cube_detection
+
+    cube = SimpleNamespace(kind="cube", x_m=5.0, y_m=5.0, size_m=1.0, heading_deg=0.0)
+    flat = lambda x, y: np.full(np.shape(x), 5.0)  # noqa: E731
+    assert not cube_detection((cube,), pts, flat, grid)[0]["grid_shows"]
+    assert cube_detection((cube,), pts, flat, des)[0]["grid_shows"]
+
+
+def test_a_designated_cell_is_scored_against_the_least_true_depth_in_it():
+    from pipeline.evaluate import grid_errors_m
+    from pipeline.evaluate_features import grid_elevation_errors_m
+    from pipeline.process.grid import designate_objects
+
+    pts = _seabed_with_a_cube()
+
+    def depth(x, y):  # the analytic seabed: 5 m, the cube's top 4 m
+        return np.where((np.abs(x - 5.0) <= 0.5) & (np.abs(y - 5.0) <= 0.5), 4.0, 5.0)
+
+    des = designate_objects(grid_seabed(pts, 2.0, bounds_m=(0, 10, 0, 10)), pts)
+    assert des.designated.sum() == 1 and des.designated[2, 2]
+    err, _ = grid_errors_m(des, truth_depth_m=depth)
+    # the cell (4..6)^2 states the cube's least depth, 4 m, and so is the truth's least depth;
+    # at its centre the truth is the top too, so test a cube off the centre below
+    assert err[2, 2] == 0.0 and np.all(err[~des.designated] == 0.0)
+
+    def off_centre(x, y):  # the same cell, the cube moved to (4.5, 5.5): centre (5, 5) off it
+        return np.where((np.abs(x - 4.2) <= 0.25) & (np.abs(y - 5.7) <= 0.25), 4.0, 5.0)
+
+    err, _ = grid_errors_m(des, truth_depth_m=off_centre)
+    assert err[2, 2] == 0.0  # not -1 m: the cell's least true depth is the cube's top
+    elev = grid_elevation_errors_m(des, lambda x, y: -off_centre(x, y))
+    assert np.all(elev == 0.0)

@@ -22,7 +22,8 @@ from scipy.optimize import least_squares
 from scipy.signal import fftconvolve
 from test_refraction import D0_M, N_AIR, N_GROUP, N_PHASE, SX, SY, analytic_pulses
 
-from pipeline.forward_scatter import bottom_delay, water_tables
+from pipeline.forward_scatter import bottom_delay
+from pipeline.forward_scatter_mc import water_tables
 from pipeline.process.detect import DetectSettings, detect_full_waveform
 from pipeline.process.refraction import RefractionSettings, seabed_points
 from pipeline.process.scatter_bias import (
@@ -117,7 +118,7 @@ def _delayed_pulses(c=0.15):
     radius = tan_half * (r_air + length * N_AIR / N_PHASE)  # the field at the seabed
     b = 0.55 * c
     b_w = 2.88e-3 * (532.0 / 500.0) ** -4.32  # sea water (Morel 1974)
-    delay = bottom_delay(length, radius, (b - b_w, b_w), water_tables())
+    delay = bottom_delay(length, radius, (b - b_w, b_w), water_tables(), c - b)
     # delays in time: two-way excess path at the group speed
     tail_s = delay.tail_mean_m * N_GROUP / C
     shift_s = np.array(

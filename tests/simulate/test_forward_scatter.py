@@ -6,7 +6,8 @@ coefficient b), scatter with a Henyey-Greenstein phase function (g = 0.9), are a
 weight exp(-a s), and count when they reach a flat seabed at depth L within the receiver's
 field-of-view radius R. Two ways: the up leg is, by reciprocity, the same experiment (the
 Lambertian seabed forgets the direction), so the two-way excess path is the sum of two
-independent draws. The model (pipeline.forward_scatter) gets only the phase function.
+independent draws. The model (pipeline.forward_scatter with the traced tables of
+pipeline.forward_scatter_mc) gets only the phase function and the absorption.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import pytest
 from waveform_support import clean_scene, detector
 
 from pipeline.forward_scatter import ScatterTables, bottom_delay
+from pipeline.forward_scatter_mc import TracedTables
 from pipeline.simulate.budget import return_budget
 from pipeline.simulate.flat_paths import flat_paths
 from pipeline.simulate.waveform import expected_waveform
@@ -72,29 +74,38 @@ def _one_way_mc(n, depth, b, a, radius, rng, max_excess=60.0):
     return s - depth, weight
 
 
-@pytest.mark.parametrize("depth", [5.0, 10.0, 20.0])
-def test_bottom_delay_against_brute_force_monte_carlo(depth):
-    c, albedo, radius = 0.15, 0.8, 2.0  # clear coastal water; a 10 mrad receiver at ~400 m
+@pytest.fixture(scope="module")
+def hg_tables():
+    return TracedTables.from_phase(_hg_phase)
+
+
+@pytest.mark.parametrize(
+    ("depth", "radius"),
+    [(5.0, 2.0), (10.0, 2.0), (20.0, 2.0), (20.0, 0.5), (20.0, 5.0), (30.0, 3.0)],
+)
+def test_bottom_delay_against_brute_force_monte_carlo(depth, radius, hg_tables):
+    """R = 2 m is a 10 mrad receiver at ~400 m; 0.5 and 5 m are the narrow and wide extremes."""
+    c, albedo = 0.15, 0.8  # clear coastal water
     b, a = albedo * c, (1 - albedo) * c
-    rng = np.random.default_rng(int(depth))
+    rng = np.random.default_rng(int(10 * depth + radius))
     excess, w = _one_way_mc(200_000, depth, b, a, radius, rng)
     keep = w > 0
     excess, w = excess[keep], w[keep] / w[keep].sum()
     n_eff = 1.0 / np.sum(w**2)
-    model = bottom_delay(
-        np.array([depth]), np.array([radius]), [b], [ScatterTables.from_phase(_hg_phase)]
-    )
+    model = bottom_delay(np.array([depth]), np.array([radius]), [b], [hg_tables], a)
 
-    # no accepted scattering on either leg: the compound-Poisson model's exp(-2 b L H_0)
+    # no accepted scattering on either leg
     p1 = float(np.sum(w * (excess == 0.0)))
     se_p1 = math.sqrt(p1 * (1 - p1) / n_eff)
     assert model.unscattered[0] == pytest.approx(p1**2, abs=3 * 2 * p1 * se_p1)
 
-    # mean two-way excess path (sum of two legs): within 3 sampling sigmas plus the model's
-    # stated accuracy (events judged one by one: 5-10 % high when several are accepted)
+    # mean two-way excess path (sum of two legs) within the sampling error: 3 sigmas of the
+    # difference of two Monte Carlo estimates of the same size (this one and the model's
+    # tables, 200 000 photons each). The single-event tables were 5-10 % high at R = 2 m and
+    # 43 % low at R = 0.5 m: 3-20 sigmas off.
     mean1 = float(np.sum(w * excess))
     se_mean = math.sqrt(2 * float(np.sum(w * (excess - mean1) ** 2)) / n_eff)
-    assert abs(model.mean_m[0] - 2 * mean1) <= 3 * se_mean + 0.12 * 2 * mean1
+    assert abs(model.mean_m[0] - 2 * mean1) <= 3 * math.sqrt(2.0) * se_mean
 
     # skew: the share of the echo's photons delayed by less than the mean (0.5 if symmetric)
     pick = rng.choice(excess.size, size=(2, 100_000), p=w)
@@ -103,7 +114,19 @@ def test_bottom_delay_against_brute_force_monte_carlo(depth):
     wt, tau, mean = model.tail_weight[0], model.tail_mean_m[0], model.mean_m[0]
     share_model = (1 - wt) + wt * (1 - math.exp(-mean / tau))
     assert share_mc > 0.6 and share_model > 0.6  # skewed late
-    assert share_model == pytest.approx(share_mc, abs=0.04 + 3 * math.sqrt(0.25 / 100_000))
+    if radius >= 2.0:
+        # the two-moment mixture's shape; in the narrow field (R / L = 0.025) the delays are
+        # heavier-tailed than one exponential (MC 0.77, mixture 0.89: mean and variance right,
+        # the shape not; see RESULTS_realism.md)
+        assert share_model == pytest.approx(share_mc, abs=0.04 + 3 * math.sqrt(0.25 / 100_000))
+
+
+def test_traced_tables_tend_to_single_events_when_scattering_is_rare(hg_tables):
+    """At b L -> 0 at most one event is accepted: the single-event integrals are exact there."""
+    single = ScatterTables.from_phase(_hg_phase)
+    rho = np.array([0.05, 0.2, 1.0])
+    traced = hg_tables.at(np.full(3, 0.1), rho)  # the first fully traced optical depth
+    np.testing.assert_allclose(traced[1], single(rho)[1], rtol=0.08)
 
 
 def _moments(scene, depth, off_nadir_deg=0.0):

@@ -111,8 +111,8 @@ def test_split_keeps_the_cox_munk_mean_glint(sea):
     e_nadir, _ = _echo(flat, flat_world, nadir, 1)
     assert e_flat.mean() / e_nadir[0] == pytest.approx(expected_ratio, rel=0.02)
     # the split sea: the same mean. Sampling error of 2000 pulses ~ 5 % (the glint at 20 deg is
-    # heavy-tailed) and the moving sea's slab interpolation lowers the traced slope variance
-    # between boundaries (-1 % at 5 m/s); the exact check is the frozen test below
+    # heavy-tailed); the exact check is the frozen test below, and the moving sea keeps its
+    # slope variance between boundaries (tests/terrain/test_evolving_sea.py)
     assert e.mean() / e_flat.mean() == pytest.approx(1.0, rel=0.15)
 
 
@@ -127,8 +127,8 @@ def test_mean_glint_over_traced_waves_is_the_cox_munk_glint(sea):
     scene, world = sea
     n = 100_000
     pulses = _Pulses(n, seed=13)
-    # the sea at a synthesised boundary (t = 0): between boundaries the moving sea is a
-    # linear interpolation in time whose slope variance is a little lower (a separate matter)
+    # the sea at a synthesised boundary (t = 0), so that the check does not depend on the
+    # time interpolation (checked against the exact field in tests/terrain)
     pulses.t_s = np.zeros(n)
     # one sub-ray per pulse: the mean is the same, and the pulses are what varies (the traced
     # waves tilt whole footprints), so 100 000 independent positions cost what 5 000 x 19 would

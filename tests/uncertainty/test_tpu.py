@@ -17,7 +17,6 @@ from pipeline.process.surface_fit import SurfaceFitSettings, fit_water_surface
 from pipeline.uncertainty.tpu import (
     CORRELATED_TERMS,
     RANDOM_TERMS,
-    TIMING_TERMS,
     TpuSettings,
     cox_munk_slope_sigma,
     index_derivatives,
@@ -83,11 +82,16 @@ def test_nadir_terms_by_hand():
     tpu = point_tpu(ret, surf, RST, st)
     t = {k: v[0] for k, v in tpu.terms.items()}  # pulse 0 points straight down
     r_air = float(surf.range_to_entry_m[0])
-    # one return's timing moves the bottom along the vertical beam by c sigma / (2 n_g), and
+    # the bottom's timing moves the bottom along the vertical beam by c sigma / (2 n_g), and
     # its depth by as much
-    for k in TIMING_TERMS:
-        assert abs(t[k][2]) == pytest.approx(C * 2e-10 / (2 * N_G), rel=1e-4)
-        assert t[k][3] == pytest.approx(-t[k][2], rel=1e-4)
+    assert abs(t["timing_bottom"][2]) == pytest.approx(C * 2e-10 / (2 * N_G), rel=1e-4)
+    assert t["timing_bottom"][3] == pytest.approx(-t["timing_bottom"][2], rel=1e-4)
+    # the surface echo's (no detector sigma: the pulse enters at its own echo) moves the entry
+    # down the beam by c sigma / (2 n_air) and shortens the path by c sigma / (2 n_g): the
+    # point by c sigma (1/n_air - 1/n_g) / 2, and its depth below the unmoved plane as much
+    ts = t["timing_surface"]
+    assert abs(ts[2]) == pytest.approx(C * 2e-10 / 2 * (1 / N_AIR - 1 / N_G), rel=1e-3)
+    assert ts[3] == pytest.approx(-ts[2], rel=1e-3)
     # navigation: a translation moves surface and seabed alike; the depth (flat seabed) keeps
     np.testing.assert_allclose(t["navigation"], [0.05, 0.05, 0.08, 0.0])
     # a roll about x turns the 412 m lever arm (0, 0, -R) into a y shift sigma R; the depth
@@ -98,8 +102,10 @@ def test_nadir_terms_by_hand():
     )
     # nadir: heading turns nothing (the noisy fitted plane tilts the beam by ~1e-8 rad)
     np.testing.assert_allclose(t["heading"], 0.0, atol=1e-5)
-    # the fitted surface's height moves the point, not its depth (own surface return)
-    assert abs(t["surface_height"][2]) > 1e-4 and abs(t["surface_height"][3]) < 1e-9
+    # the fitted surface's height moves the depth, not the point: the pulse entered where its
+    # own surface return is, and its depth is below the plane
+    sh = t["surface_height"]
+    assert abs(sh[2]) < 1e-9 and abs(sh[3]) == pytest.approx(surf.height_sigma_m[0], rel=1e-3)
     # footprint of a 1 mrad beam: 1e-3 (r_air + L / n_w) / 4 per axis, times tan 10° up;
     # over a plane the return's centroid is the beam centre's range: no depth term
     fp = 1e-3 * (r_air + 12.0 / N_W) / 4.0
@@ -154,7 +160,12 @@ GRAD = (0.1, -0.06)
 
 @pytest.fixture(scope="module")
 def wavy():
-    ret, surf = survey(wave_m=0.05)
+    ret, _ = survey(wave_m=0.05)
+    # the detector's 0.1 ns (the surface returns' noise): each echo's offset from its plane
+    # is then part wave, part noise (own-echo weights ~0.9), so every surface term is in play
+    n = len(ret)
+    ret = dataclasses.replace(ret, t_surface_sigma_s=np.full(n, 1e-10), t_bottom_sigma_s=None)
+    surf = fit_water_surface(ret, FIT)
     st = TpuSettings(wave_slope_sigma_rad=0.02, seabed_slope_deg=5.0)
     g = np.tile(GRAD, (len(ret), 1))
     tpu = point_tpu(ret, surf, RST, st, seabed_gradient=g)
@@ -187,11 +198,35 @@ def test_tpu_matches_monte_carlo_through_refraction(wavy):
     assert np.all(np.abs(err[:, 3] - second) < 4 * sd[:, 3] / np.sqrt(1000) + 1e-3)
 
 
+def test_surface_terms_follow_the_own_echo_weight(wavy):
+    """Nadir: the pulse entered at plane + w (own echo - plane), w its echo's weight. The echo's
+    timing moves the entry down the beam by w c dt / (2 n_air) and shortens the path by
+    w c dt / (2 n_g); the plane's height moves the entry up by (1 - w) dh and lengthens the
+    path by (1 - w) dh n_air / n_g. The point moves by the difference; its depth below the
+    plane by the plane's move less the point's."""
+    ret, surf, tpu, _ = wavy
+    w = float(surf.own_weight[0])
+    assert 0.5 < w < 0.99  # part wave, part noise
+    dt = float(ret.t_surface_sigma_s[0])
+    ts = tpu.terms["timing_surface"][0]
+    assert abs(ts[2]) == pytest.approx(w * C * dt / 2 * (1 / N_AIR - 1 / N_G), rel=2e-3)
+    assert ts[3] == pytest.approx(-ts[2], rel=2e-3)
+    dh = float(surf.height_sigma_m[0])
+    sh = tpu.terms["surface_height"][0]
+    dz = (1 - w) * dh * (1 - N_AIR / N_G)
+    assert abs(sh[2]) == pytest.approx(dz, rel=2e-3)
+    assert abs(sh[3]) == pytest.approx(dh - dz, rel=2e-3)
+
+
 def test_depth_sigma_is_not_the_elevation_sigma(wavy):
     """The vertical navigation (8 cm) moves z, not the depth below the measured surface; the
     slope (11.7 %) brings the horizontal errors into the depth."""
     _, _, tpu, mc = wavy
-    assert np.mean(tpu.sigma_v_m) > 0.08 > 2.0 * np.mean(tpu.sigma_depth_m)
+    assert np.mean(tpu.sigma_v_m) > 0.08
+    # and the 5 cm waves the fitted plane does not follow are in the depth below it, hardly
+    # in the point (the pulses enter at their echoes, weight ~0.9)
+    wave = tpu.terms["wave_height"]
+    assert np.median(np.abs(wave[:, 2])) < 0.1 * np.median(np.abs(wave[:, 3]))
     # the depth's draws are not the elevation's: their correlation is weak
     dz = mc[:, :, 2] - mc[:, :, 2].mean(axis=0)
     dd = mc[:, :, 3] - mc[:, :, 3].mean(axis=0)
@@ -316,6 +351,9 @@ def test_pair_scatter_recovers_the_random_error_not_the_shared_one():
 def test_timing_from_scatter_explains_the_scatter():
     ret, surf = survey(n_side=6)
     n = len(ret)
+    # a calm sea, no wave scatter about the planes: the TPU's wave height (in the depth below
+    # the plane) is then 0 whatever timing sigmas the scatter sets
+    surf = dataclasses.replace(surf, fit_sigma_m=np.zeros(n))
     amp = dict(surface_amplitude=np.full(n, 100.0), bottom_amplitude=np.linspace(20, 2000, n))
     ret = dataclasses.replace(ret, **amp)
     scatter = np.linspace(0.005, 0.06, n)
@@ -379,4 +417,26 @@ def test_detector_sigmas_are_used():
     )
     tpu = point_tpu(with_sig, surf, RST)
     assert abs(tpu.terms["timing_bottom"][0, 2]) == pytest.approx(C * 5e-10 / (2 * N_G), rel=1e-4)
-    assert abs(tpu.terms["timing_surface"][0, 2]) == pytest.approx(C * 3e-10 / (2 * N_G), rel=1e-4)
+    # the own echo carries the entry (fitted without detector sigmas): the surface's timing
+    # moves the entry by c dt / (2 n_air) and the path by c dt / (2 n_g)
+    dz_s = C * 3e-10 / 2 * (1 / N_AIR - 1 / N_G)
+    assert abs(tpu.terms["timing_surface"][0, 2]) == pytest.approx(dz_s, rel=1e-3)
+
+
+def test_pair_scatter_leaves_out_the_seabed_relief_between_the_pairs():
+    """Scan lines of soundings 1.5 m apart (an oscillating scanner's spacing) over a plane with
+    a smooth relief ``A sin(k x)`` (wavelength 40 m, A = 0.3 m: real seabed, no error) and iid
+    noise of 1 cm. Successive soundings differ by the relief too: its semivariogram at the
+    lag h = 1.5 m is ``A² (1 - cos(k h)) / 2`` (3.5 cm as a sigma), which the noise estimate must
+    not take for timing noise. Before: 2.3 cm (the local plane takes part of the relief)."""
+    rng = np.random.default_rng(11)
+    h, n_line, per_line = 1.5, 40, 60
+    x = np.tile(np.arange(per_line) * h, n_line)
+    y = np.repeat(np.arange(n_line) * 2.0, per_line)
+    k = 2.0 * np.pi / 40.0
+    sigma = 0.01
+    depth = 6.0 + 0.05 * x + 0.3 * np.sin(k * x + 0.7 * y) + rng.normal(0, sigma, x.size)
+    est = pair_scatter(np.column_stack([x, y]), depth, order=np.arange(x.size))
+    relief = np.sqrt(0.3**2 * (1.0 - np.cos(k * h)) / 2.0)
+    assert relief > 3.0 * sigma  # the relief would dominate
+    assert np.median(est) == pytest.approx(sigma, rel=0.25)

@@ -147,7 +147,7 @@ def test_sampler_on_the_compiled_model_gives_the_reference_posterior(monkeypatch
     st = PosteriorSettings(max_steps=600)
     fast = sample_batch(waves, FW, st, seed=3)
 
-    def numpy_rows(theta, samples, n_valid, cos_water, box, ln_k_prior, system):
+    def numpy_rows(theta, samples, n_valid, cos_water, box, ln_k_prior, system, exposure):
         """The numpy log posterior as it was: prior box, bottom in the window, reference model."""
         pulse = np.arange(theta.shape[0]) % samples.shape[0]
         lo, hi, t_last = box[pulse, :9], box[pulse, 9:18], box[pulse, 18]

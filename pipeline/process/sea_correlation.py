@@ -1,0 +1,220 @@
+"""How far the sea a pulse met at its water entry still tells the sea above its sounding.
+
+A sounding's depth is read below the water surface above it, ``B``, at the pulse's time; the
+pulse met the sea at its entry ``E``, ``Delta = |B - E|`` away horizontally (about a quarter of
+the depth at 20° off nadir). The local fitted plane follows the waves longer than its
+neighbourhood; the pulse's own surface echo tells, besides its ranging noise, the height of the
+shorter waves at ``E`` above that plane, ``s_E``
+(:func:`~pipeline.process.surface_land.own_echo_weight` takes the noise out: ``w s_E``). Above
+``B`` the same wave has moved on by ``Delta``: the best linear predictor of the sea there above
+the plane is ``rho(Delta) w s_E`` (simple kriging from one observation; Cressie 1993,
+*Statistics for Spatial Data*, §3.4), ``rho`` the correlation of the heights above the plane at
+horizontal lag ``Delta``. With ``rho = 1`` (the sea above ``B`` taken as at ``E``) a deep
+sounding under a short sea inherits the wave at its entry; with ``rho = 0`` (the plane alone) a
+shallow sounding under a 10 m/s sea carries the whole wave height it should have cancelled.
+
+``rho`` is **measured** from the survey's own surface returns: pairs of surface points at most
+the surface fit's time window apart (the sea moves), ``h`` apart horizontally, both heights
+taken above the *earlier* pulse's local plane (what a sounding reads: its entry and the sea
+over it, against its own plane). Per lag bin the regression of the partner's height on the
+anchor's, ``beta(h) = sum(s_i s_j) / sum(s_i²)``, is the predictor's coefficient (the anchor's
+ranging noise shrinks it, as ``w`` does: ``rho(h) = beta(h) / beta(h_0)`` divides it out at the
+shortest lag ``h_0``); ``rho`` is clipped to ``[0, 1]`` and made non-increasing with lag (a
+swell's negative lobe is not followed: the plane alone is the safer reading there). Without
+pairs ``rho = 0`` everywhere: the depth is read below the plane.
+
+Photon counting: a window's shots share one detection; pairs within one window are one
+measurement twice and are left out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.process.returns import DetectedReturns, PointFlag
+
+__all__ = [
+    "LAG_EDGES_M",
+    "SeaCorrelation",
+    "SurfacePairs",
+    "sea_correlation",
+    "surface_pairs",
+    "time_pairs",
+]
+
+#: Lag bins (m): fine at the lags of shallow soundings, up to those of 100 m depths.
+LAG_EDGES_M = (0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0)
+#: Pairs a lag bin needs.
+MIN_PAIRS = 200
+#: Anchors per time offset at most (drawn at random with a fixed seed: a stride would alias with
+#: the scan pattern), and the farthest offset in time order looked at.
+_MAX_PER_OFFSET = 50_000
+_MAX_OFFSET = 2000
+#: The shortest lag's regression must stand this many standard errors above 0.
+_MIN_T = 3.0
+
+
+@dataclass(frozen=True)
+class SeaCorrelation:
+    """Correlation of the sea's heights above the local plane against horizontal lag.
+
+    Attributes
+    ----------
+    lag_m : (k,) float64
+        Mean pair separation of each lag bin with enough pairs (ascending).
+    rho : (k,) float64
+        ``rho`` there, in ``[0, 1]``, non-increasing.
+    pairs : int
+        Pairs used.
+    """
+
+    lag_m: np.ndarray
+    rho: np.ndarray
+    pairs: int
+
+    def at(self, lag_m) -> np.ndarray:
+        """``rho`` at horizontal lags ``lag_m`` (1 at 0, linear between bins, the last beyond).
+
+        Without bins: 0 (the plane alone).
+        """
+        lag = np.asarray(lag_m, dtype=np.float64)
+        if self.lag_m.size == 0:
+            return np.zeros(lag.shape)
+        return np.interp(lag, np.r_[0.0, self.lag_m], np.r_[1.0, self.rho])
+
+
+def time_pairs(t: np.ndarray, group, max_dt_s: float):
+    """Pairs ``(i, j)``, ``i < j`` in time order, at most ``max_dt_s`` apart, not in one group."""
+    n = t.size
+    rng = np.random.default_rng(0)  # the same survey, the same pairs
+    offsets = np.unique(np.round(np.geomspace(1, max(min(_MAX_OFFSET, n - 1), 1), 64)))
+    ii, jj = [], []
+    for k in offsets.astype(np.int64):
+        if k >= n:
+            break
+        i = np.arange(n - k)
+        if i.size > _MAX_PER_OFFSET:
+            i = np.sort(rng.choice(i.size, _MAX_PER_OFFSET, replace=False))
+        j = i + k
+        ok = (t[j] - t[i]) <= max_dt_s
+        if group is not None:
+            ok &= group[i] != group[j]
+        if not ok.any():
+            break  # farther offsets lie farther apart in time still
+        ii.append(i[ok])
+        jj.append(j[ok])
+    if not ii:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return np.concatenate(ii), np.concatenate(jj)
+
+
+@dataclass(frozen=True)
+class SurfacePairs:
+    """Pairs of near-simultaneous surface points, both heights above the earlier one's plane.
+
+    Attributes
+    ----------
+    row_i, row_j : (p,) int64
+        Pulse rows of the earlier (anchor) and the later point of each pair.
+    s_i_m, s_j_m : (p,) float64
+        Their heights above the anchor's local plane (what a sounding's depth reads: its
+        entry and the sea over it, against its own plane).
+    lag_m : (p,) float64
+        Horizontal separation.
+    """
+
+    row_i: np.ndarray
+    row_j: np.ndarray
+    s_i_m: np.ndarray
+    s_j_m: np.ndarray
+    lag_m: np.ndarray
+
+
+def surface_pairs(
+    returns: DetectedReturns, surface, *, max_dt_s: float | None, group=None
+) -> SurfacePairs | None:
+    """Pairs of the water pulses' own, non-outlier surface points; None without any.
+
+    :func:`time_pairs` in emission-time order (pulse-id order, no time limit, without
+    ``t_emit_s``); ``group``: pulses sharing one detection (never paired together).
+    """
+    ok = surface.is_water & returns.has_surface
+    ok &= (surface.flags & np.uint16(PointFlag.SURFACE_OUTLIER)) == 0
+    idx = np.flatnonzero(ok)
+    if idx.size < 2:
+        return None
+    if returns.t_emit_s is not None:
+        t = np.asarray(returns.t_emit_s, dtype=np.float64)[idx]
+    else:
+        t, max_dt_s = returns.pulse_id[idx].astype(np.float64), None
+    order = np.argsort(t, kind="stable")
+    idx, t = idx[order], t[order]
+    g = None if group is None else np.asarray(group).ravel()[idx]
+    i, j = time_pairs(t, g, np.inf if max_dt_s is None else float(max_dt_s))
+    if i.size == 0:
+        return None
+    p = surface.surface_point_m[idx]
+    anchor = idx[i]
+    s_i = p[i, 2] - surface.surface_z_m(anchor, p[i, 0], p[i, 1])
+    s_j = p[j, 2] - surface.surface_z_m(anchor, p[j, 0], p[j, 1])
+    lag = np.hypot(p[i, 0] - p[j, 0], p[i, 1] - p[j, 1])
+    return SurfacePairs(anchor, idx[j], s_i, s_j, lag)
+
+
+def sea_correlation(
+    returns: DetectedReturns,
+    surface,
+    *,
+    max_dt_s: float | None,
+    group=None,
+    min_pairs: int = MIN_PAIRS,
+) -> SeaCorrelation:
+    """Measure ``rho(h)`` from the surface returns (module notes).
+
+    Parameters
+    ----------
+    returns : DetectedReturns
+        Every pulse, ``(n,)`` per field; ``t_emit_s`` orders them in time (without it the pulse
+        id does, and no time limit applies).
+    surface : WaterSurface
+        The fitted surface of the same pulses.
+    max_dt_s : float or None
+        Pairs at most this far apart in time (the surface fit's time window); None: no limit.
+    group : (n,) array_like, optional
+        Pulses sharing one detection (a photon-counting window): never paired together.
+    min_pairs : int, optional
+        Pairs a lag bin needs.
+
+    Returns
+    -------
+    SeaCorrelation
+    """
+    pairs = surface_pairs(returns, surface, max_dt_s=max_dt_s, group=group)
+    empty = SeaCorrelation(np.zeros(0), np.zeros(0), 0)
+    if pairs is None:
+        return empty
+    i, s_i, s_j, lag = pairs.row_i, pairs.s_i_m, pairs.s_j_m, pairs.lag_m
+    edges = np.asarray(LAG_EDGES_M)
+    b = np.digitize(lag, edges) - 1
+    inside = (b >= 0) & (b < edges.size - 1)
+    b, s_i, s_j, lag = b[inside], s_i[inside], s_j[inside], lag[inside]
+    nb = edges.size - 1
+    count = np.bincount(b, minlength=nb)
+    sxy = np.bincount(b, weights=s_i * s_j, minlength=nb)
+    sxx = np.bincount(b, weights=s_i * s_i, minlength=nb)
+    slag = np.bincount(b, weights=lag, minlength=nb)
+    use = (count >= min_pairs) & (sxx > 0.0)
+    if not use.any():
+        return empty
+    beta = sxy[use] / sxx[use]
+    # the regression's standard error at the shortest lag (pairs as independent): a sea the
+    # echoes do not resolve (calm water, noise only) gives a beta within noise of 0
+    first = b == np.flatnonzero(use)[0]
+    resid = s_j[first] - beta[0] * s_i[first]
+    se0 = np.sqrt(np.sum((s_i[first] * resid) ** 2)) / sxx[use][0]
+    if not beta[0] > _MIN_T * se0:  # no correlation even at the shortest lag: no sea told
+        return SeaCorrelation(np.zeros(0), np.zeros(0), int(i.size))
+    rho = np.minimum.accumulate(np.clip(beta / beta[0], 0.0, 1.0))
+    return SeaCorrelation(slag[use] / count[use], rho, int(i.size))

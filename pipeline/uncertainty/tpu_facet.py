@@ -1,0 +1,210 @@
+"""TPU term of the wave facet a beam refracts through that the fitted surface does not resolve.
+
+The processing refracts each beam through its pulse's fitted local water plane
+(:func:`~pipeline.process.refraction.seabed_points`). The sea the pulse met is tilted by the
+waves' slope at its entry; where the plane does not follow that slope (a profiler's collinear
+surface points hold no across-track slope; a sparse or wide fit smooths the waves away) the
+in-water beam leaves in another direction and the sounding lands beside where it is put. By
+Snell's law a nadir beam through a facet of slope ``beta`` turns by ``beta (1 - 1/n_w)``,
+``L beta (1 - 1/n_w)`` sideways after the in-water path ``L``, and over a seabed of depth
+gradient ``g`` the depth read at the measured position is wrong by ``g`` times that (the
+vertical change itself is second order near nadir). This term propagates it, per slope axis
+``u`` in ``x``, ``y``: ``dB/dbeta_u = L dt/dbeta_u`` (``t`` the in-water direction of
+:func:`~pipeline.optics.refract_direction` through the plane's normal with its slope ``u``
+moved), the depth ``(p - g) . dB_xy - dB_z`` (``p`` the plane's gradient: the depth is read
+below the plane above the point), times the slope sigma ``s_u``.
+
+``s_u`` is measured by the survey, never assumed: the surface returns' height variogram above
+each pulse's own plane (:func:`~pipeline.uncertainty.tpu_measured.surface_variogram`) rises
+as ``gamma(h) = n + a h²`` at short lags, ``2 a`` the mean-square slope of the sea that the
+planes do not follow along the pairs' directions. Isotropic sea: the same along both axes,
+``s_u² = 2 a - t_u²``, ``t_u`` the plane's per-axis tilt sigma the ``surface_tilt_*`` terms
+already carry (the fit's standard error or the tilt measured over the sounding,
+:func:`~pipeline.uncertainty.tpu_neighbours.surface_tilt_sigma`): never a double count. Across
+a profiler's track the planes follow no slope at all, so what they miss there is ``2 a`` plus
+the along-track slope they do follow; that part is not added (the planes' slope scatter is fit
+noise on flat water, see :func:`unresolved_slope_sigma_rad`). Flat water: ``a = 0``, no term. A
+user's ``process.tpu.wave_slope_sigma_rad > 0`` wins (its ``wave_slope_*`` terms stand for it
+and this term is not added).
+
+Slopes shorter than the variogram's shortest lags (capillaries) are not in ``a``: they vary
+within the footprint, and their mean over it is small.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import numpy as np
+
+from pipeline.optics import refract_direction
+from pipeline.process.surface_fit import WaterSurface
+from pipeline.uncertainty.tpu_measured import SurfaceVariogram
+from pipeline.uncertainty.tpu_settings import DEPTH, PointTpu, X, Y, Z
+
+__all__ = ["FACET_TERMS", "unresolved_slope_sigma_rad", "facet_jacobian", "with_wave_facet"]
+
+#: Names of the two terms (facet slope along x, along y) in ``PointTpu.terms``.
+FACET_TERMS = ("wave_facet_x", "wave_facet_y")
+
+
+def unresolved_slope_sigma_rad(
+    vg: SurfaceVariogram, surface: WaterSurface, tilt_sigma_rad=None, rows=None
+) -> np.ndarray:
+    """Per-axis sigma of the facet slope the planes do not resolve, ``(k, 2)`` (x, y).
+
+    Parameters
+    ----------
+    vg : SurfaceVariogram
+        The survey's surface variogram (its ``rise_per_m2``).
+    surface : WaterSurface
+        The fitted planes of every pulse (which enter water; the fit's tilt sigma).
+    tilt_sigma_rad : (k,) array_like, optional
+        Each row's plane tilt sigma (both axes) that the ``surface_tilt_*`` terms carry; its
+        per-axis share ``/ sqrt 2`` is taken off. Default: the fit's ``normal_sigma_rad``.
+    rows : (k,) array_like of int, optional
+        Pulses (rows of ``surface``) to give; default all.
+    """
+    rows = np.arange(len(surface)) if rows is None else np.asarray(rows, dtype=np.int64)
+    # the slope the planes miss along the pairs, the same along every axis (isotropic sea). The
+    # planes' own slope scatter is not added back across the axes they cannot follow: on flat
+    # water it is fit noise (suite tuning scene 24: 4e-4 across a Palmer line, where the fit's
+    # sigma says 1e-5 and the sea has 2e-5), and where it is sea it was small (scene 13: 2e-5
+    # along a profiler's track against 2 a = 8e-3)
+    left = 2.0 * max(vg.rise_per_m2, 0.0)
+    tilt = surface.normal_sigma_rad[rows] if tilt_sigma_rad is None else tilt_sigma_rad
+    tilt2 = np.nan_to_num(np.asarray(tilt, dtype=np.float64)) ** 2 / 2.0
+    var = np.maximum(left - tilt2, 0.0)[:, None] * np.ones((1, 2))
+    return np.where(surface.is_water[rows, None], np.sqrt(var), 0.0)
+
+
+def _normal_with_slope(normal: np.ndarray, axis: int, step: float) -> np.ndarray:
+    """Upward unit normals whose surface slope along ``axis`` (0: x, 1: y) is moved by ``step``."""
+    nz = np.where(np.abs(normal[:, 2]) > 1e-12, normal[:, 2], 1e-12)
+    grad = -normal[:, :2] / nz[:, None]
+    grad[:, axis] += step
+    out = np.column_stack([-grad, np.ones(len(normal))])
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+def facet_jacobian(
+    direction: np.ndarray,
+    normal: np.ndarray,
+    entry_m: np.ndarray,
+    point_m: np.ndarray,
+    seabed_gradient: np.ndarray,
+    n_air: float,
+    n_water: float,
+) -> np.ndarray:
+    """Change of each sounding per unit facet slope, ``(n, 2, 4)``: axis, (x, y, z, depth).
+
+    The range is unchanged; the in-water direction turns (Snell's law through the plane's
+    normal with one slope component moved; central differences). Depth: below the plane above
+    the moved point, compared at the measured position (``(p - g) . dB_xy - dB_z``).
+
+    Parameters
+    ----------
+    direction : (n, 3)
+        Measured beam directions (unit).
+    normal : (n, 3)
+        The fitted planes' upward normals.
+    entry_m, point_m : (n, 3)
+        Where the beam entered the water; the sounding.
+    seabed_gradient : (n, 2)
+        Depth gradient of the seabed under the soundings.
+    n_air, n_water : float
+        Phase indices.
+    """
+    n = len(direction)
+    length = np.linalg.norm(point_m - entry_m, axis=1)
+    nz = np.where(np.abs(normal[:, 2]) > 1e-12, normal[:, 2], 1e-12)
+    plane_grad = -normal[:, :2] / nz[:, None]
+    out = np.zeros((n, 2, 4))
+    h = 1e-4
+    for axis in (0, 1):
+        t_p, _ = refract_direction(direction, _normal_with_slope(normal, axis, h), n_air, n_water)
+        t_m, _ = refract_direction(direction, _normal_with_slope(normal, axis, -h), n_air, n_water)
+        db = length[:, None] * (t_p - t_m) / (2.0 * h)
+        out[:, axis, :3] = db
+        out[:, axis, DEPTH] = np.sum((plane_grad - seabed_gradient) * db[:, :2], axis=1) - db[:, 2]
+    return out
+
+
+def _with_random_rows(tpu: PointTpu, rows: dict[str, np.ndarray]) -> PointTpu:
+    """``tpu`` with more random terms ``(n, 4)`` (x, y, z, depth), totals in quadrature."""
+    add = {k: 0.0 for k in ("x", "y", "z", "d")}
+    for v in rows.values():
+        add["x"] = add["x"] + v[:, X] ** 2
+        add["y"] = add["y"] + v[:, Y] ** 2
+        add["z"] = add["z"] + v[:, Z] ** 2
+        add["d"] = add["d"] + v[:, DEPTH] ** 2
+    h2 = (add["x"] + add["y"]) / 2.0
+
+    def up(a, b):
+        return None if a is None else np.sqrt(a**2 + b)
+
+    return dataclasses.replace(
+        tpu,
+        terms={**tpu.terms, **rows},
+        sigma_x_m=up(tpu.sigma_x_m, add["x"]),
+        sigma_y_m=up(tpu.sigma_y_m, add["y"]),
+        sigma_h_m=up(tpu.sigma_h_m, h2),
+        sigma_h_random_m=up(tpu.sigma_h_random_m, h2),
+        sigma_v_m=up(tpu.sigma_v_m, add["z"]),
+        sigma_v_random_m=up(tpu.sigma_v_random_m, add["z"]),
+        sigma_depth_m=up(tpu.sigma_depth_m, add["d"]),
+        sigma_depth_random_m=up(tpu.sigma_depth_random_m, add["d"]),
+    )
+
+
+def with_wave_facet(
+    tpu: PointTpu,
+    returns_direction: np.ndarray,
+    surface: WaterSurface,
+    vg: SurfaceVariogram,
+    seabed_gradient: np.ndarray,
+    n_water: float,
+    tilt_sigma_rad=None,
+) -> PointTpu:
+    """``tpu`` with the two random :data:`FACET_TERMS` (module notes).
+
+    Parameters
+    ----------
+    tpu : PointTpu
+        Rows ``tpu.row`` are pulses (rows of ``surface`` and ``returns_direction``).
+    returns_direction : (n_pulses, 3)
+        ``DetectedReturns.direction_meas`` of every pulse.
+    surface : WaterSurface
+    vg : SurfaceVariogram
+    seabed_gradient : (len(tpu), 2)
+        Depth gradient under each row's sounding.
+    n_water : float
+        The processing's phase index of water.
+    tilt_sigma_rad : (n_pulses,) array_like, optional
+        The plane tilt sigma each pulse's ``surface_tilt_*`` terms used (default: the fit's).
+    """
+    r = np.asarray(tpu.row, dtype=np.int64)
+    tilt = None if tilt_sigma_rad is None else np.asarray(tilt_sigma_rad, dtype=np.float64)[r]
+    sig = unresolved_slope_sigma_rad(vg, surface, tilt, rows=r)  # (k, 2)
+    jac = facet_jacobian(
+        returns_direction[r],
+        surface.normal[r],
+        surface.entry_m[r],
+        tpu.xyz_m,
+        np.asarray(seabed_gradient, dtype=np.float64).reshape(-1, 2),
+        surface.air_index,
+        n_water,
+    )
+    rows = {name: jac[:, a, :] * sig[:, a : a + 1] for a, name in enumerate(FACET_TERMS)}
+    # a row without water has no facet (sigma 0) and may have no entry or plane: no term
+    ok = np.all([np.isfinite(v).all(axis=1) for v in rows.values()], axis=0)
+    if np.any(~ok & np.any(sig > 0.0, axis=1)):  # never a silent NaN: said, and no term there
+        warnings.warn(
+            f"wave facet term not finite for {int(np.sum(~ok & np.any(sig > 0, axis=1)))} "
+            "soundings with water; left at 0",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    rows = {k: np.where(ok[:, None], v, 0.0) for k, v in rows.items()}
+    return _with_random_rows(tpu, rows)

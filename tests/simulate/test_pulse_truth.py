@@ -1,0 +1,62 @@
+"""The per-pulse truth remembers the sea it met, and answers exactly as the direct formula."""
+
+import numpy as np
+
+from pipeline.simulate.pulse_truth import PulseDepth
+from pipeline.simulate.world import Truth
+
+
+class _Sea:
+    """A travelling wave written here; counts the points it is asked for."""
+
+    evolving = True
+
+    def __init__(self):
+        self.asked = 0
+
+    def height_m(self, x, y, t):
+        self.asked += np.size(x)
+        return 0.3 * np.sin(0.5 * np.asarray(x) + 0.2 * np.asarray(y) - 1.7 * np.asarray(t))
+
+
+class _Plane:
+    def height_m(self, x, y):
+        return -5.0 - 0.1 * np.asarray(x)
+
+
+def _direct(x, y, pid):
+    t = 0.01 * pid
+    return 0.3 * np.sin(0.5 * x + 0.2 * y - 1.7 * t) + 5.0 + 0.1 * x
+
+
+def test_remembered_sea_gives_the_direct_depth_and_is_not_asked_twice():
+    sea = _Sea()
+    truth = Truth(seabed=_Plane(), water=sea, frame=None, pulse_time_s=lambda p: 0.01 * p)
+    depth = truth.depth_at_pulses_m
+    assert truth.depth_at_pulses_m is depth  # one instance per truth
+    rng = np.random.default_rng(4)
+    pid = rng.permutation(500)
+    x, y = rng.uniform(0, 50, 500), rng.uniform(0, 50, 500)
+    np.testing.assert_allclose(depth(x, y, pid), _direct(x, y, pid), rtol=0, atol=1e-12)
+    assert sea.asked == 500
+    # a subset in another order: all remembered
+    sub = rng.choice(500, 120, replace=False)
+    np.testing.assert_allclose(depth(x[sub], y[sub], pid[sub]), _direct(x[sub], y[sub], pid[sub]))
+    assert sea.asked == 500
+    # the same pulses at other points (uncorrected soundings) are new; repeats inside a call too
+    x2 = x[:50] + 0.25
+    x3 = np.concatenate([x2, x2])
+    y3, p3 = np.concatenate([y[:50], y[:50]]), np.concatenate([pid[:50], pid[:50]])
+    np.testing.assert_allclose(depth(x3, y3, p3), _direct(x3, y3, p3), atol=1e-12)
+    assert sea.asked == 600
+    np.testing.assert_allclose(depth(x2, y[:50], pid[:50]), _direct(x2, y[:50], pid[:50]))
+    assert sea.asked == 600
+
+
+def test_without_pulses_the_depth_is_below_the_sea_at_t0():
+    truth = Truth(seabed=_Plane(), water=_Sea(), frame=None, pulse_time_s=None)
+    x = np.array([[1.0, 2.0], [3.0, 4.0]])
+    out = truth.depth_at_pulses_m(x, x, np.zeros((2, 2), dtype=int))
+    assert out.shape == (2, 2)
+    np.testing.assert_allclose(out, _direct(x, x, 0))
+    assert isinstance(truth.depth_at_pulses_m, PulseDepth)
