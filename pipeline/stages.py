@@ -9,12 +9,14 @@ timing each one (:class:`StageClock`) so the manifest can show wall and CPU seco
 from __future__ import annotations
 
 import contextlib
+import resource
+import sys
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["Stage", "PlannedStage", "Plan", "STAGES", "plan", "StageClock"]
+__all__ = ["Stage", "PlannedStage", "Plan", "STAGES", "plan", "StageClock", "peak_rss_mb"]
 
 
 def _profiler(scene) -> str | None:
@@ -150,16 +152,39 @@ def plan(scene) -> Plan:
     return Plan(out)
 
 
+def peak_rss_mb() -> float:
+    """Peak resident memory of the running process so far, MiB.
+
+    ``VmHWM`` of ``/proc/self/status`` (Linux): the high-water mark of this process image, which
+    starts afresh at ``exec``, unlike ``ru_maxrss``, which a child inherits from the process
+    that forked it (a run started from a large parent, a test runner, would show the parent's
+    peak). Elsewhere ``ru_maxrss`` (KiB on Linux, bytes on macOS).
+    """
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return rss / 2**20 if sys.platform == "darwin" else rss / 1024.0
+
+
 @dataclass
 class StageClock:
     """Wall and CPU seconds per stage, and the order in which stages ran.
 
     A stage that runs per chunk is timed across all its chunks. ``cpu_s`` is the process's CPU
     time (all threads), so a stage using several cores can show more CPU than wall time.
+    ``peak_rss_mb`` is this process's resident-memory high-water mark when the stage last
+    ended (:func:`peak_rss_mb`, which never decreases): the first stage whose figure jumps is
+    the one that raised the run's peak (stages run in pool workers are not in it).
     """
 
     wall_s: dict[str, float] = field(default_factory=dict)
     cpu_s: dict[str, float] = field(default_factory=dict)
+    peak_rss_mb: dict[str, float] = field(default_factory=dict)
 
     @contextlib.contextmanager
     def stage(self, name: str) -> Iterator[None]:
@@ -170,11 +195,22 @@ class StageClock:
         finally:
             self.wall_s[name] = self.wall_s.get(name, 0.0) + time.perf_counter() - w0
             self.cpu_s[name] = self.cpu_s.get(name, 0.0) + time.process_time() - c0
+            self.peak_rss_mb[name] = peak_rss_mb()
 
     def ran(self) -> list[str]:
         """Names of the stages timed, in the order they first ran."""
         return list(self.wall_s)
 
     def to_dict(self) -> dict[str, dict[str, float]]:
-        """``{stage: {"wall_s": ..., "cpu_s": ...}}``, JSON-ready."""
-        return {k: {"wall_s": self.wall_s[k], "cpu_s": self.cpu_s[k]} for k in self.wall_s}
+        """``{stage: {"wall_s": ..., "cpu_s": ..., "peak_rss_mb": ...}}``, JSON-ready.
+
+        ``peak_rss_mb`` is None for a stage timed only in pool workers.
+        """
+        return {
+            k: {
+                "wall_s": self.wall_s[k],
+                "cpu_s": self.cpu_s[k],
+                "peak_rss_mb": self.peak_rss_mb.get(k),
+            }
+            for k in self.wall_s
+        }

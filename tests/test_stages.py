@@ -166,3 +166,28 @@ def test_no_module_over_450_lines():
         if (n := len(p.read_text().splitlines())) > 450
     }
     assert long == {}
+
+
+def test_stage_clock_records_the_memory_peak_a_stage_raised():
+    # in a fresh interpreter: ru_maxrss is the process's high-water mark, which the tests run
+    # before this one have already raised
+    code = """
+import json
+import numpy as np
+from pipeline.stages import StageClock
+
+clock = StageClock()
+with clock.stage("small"):
+    pass
+with clock.stage("big"):
+    a = np.ones(25_000_000)  # 200 MB, every page written
+    del a
+print(json.dumps(clock.to_dict()))
+"""
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT
+    )
+    d = json.loads(out.stdout.strip().splitlines()[-1])
+    # the high-water mark is the kernel's (ru_maxrss), not the clock's bookkeeping: the 200 MB
+    # array raised it by most of its size, and it stays raised after the array is gone
+    assert d["big"]["peak_rss_mb"] - d["small"]["peak_rss_mb"] > 150.0
