@@ -49,6 +49,8 @@ __all__ = ["ObjectSettings", "ObjectDetections", "detect_objects", "classify_obj
 _TUKEY_C = 4.685
 #: MAD to standard deviation at the normal distribution
 _MAD_TO_SIGMA = 1.4826
+#: points tested at once (memory: ~3 kB per point of temporaries with 48 neighbours)
+_BLOCK_ROWS = 32768
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -144,13 +146,29 @@ def detect_objects(xy_m, z_m, sigma_z_m, settings: ObjectSettings = ObjectSettin
     if n == 0 or n < settings.min_neighbours:
         return ObjectDetections(np.zeros(n, bool), nan, nan.copy())
     ref = _reference(xy, z, settings.reference_cell_m)
+    tree = cKDTree(xy[ref])
+    is_obj, height, sigma = np.zeros(n, bool), nan, nan.copy()
+    # rows are independent: blocks keep the (rows, neighbours) temporaries bounded (a survey's
+    # points at once took ~3 kB each) and give the same figures
+    for lo in range(0, n, _BLOCK_ROWS):
+        rows = slice(lo, min(lo + _BLOCK_ROWS, n))
+        is_obj[rows], height[rows], sigma[rows] = _test_rows(
+            xy, z, sig[rows], ref, tree, rows, settings
+        )
+    return ObjectDetections(is_obj, height, sigma)
+
+
+def _test_rows(xy, z, sig, ref, tree, rows: slice, settings: ObjectSettings):
+    """:func:`detect_objects`' test of the points ``rows``: (is_object, height_m, sigma_m)."""
+    xy_r, z_r = xy[rows], z[rows]
+    n = z_r.size
     k = int(min(settings.neighbours, ref.size))
-    dist, idx = cKDTree(xy[ref]).query(xy, k=k, distance_upper_bound=settings.radius_m)
+    dist, idx = tree.query(xy_r, k=k, distance_upper_bound=settings.radius_m)
     dist, idx = dist.reshape(n, k), idx.reshape(n, k)
     ok = idx < ref.size
     j = ref[np.where(ok, idx, 0)]
-    dx, dy = xy[j, 0] - xy[:, :1], xy[j, 1] - xy[:, 1:]
-    dz = z[j] - z[:, None]  # neighbour heights relative to the point
+    dx, dy = xy[j, 0] - xy_r[:, :1], xy[j, 1] - xy_r[:, 1:]
+    dz = z[j] - z_r[:, None]  # neighbour heights relative to the point
     enough = ok.sum(axis=1) >= settings.min_neighbours
 
     a = np.nan_to_num(_row_median(dz, ok))
@@ -173,7 +191,7 @@ def detect_objects(xy_m, z_m, sigma_z_m, settings: ObjectSettings = ObjectSettin
     sigma = np.where(enough, np.sqrt(sig * sig + scale * scale * (1.0 + 1.0 / m)), np.nan)
     with np.errstate(invalid="ignore"):
         is_obj = enough & (height > settings.k_sigma * sigma) & (height >= settings.min_height_m)
-    return ObjectDetections(is_obj, height, sigma)
+    return is_obj, height, sigma
 
 
 def _weighted_plane(dx, dy, dz, w):

@@ -106,3 +106,17 @@ def test_classify_objects_sets_class_43_on_bottom_points_only():
 def test_settings_are_checked():
     with pytest.raises(ValueError):
         ObjectSettings(neighbours=8, min_neighbours=16)
+
+
+def test_blocks_of_points_give_the_same_detections_as_all_at_once(monkeypatch):
+    import pipeline.process.objects as objects
+
+    rng = np.random.default_rng(11)
+    x, y, z, sig, _, _ = swath_cloud(rng)
+    whole = detect_objects(np.c_[x, y], z, sig)
+    monkeypatch.setattr(objects, "_BLOCK_ROWS", 97)  # a prime: blocks cut anywhere
+    blocks = detect_objects(np.c_[x, y], z, sig)
+    assert x.size > 50 * 97
+    np.testing.assert_array_equal(blocks.is_object, whole.is_object)
+    np.testing.assert_array_equal(blocks.height_m, whole.height_m)
+    np.testing.assert_array_equal(blocks.sigma_m, whole.sigma_m)
