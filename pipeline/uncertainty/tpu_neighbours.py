@@ -26,6 +26,9 @@ from pipeline.uncertainty.tpu_settings import (
 )
 from pipeline.uncertainty.tpu_terms import _inputs, _terms
 
+#: query points per neighbour search block (memory: ~1.5 kB each with 64 neighbours)
+_QUERY_BLOCK = 65536
+
 
 def _plane_fit(w, dx, dy, z, ridge):
     """Batched weighted least-squares planes ``z = a + b dx + c dy``, ridge ``ridge`` on b, c."""
@@ -200,9 +203,13 @@ def pair_scatter(
     i, j = i[ok], j[ok]
     half_sq = half_sq[ok] - rise * sep_sq[ok]
     k = min(neighbours, half_sq.size)
-    _, near = cKDTree(0.5 * (xy[i] + xy[j])).query(q, k=k, workers=-1)
-    near = np.asarray(near).reshape(len(q), k)
-    return np.sqrt(np.maximum(np.mean(half_sq[near], axis=1), 0.0))
+    tree = cKDTree(0.5 * (xy[i] + xy[j]))
+    for lo in range(0, len(q), _QUERY_BLOCK):  # (queries, k) temporaries bounded
+        qq = q[lo : lo + _QUERY_BLOCK]
+        _, near = tree.query(qq, k=k, workers=-1)
+        near = np.asarray(near).reshape(len(qq), k)
+        out[lo : lo + len(qq)] = np.sqrt(np.maximum(np.mean(half_sq[near], axis=1), 0.0))
+    return out
 
 
 def _pair_half_squares(xy, dep, g, i, j, max_separation_m):
@@ -258,12 +265,16 @@ def surface_over_sounding(
         _, j = tree.query(xy, k=1, workers=-1)
     else:
         k = min(16, ws.size)
-        _, near = tree.query(xy, k=k, workers=-1)
-        near = np.asarray(near).reshape(xy.shape[0], k)
-        dt = np.abs(returns.t_emit_s[ws[near]] - returns.t_emit_s[rows][:, None])
-        same = dt <= surface.time_window_s
-        # argmax finds the first (nearest) in the window; none in it: the nearest
-        j = near[np.arange(near.shape[0]), np.where(same.any(1), np.argmax(same, axis=1), 0)]
+        j = np.empty(xy.shape[0], dtype=np.int64)
+        for lo in range(0, xy.shape[0], _QUERY_BLOCK):  # (soundings, k) temporaries bounded
+            b = slice(lo, lo + _QUERY_BLOCK)
+            _, near = tree.query(xy[b], k=k, workers=-1)
+            near = np.asarray(near).reshape(-1, k)
+            dt = np.abs(returns.t_emit_s[ws[near]] - returns.t_emit_s[rows[b]][:, None])
+            same = dt <= surface.time_window_s
+            # argmax finds the first (nearest) in the window; none in it: the nearest
+            pick = np.where(same.any(1), np.argmax(same, axis=1), 0)
+            j[b] = near[np.arange(near.shape[0]), pick]
 
     def apart(x, y):  # the plane over the sounding less the pulse's own, at (x, y)
         return surface.surface_z_m(ws[j], x, y) - surface.surface_z_m(rows, x, y)

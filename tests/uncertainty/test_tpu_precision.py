@@ -101,3 +101,23 @@ def test_a_random_term_adds_in_quadrature():
     np.testing.assert_array_equal(out.sigma_depth_correlated_m, tpu.sigma_depth_correlated_m)
     np.testing.assert_array_equal(out.sigma_h_m, tpu.sigma_h_m)
     assert out.terms[WINDOW_TERM].shape == (len(tpu), 4)
+
+
+def test_neighbour_searches_in_blocks_give_the_same_figures(monkeypatch):
+    import pipeline.uncertainty.tpu_neighbours as tn
+    from pipeline.process.surface_fit import fit_water_surface
+    from tests.uncertainty.test_tpu import FIT
+
+    ret, surf, pts, scatter = _noisy(3e-10, 1e-10)
+    # a time per pulse, so that the surface over each sounding is searched within the window
+    ret = dataclasses.replace(ret, t_emit_s=ret.pulse_id * 5e-3)
+    surf = fit_water_surface(ret, FIT)
+    assert surf.time_window_s is not None
+    over = tn.surface_over_sounding(ret, surf, pts.xyz_m[:, :2])
+    monkeypatch.setattr(tn, "_QUERY_BLOCK", 37)  # blocks cut anywhere
+    assert len(ret) > 20 * 37
+    np.testing.assert_array_equal(
+        pair_scatter(pts.xyz_m[:, :2], pts.depth_m, order=ret.pulse_id), scatter
+    )
+    for a, b in zip(tn.surface_over_sounding(ret, surf, pts.xyz_m[:, :2]), over, strict=True):
+        np.testing.assert_array_equal(a, b)
