@@ -1,0 +1,39 @@
+"""Peak resident memory after each stage of a Palmer survey of about N pulses (issue 15).
+
+Usage: ``PYTHONPATH=. python benchmarks/stage_memory.py N`` (1 worker, posteriors off,
+chunks of 20 000 pulses; the scene is :func:`bench_e2e.palmer`). Prints each stage's
+``peak_rss_mb`` from the run's manifest (:class:`pipeline.stages.StageClock`): the first stage
+whose figure jumps is the one that raised the run's peak. One survey per invocation: the
+high-water mark never falls within a process. Results: ``RESULTS_e2e.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_e2e import palmer  # noqa: E402
+
+from pipeline.run import run_scene  # noqa: E402
+from pipeline.scene import parse_scene  # noqa: E402
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("pulses", type=int)
+    n = ap.parse_args().pulses
+    with tempfile.TemporaryDirectory() as tmp:
+        scene = parse_scene(palmer(n, False, 20_000))
+        m = run_scene(scene, Path(tmp) / "out", log=lambda s: None, workers=1)
+    print(f"# about {n} pulses")
+    for s in m["plan"]:
+        if s.get("peak_rss_mb") is not None:
+            print(f"{s['stage']:20s} {s['peak_rss_mb']:8.0f} MB  cpu {s['cpu_s']:.1f} s")
+
+
+if __name__ == "__main__":
+    main()
