@@ -119,6 +119,23 @@ def test_wind_sea_between_boundaries_keeps_its_slopes_and_heights():
     assert mid_slab_mss_ratio(energy, k2, omega, slab) == pytest.approx(np.mean(ratios), abs=5e-4)
 
 
+@pytest.mark.parametrize("wind_m_s", [3.0, 11.0])
+def test_slab_search_by_frequency_bins_is_the_search_over_every_mode(wind_m_s):
+    """The binned search picks the slab the search over each mode picks (the brute force)."""
+    field = WaveField(
+        wind_m_s, extent=(0.0, 80.0, 0.0, 80.0), spacing_m=80.0 / 256, rng=5, calibrate_mss=False
+    )
+    tol_m, mss_tol = 2e-3, 1e-3
+    energy, k2, omega = field.mode_energies()
+    sigma_4 = math.sqrt(float(np.sum(omega**8 * energy)))
+    grid = np.geomspace(0.005, min((384.0 * tol_m / (3.0 * sigma_4)) ** 0.25, 1.0), 200)
+    ratio = np.array([mid_slab_mss_ratio(energy, k2, omega, s) for s in grid])
+    bad = np.flatnonzero(ratio < 1.0 - mss_tol)
+    assert bad.size  # the slope criterion binds: the test is about it
+    expected = float(grid[max(bad[0] - 1, 0)])
+    assert slab_for_tolerances_s(field, tol_m, mss_tol) == pytest.approx(expected, rel=1e-12)
+
+
 def test_frozen_sea_is_the_surface_at_t0():
     field = _single_wave()
     x = np.linspace(0.0, SIDE_M, 300)
