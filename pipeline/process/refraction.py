@@ -23,11 +23,17 @@ Geometry per pulse with a bottom return (measured origin ``o``, unit direction `
 * ``L`` less the forward-scattering range bias the bottom echo carries
   (:mod:`pipeline.process.scatter_bias`, when ``forward_scatter`` is set).
 * Seabed point ``B = E + t L``; ``depth_m`` is the height of the sea above ``B`` minus ``B_z``
-  (vertical, positive down), the sea above ``B`` being the local water plane at ``B``'s
-  horizontal position plus ``rho(Delta) w s_E``: the part of the sea met at ``E`` above the
-  plane (``w s_E``, vertical) still there ``Delta = |B - E|`` away, ``rho`` the correlation of
-  the sea's heights above the plane at that lag measured from the survey's surface returns
-  (:mod:`pipeline.process.sea_correlation`; simple kriging from one observation). On the
+  (vertical, positive down), the sea above ``B`` being the local water plane's level at ``E``
+  (carried to ``B`` by the global plane's tilt), plus the share ``gamma(Delta)`` of the local
+  plane's own rise from ``E`` to ``B`` that the survey's echo pairs show comes true there
+  (:mod:`pipeline.process.sea_correlation`: over a moving wind sea the plane's tilt is mostly
+  fit noise and ``gamma`` falls to 0 within a few metres; under a long swell it stays ~1; on
+  the 5 m/s wave scene of issue 13 carrying the whole tilt made the sea above ``B`` err by
+  0.21 m, more than the sea's own 0.145 m), plus ``rho(Delta) w s_E``: the part of the sea
+  met at ``E`` above the plane (``w s_E``, vertical) still there ``Delta = |B - E|`` away,
+  ``rho`` the correlation of the sea's heights above the plane at that lag measured from the
+  survey's surface returns (:mod:`pipeline.process.sea_correlation`; simple kriging from one
+  observation). Before ``gamma`` (the whole tilt carried), on the
   suite's tuning wave scenes (point RMSE, m; plane alone / echo alone / measured ``rho``):
   seed 33, 1.1 m under 10.9 m/s: 0.077 / 0.056 / 0.053; seed 36, 6.7 m under 10.7 m/s:
   0.104 / 0.116 / 0.096; seed 57, 17.5 m under 10.1 m/s: 0.248 / 0.258 / 0.247.
@@ -188,13 +194,17 @@ def seabed_points(
         flags |= np.uint16(PointFlag.NOT_REFRACTED)
         xyz = straight
 
-    # depth below the sea above the point: the fitted local plane there, plus the part of the
-    # sea the pulse met at its entry (w s_E) that is still there Delta away (sea_correlation)
-    depth = surface.surface_z_m(idx, xyz[:, 0], xyz[:, 1]) - xyz[:, 2]
+    # depth below the sea above the point: the local plane's level where the pulse met the
+    # sea (its tilt not extrapolated, WaterSurface.level_z_m), plus the part of the sea the
+    # pulse met at its entry (w s_E) that is still there Delta away (sea_correlation)
+    met = np.where(refr[:, None], o + d * r_in[:, None], xyz)  # where the pulse met the sea
+    level = surface.level_z_m(idx, met[:, :2], xyz[:, :2])
+    rise = surface.surface_z_m(idx, xyz[:, 0], xyz[:, 1]) - level  # the plane's own tilt
     corr = surface.sea_correlation
+    delta = np.hypot(xyz[:, 0] - met[:, 0], xyz[:, 1] - met[:, 1])
+    share = np.ones(len(idx)) if corr is None else corr.tilt_at(delta)
+    depth = level + share * rise - xyz[:, 2]
     if correct_refraction and corr is not None:
-        met = o + d * r_in[:, None]  # where the pulse met the sea
-        delta = np.hypot(xyz[:, 0] - met[:, 0], xyz[:, 1] - met[:, 1])
         sea = np.where(refr, d[:, 2] * (r_in - r_e), 0.0)  # w s_E, vertical
         depth = depth + corr.at(delta) * sea
 

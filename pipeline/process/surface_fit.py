@@ -157,6 +157,19 @@ class WaterSurface:
         valid = self.is_water[index] | self.is_land[index]
         return np.where(valid, z, self.global_z_m(x_m, y_m))  # grazing: no local entry
 
+    def level_z_m(self, index: np.ndarray, at_xy_m: np.ndarray, xy_m: np.ndarray) -> np.ndarray:
+        """The level of pulses' local planes at ``at_xy_m``, carried level to ``xy_m``; ``(n,)``.
+
+        The local plane's height at ``at_xy_m`` (where the pulse met the sea) plus the global
+        plane's rise from there to ``xy_m``: the local plane's own tilt is left out (how much
+        of it to carry is measured, :meth:`SeaCorrelation.tilt_at
+        <pipeline.process.sea_correlation.SeaCorrelation.tilt_at>`); the global plane's tilt
+        (a datum's slope) is kept.
+        """
+        at, xy = np.asarray(at_xy_m, dtype=np.float64), np.asarray(xy_m, dtype=np.float64)
+        z = self.surface_z_m(index, at[:, 0], at[:, 1])
+        return z + self.global_z_m(xy[:, 0], xy[:, 1]) - self.global_z_m(at[:, 0], at[:, 1])
+
     def global_z_m(self, x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
         """Height of the global water plane at ``(x_m, y_m)``."""
         z0, gx, gy = self.global_plane
