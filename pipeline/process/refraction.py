@@ -66,6 +66,7 @@ from pipeline.process.classify import ClassifySettings, classify_points
 from pipeline.process.returns import DetectedReturns, PointFlag, Points, ReturnKind
 from pipeline.process.scatter_bias import ScatterBiasModel, range_bias_m
 from pipeline.process.sea_correlation import sea_correlation
+from pipeline.process.sea_kriging import sea_field
 from pipeline.process.surface_fit import SurfaceFitSettings, WaterSurface, fit_water_surface
 
 __all__ = [
@@ -207,6 +208,14 @@ def seabed_points(
     if correct_refraction and corr is not None:
         sea = np.where(refr, d[:, 2] * (r_in - r_e), 0.0)  # w s_E, vertical
         depth = depth + corr.at(delta) * sea
+    field = surface.sea_field
+    if correct_refraction and field is not None and returns.t_emit_s is not None and refr.any():
+        # the sea above the point at the pulse's time, kriged from the echoes around it
+        # (pipeline.process.sea_kriging); the plane's reading stays where no echo is near
+        r = np.flatnonzero(refr)
+        kriged, _, used = field.predict(xyz[r, :2], np.asarray(returns.t_emit_s)[idx[r]])
+        r, kriged = r[used > 0], kriged[used > 0]
+        depth[r] = surface.global_z_m(xyz[r, 0], xyz[r, 1]) + kriged - xyz[r, 2]
 
     # a-priori uncertainty, first order
     point = np.radians(st.pointing_sigma_deg)
@@ -339,7 +348,17 @@ def georeference(
     surface = fit_water_surface(returns, surface_settings)
     group = None if shots_per_window is None else returns.pulse_id // shots_per_window
     corr = sea_correlation(returns, surface, max_dt_s=surface.time_window_s, group=group)
-    surface = dataclasses.replace(surface, sea_correlation=corr)
+    field = None
+    st = surface_settings or SurfaceFitSettings()
+    if group is None and st.time_window_s is not None:  # photon windows: one detection each
+        field = sea_field(
+            returns,
+            surface,
+            neighbours=st.kriging_neighbours,
+            window_s=st.kriging_window_s,
+            speed_m_s=st.radius_m / st.time_window_s,
+        )
+    surface = dataclasses.replace(surface, sea_correlation=corr, sea_field=field)
     parts = [
         water_surface_points(returns, surface, refraction_settings),
         seabed_points(returns, surface, refraction_settings),

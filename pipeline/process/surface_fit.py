@@ -122,6 +122,9 @@ class WaterSurface:
     sea_correlation : SeaCorrelation or None
         How far the own echo's sea tells the sea above the sounding
         (:mod:`pipeline.process.sea_correlation`); None: not at all (the plane alone).
+    sea_field : SeaField or None
+        The echoes that krige the sea above each sounding at its pulse's time
+        (:mod:`pipeline.process.sea_kriging`); None: the plane (and ``sea_correlation``) is read.
     """
 
     entry_m: np.ndarray
@@ -142,6 +145,7 @@ class WaterSurface:
     time_window_s: float | None = None
     own_weight: np.ndarray | None = None
     sea_correlation: object | None = None
+    sea_field: object | None = None
 
     def __len__(self) -> int:
         return int(self.entry_m.shape[0])
