@@ -188,15 +188,7 @@ def survey_uncertainty(
     # the waves between each pulse's water entry and its sounding (the variogram's wave part
     # beyond what the fitted plane's measured tilt already holds)
     surf = processed.surface
-    sea_sigma = None
-    field = getattr(surf, "sea_field", None)
-    if field is not None and returns.t_emit_s is not None and len(tpu40):
-        # the depths read the sea above the soundings kriged: its error is the kriging sigma
-        _, sig, used = field.predict(tpu40.xyz_m[:, :2], np.asarray(returns.t_emit_s)[tpu40.row])
-        sea_sigma = np.where((used > 0) & surf.is_water[tpu40.row], sig, np.nan)
-    tpu40 = with_wave_entry(
-        tpu40, vg, surf.entry_m[tpu40.row, :2], surf.sea_correlation, sea_sigma_m=sea_sigma
-    )
+    tpu40 = with_wave_entry(tpu40, vg, surf.entry_m[tpu40.row, :2], surf.sea_correlation)
     if st.wave_slope_sigma_rad == 0.0:  # a user's facet slope (wave_slope_* terms) wins
         # the wave facet each beam refracted through that the fitted planes do not follow
         bottom_rows = np.flatnonzero(returns.has_bottom)

@@ -283,9 +283,7 @@ def wave_entry_sigma_m(vg: SurfaceVariogram, delta_m, rho=None) -> np.ndarray:
 _TILT_TERMS = ("surface_tilt_x", "surface_tilt_y")
 
 
-def with_wave_entry(
-    tpu: PointTpu, vg: SurfaceVariogram, entry_xy_m, sea=None, sea_sigma_m=None
-) -> PointTpu:
+def with_wave_entry(tpu: PointTpu, vg: SurfaceVariogram, entry_xy_m, sea=None) -> PointTpu:
     """``tpu`` with the wave term (:data:`WAVE_TERM`, random, depth only).
 
     Its variance is that of :func:`wave_entry_sigma_m` at each sounding's offset ``Delta``
@@ -303,10 +301,6 @@ def with_wave_entry(
         Horizontal water entry of each row's pulse.
     sea : SeaCorrelation, optional
         The correlation the depths used (``WaterSurface.sea_correlation``); None: ``rho = 1``.
-    sea_sigma_m : (n,) array_like, optional
-        Where the depth read the sea above the sounding kriged from the echoes around it
-        (:mod:`pipeline.process.sea_kriging`), the kriging standard deviation: the term is
-        that, whole (the depth no longer reads the plane's tilt there); NaN: not kriged.
     """
     entry = np.asarray(entry_xy_m, dtype=np.float64).reshape(-1, 2)
     if entry.shape[0] != len(tpu):
@@ -318,7 +312,4 @@ def with_wave_entry(
             tilt_var += tpu.terms[k][:, DEPTH] ** 2
     rho = None if sea is None else sea.at(delta)
     wave = np.sqrt(np.maximum(wave_entry_sigma_m(vg, delta, rho) ** 2 - tilt_var, 0.0))
-    if sea_sigma_m is not None:
-        kriged = np.asarray(sea_sigma_m, dtype=np.float64).ravel()
-        wave = np.where(np.isfinite(kriged), kriged, wave)
     return with_random_term(tpu, WAVE_TERM, np.zeros(len(tpu)), wave)
