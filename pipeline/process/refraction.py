@@ -23,11 +23,17 @@ Geometry per pulse with a bottom return (measured origin ``o``, unit direction `
 * ``L`` less the forward-scattering range bias the bottom echo carries
   (:mod:`pipeline.process.scatter_bias`, when ``forward_scatter`` is set).
 * Seabed point ``B = E + t L``; ``depth_m`` is the height of the sea above ``B`` minus ``B_z``
-  (vertical, positive down), the sea above ``B`` being the local water plane at ``B``'s
-  horizontal position plus ``rho(Delta) w s_E``: the part of the sea met at ``E`` above the
-  plane (``w s_E``, vertical) still there ``Delta = |B - E|`` away, ``rho`` the correlation of
-  the sea's heights above the plane at that lag measured from the survey's surface returns
-  (:mod:`pipeline.process.sea_correlation`; simple kriging from one observation). On the
+  (vertical, positive down), the sea above ``B`` being the local water plane's level at ``E``
+  (carried to ``B`` by the global plane's tilt), plus the share ``gamma(Delta)`` of the local
+  plane's own rise from ``E`` to ``B`` that the survey's echo pairs show comes true there
+  (:mod:`pipeline.process.sea_correlation`: over a moving wind sea the plane's tilt is mostly
+  fit noise and ``gamma`` falls to 0 within a few metres; under a long swell it stays ~1; on
+  the 5 m/s wave scene of issue 13 carrying the whole tilt made the sea above ``B`` err by
+  0.21 m, more than the sea's own 0.145 m), plus ``rho(Delta) w s_E``: the part of the sea
+  met at ``E`` above the plane (``w s_E``, vertical) still there ``Delta = |B - E|`` away,
+  ``rho`` the correlation of the sea's heights above the plane at that lag measured from the
+  survey's surface returns (:mod:`pipeline.process.sea_correlation`; simple kriging from one
+  observation). Before ``gamma`` (the whole tilt carried), on the
   suite's tuning wave scenes (point RMSE, m; plane alone / echo alone / measured ``rho``):
   seed 33, 1.1 m under 10.9 m/s: 0.077 / 0.056 / 0.053; seed 36, 6.7 m under 10.7 m/s:
   0.104 / 0.116 / 0.096; seed 57, 17.5 m under 10.1 m/s: 0.248 / 0.258 / 0.247.
@@ -60,6 +66,7 @@ from pipeline.process.classify import ClassifySettings, classify_points
 from pipeline.process.returns import DetectedReturns, PointFlag, Points, ReturnKind
 from pipeline.process.scatter_bias import ScatterBiasModel, range_bias_m
 from pipeline.process.sea_correlation import sea_correlation
+from pipeline.process.sea_kriging import sea_field
 from pipeline.process.surface_fit import SurfaceFitSettings, WaterSurface, fit_water_surface
 
 __all__ = [
@@ -188,15 +195,27 @@ def seabed_points(
         flags |= np.uint16(PointFlag.NOT_REFRACTED)
         xyz = straight
 
-    # depth below the sea above the point: the fitted local plane there, plus the part of the
-    # sea the pulse met at its entry (w s_E) that is still there Delta away (sea_correlation)
-    depth = surface.surface_z_m(idx, xyz[:, 0], xyz[:, 1]) - xyz[:, 2]
+    # depth below the sea above the point: the local plane's level where the pulse met the
+    # sea (its tilt not extrapolated, WaterSurface.level_z_m), plus the part of the sea the
+    # pulse met at its entry (w s_E) that is still there Delta away (sea_correlation)
+    met = np.where(refr[:, None], o + d * r_in[:, None], xyz)  # where the pulse met the sea
+    level = surface.level_z_m(idx, met[:, :2], xyz[:, :2])
+    rise = surface.surface_z_m(idx, xyz[:, 0], xyz[:, 1]) - level  # the plane's own tilt
     corr = surface.sea_correlation
+    delta = np.hypot(xyz[:, 0] - met[:, 0], xyz[:, 1] - met[:, 1])
+    share = np.ones(len(idx)) if corr is None else corr.tilt_at(delta)
+    depth = level + share * rise - xyz[:, 2]
     if correct_refraction and corr is not None:
-        met = o + d * r_in[:, None]  # where the pulse met the sea
-        delta = np.hypot(xyz[:, 0] - met[:, 0], xyz[:, 1] - met[:, 1])
         sea = np.where(refr, d[:, 2] * (r_in - r_e), 0.0)  # w s_E, vertical
         depth = depth + corr.at(delta) * sea
+    field = surface.sea_field
+    if correct_refraction and field is not None and returns.t_emit_s is not None and refr.any():
+        # the sea above the point at the pulse's time, kriged from the echoes around it
+        # (pipeline.process.sea_kriging); the plane's reading stays where no echo is near
+        r = np.flatnonzero(refr)
+        kriged, _, used = field.predict(xyz[r, :2], np.asarray(returns.t_emit_s)[idx[r]])
+        r, kriged = r[used > 0], kriged[used > 0]
+        depth[r] = surface.global_z_m(xyz[r, 0], xyz[r, 1]) + kriged - xyz[r, 2]
 
     # a-priori uncertainty, first order
     point = np.radians(st.pointing_sigma_deg)
@@ -329,7 +348,17 @@ def georeference(
     surface = fit_water_surface(returns, surface_settings)
     group = None if shots_per_window is None else returns.pulse_id // shots_per_window
     corr = sea_correlation(returns, surface, max_dt_s=surface.time_window_s, group=group)
-    surface = dataclasses.replace(surface, sea_correlation=corr)
+    field = None
+    st = surface_settings or SurfaceFitSettings()
+    if group is None and st.time_window_s is not None:  # photon windows: one detection each
+        field = sea_field(
+            returns,
+            surface,
+            neighbours=st.kriging_neighbours,
+            window_s=st.kriging_window_s,
+            speed_m_s=st.radius_m / st.time_window_s,
+        )
+    surface = dataclasses.replace(surface, sea_correlation=corr, sea_field=field)
     parts = [
         water_surface_points(returns, surface, refraction_settings),
         seabed_points(returns, surface, refraction_settings),

@@ -23,6 +23,15 @@ shortest lag ``h_0``); ``rho`` is clipped to ``[0, 1]`` and made non-increasing 
 swell's negative lobe is not followed: the plane alone is the safer reading there). Without
 pairs ``rho = 0`` everywhere: the depth is read below the plane.
 
+**The plane's tilt** (``gamma``): the same pairs tell how far the anchor's local plane, carried
+``h`` away, predicts the sea there. Per lag bin, ``gamma(h) = sum(r u) / sum(r²)``, the
+regression of the partner's height above the anchor's level (its plane's height at the anchor,
+carried by the global plane's tilt only) on the rise ``r`` the anchor plane's own tilt gives it
+(clipped to ``[0, 1]``): ~1 where the planes follow the waves (a long swell), ~0 where their
+tilt is fit noise (a wind sea moving through the 1 s window, noisy echoes). A sounding's depth
+carries ``gamma(Delta)`` of its plane's rise to ``B``. Partners within the anchor's fit
+radius helped fit its plane, which raises ``gamma`` there towards 1 (the whole tilt, as before).
+
 Photon counting: a window's shots share one detection; pairs within one window are one
 measurement twice and are left out.
 """
@@ -68,11 +77,26 @@ class SeaCorrelation:
         ``rho`` there, in ``[0, 1]``, non-increasing.
     pairs : int
         Pairs used.
+    tilt_lag_m, tilt : (t,) float64 or None
+        Lag bins and the share ``gamma`` of the local plane's own rise that comes true there
+        (module notes); None: the whole rise (the plane as fitted).
     """
 
     lag_m: np.ndarray
     rho: np.ndarray
     pairs: int
+    tilt_lag_m: np.ndarray | None = None
+    tilt: np.ndarray | None = None
+
+    def tilt_at(self, lag_m) -> np.ndarray:
+        """Share of the local plane's own rise to carry ``lag_m`` away (1 without bins).
+
+        Flat below the first bin and beyond the last, linear between.
+        """
+        lag = np.asarray(lag_m, dtype=np.float64)
+        if self.tilt is None or self.tilt.size == 0:
+            return np.ones(lag.shape)
+        return np.interp(lag, self.tilt_lag_m, self.tilt)
 
     def at(self, lag_m) -> np.ndarray:
         """``rho`` at horizontal lags ``lag_m`` (1 at 0, linear between bins, the last beyond).
@@ -123,6 +147,9 @@ class SurfacePairs:
         entry and the sea over it, against its own plane).
     lag_m : (p,) float64
         Horizontal separation.
+    rise_m : (p,) float64, optional
+        The anchor's local plane's own rise from the anchor to the partner (beyond the global
+        plane's): what its tilt, carried ``lag_m`` away, tells of the sea there.
     """
 
     row_i: np.ndarray
@@ -130,6 +157,7 @@ class SurfacePairs:
     s_i_m: np.ndarray
     s_j_m: np.ndarray
     lag_m: np.ndarray
+    rise_m: np.ndarray | None = None
 
 
 def surface_pairs(
@@ -158,9 +186,11 @@ def surface_pairs(
     p = surface.surface_point_m[idx]
     anchor = idx[i]
     s_i = p[i, 2] - surface.surface_z_m(anchor, p[i, 0], p[i, 1])
-    s_j = p[j, 2] - surface.surface_z_m(anchor, p[j, 0], p[j, 1])
+    plane_j = surface.surface_z_m(anchor, p[j, 0], p[j, 1])
+    s_j = p[j, 2] - plane_j
+    rise = plane_j - surface.level_z_m(anchor, p[i, :2], p[j, :2])
     lag = np.hypot(p[i, 0] - p[j, 0], p[i, 1] - p[j, 1])
-    return SurfacePairs(anchor, idx[j], s_i, s_j, lag)
+    return SurfacePairs(anchor, idx[j], s_i, s_j, lag, rise)
 
 
 def sea_correlation(
@@ -202,10 +232,12 @@ def sea_correlation(
     b, s_i, s_j, lag = b[inside], s_i[inside], s_j[inside], lag[inside]
     nb = edges.size - 1
     count = np.bincount(b, minlength=nb)
+    tilt = _tilt_share(b, lag, s_j, pairs.rise_m[inside], count, nb, min_pairs)
     sxy = np.bincount(b, weights=s_i * s_j, minlength=nb)
     sxx = np.bincount(b, weights=s_i * s_i, minlength=nb)
     slag = np.bincount(b, weights=lag, minlength=nb)
     use = (count >= min_pairs) & (sxx > 0.0)
+    empty = SeaCorrelation(np.zeros(0), np.zeros(0), int(i.size), *tilt)
     if not use.any():
         return empty
     beta = sxy[use] / sxx[use]
@@ -215,6 +247,26 @@ def sea_correlation(
     resid = s_j[first] - beta[0] * s_i[first]
     se0 = np.sqrt(np.sum((s_i[first] * resid) ** 2)) / sxx[use][0]
     if not beta[0] > _MIN_T * se0:  # no correlation even at the shortest lag: no sea told
-        return SeaCorrelation(np.zeros(0), np.zeros(0), int(i.size))
+        return empty
     rho = np.minimum.accumulate(np.clip(beta / beta[0], 0.0, 1.0))
-    return SeaCorrelation(slag[use] / count[use], rho, int(i.size))
+    return SeaCorrelation(slag[use] / count[use], rho, int(i.size), *tilt)
+
+
+def _tilt_share(b, lag, s_j, rise, count, nb, min_pairs):
+    """Per lag bin, ``gamma = sum(r u) / sum(r²)``: the share of the plane's rise that comes true.
+
+    ``r`` the anchor plane's own rise to the partner, ``u = s_j + r`` the partner's height above
+    the anchor's level (:meth:`~pipeline.process.surface_fit.WaterSurface.level_z_m`); clipped
+    to ``[0, 1]``. Bins with fewer than ``min_pairs`` pairs (or no rise) are left out; none:
+    ``(None, None)`` (the whole rise).
+    """
+    if rise is None:
+        return None, None
+    u = s_j + rise
+    srr = np.bincount(b, weights=rise * rise, minlength=nb)
+    sru = np.bincount(b, weights=rise * u, minlength=nb)
+    slag = np.bincount(b, weights=lag, minlength=nb)
+    use = (count >= min_pairs) & (srr > 0.0)
+    if not use.any():
+        return None, None
+    return slag[use] / count[use], np.clip(sru[use] / srr[use], 0.0, 1.0)

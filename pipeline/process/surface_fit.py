@@ -122,6 +122,9 @@ class WaterSurface:
     sea_correlation : SeaCorrelation or None
         How far the own echo's sea tells the sea above the sounding
         (:mod:`pipeline.process.sea_correlation`); None: not at all (the plane alone).
+    sea_field : SeaField or None
+        The echoes that krige the sea above each sounding at its pulse's time
+        (:mod:`pipeline.process.sea_kriging`); None: the plane (and ``sea_correlation``) is read.
     """
 
     entry_m: np.ndarray
@@ -142,6 +145,7 @@ class WaterSurface:
     time_window_s: float | None = None
     own_weight: np.ndarray | None = None
     sea_correlation: object | None = None
+    sea_field: object | None = None
 
     def __len__(self) -> int:
         return int(self.entry_m.shape[0])
@@ -156,6 +160,19 @@ class WaterSurface:
         z = e[:, 2] - (nrm[:, 0] * (x_m - e[:, 0]) + nrm[:, 1] * (y_m - e[:, 1])) / nrm[:, 2]
         valid = self.is_water[index] | self.is_land[index]
         return np.where(valid, z, self.global_z_m(x_m, y_m))  # grazing: no local entry
+
+    def level_z_m(self, index: np.ndarray, at_xy_m: np.ndarray, xy_m: np.ndarray) -> np.ndarray:
+        """The level of pulses' local planes at ``at_xy_m``, carried level to ``xy_m``; ``(n,)``.
+
+        The local plane's height at ``at_xy_m`` (where the pulse met the sea) plus the global
+        plane's rise from there to ``xy_m``: the local plane's own tilt is left out (how much
+        of it to carry is measured, :meth:`SeaCorrelation.tilt_at
+        <pipeline.process.sea_correlation.SeaCorrelation.tilt_at>`); the global plane's tilt
+        (a datum's slope) is kept.
+        """
+        at, xy = np.asarray(at_xy_m, dtype=np.float64), np.asarray(xy_m, dtype=np.float64)
+        z = self.surface_z_m(index, at[:, 0], at[:, 1])
+        return z + self.global_z_m(xy[:, 0], xy[:, 1]) - self.global_z_m(at[:, 0], at[:, 1])
 
     def global_z_m(self, x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
         """Height of the global water plane at ``(x_m, y_m)``."""

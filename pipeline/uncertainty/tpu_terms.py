@@ -34,7 +34,14 @@ def _take_surface(surface: WaterSurface, index: np.ndarray) -> WaterSurface:
         f.name: getattr(surface, f.name)[index]
         for f in dataclasses.fields(surface)
         if f.name
-        not in ("global_plane", "global_sigma_m", "air_index", "time_window_s", "sea_correlation")
+        not in (
+            "global_plane",
+            "global_sigma_m",
+            "air_index",
+            "time_window_s",
+            "sea_correlation",
+            "sea_field",
+        )
         and getattr(surface, f.name) is not None
     }
     return dataclasses.replace(surface, **rows)

@@ -33,11 +33,15 @@ def _snell(d, nrm):
     return mu * d + (mu * cos_i - cos_t)[:, None] * nrm
 
 
-def sine_sea_pulses(amp_m, wavelength_m, x_m, y_m, theta_deg=0.0, altitude_m=400.0):
+def sine_sea_pulses(
+    amp_m, wavelength_m, x_m, y_m, theta_deg=0.0, altitude_m=400.0, along_x=False, seabed_z_m=None
+):
     """Pulses hitting the sea ``z = amp cos(2π x/λ)`` at ``(x, y)``; exact times; truth.
 
-    Beams tilt ``theta_deg`` off nadir along y (across the crests' slope direction x).
+    Beams tilt ``theta_deg`` off nadir along y (across the crests' slope direction x), or along
+    x with ``along_x``; a flat seabed at ``seabed_z_m`` (default :data:`SEABED_Z_M`).
     """
+    seabed_z_m = SEABED_Z_M if seabed_z_m is None else seabed_z_m
     n = x_m.size
     k = 2.0 * np.pi / wavelength_m
     zs = amp_m * np.cos(k * x_m)
@@ -45,12 +49,14 @@ def sine_sea_pulses(amp_m, wavelength_m, x_m, y_m, theta_deg=0.0, altitude_m=400
     nrm = np.column_stack([-slope, np.zeros(n), np.ones(n)])
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
     th = np.radians(theta_deg)
-    d = np.tile([0.0, np.sin(th), -np.cos(th)], (n, 1))
+    d = np.tile(
+        [np.sin(th), 0.0, -np.cos(th)] if along_x else [0.0, np.sin(th), -np.cos(th)], (n, 1)
+    )
     hit = np.column_stack([x_m, y_m, zs])
     r_air = (altitude_m - zs) / np.cos(th)
     o = hit - d * r_air[:, None]
     t = _snell(d, nrm)
-    length = (SEABED_Z_M - zs) / t[:, 2]
+    length = (seabed_z_m - zs) / t[:, 2]
     bottom = hit + t * length[:, None]
     ret = DetectedReturns(
         pulse_id=np.arange(n),

@@ -1,0 +1,99 @@
+"""The sea above a sounding: how much of its local plane's tilt to carry to it (issue 13).
+
+The depth of a sounding is read below the sea above it, ``Delta`` (a quarter of the depth at
+20° off nadir) from where its pulse met the sea. The local plane (16 echoes within 5 m and 1 s)
+carries a tilt; carried ``Delta`` away it tells the sea there only as far as that tilt is the
+sea's, not the fit's noise. The survey's own pairs of echoes measure that share per lag
+(:mod:`pipeline.process.sea_correlation`).
+
+Written here: a sea (flat with a known echo timing noise, or a long standing wave), beams tilted
+along x, Snell's law by hand at the sea's own normal, a flat seabed 40 m down, exact times. The
+true depth below the sea above each sounding is ``a cos(k x_B) - z_seabed``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from pipeline.process.refraction import georeference
+from tests.process.test_wave_entry import FIT, REFR, sine_sea_pulses
+
+SEABED_Z_M = -40.0
+
+
+def _pulses(amp_m, wavelength_m):
+    """Pulses on ``z = amp cos(2π x/λ)`` over a 1 m grid, beams 15° off nadir along x."""
+    x, y = (a.ravel() for a in np.meshgrid(np.arange(0.0, 120.0, 1.0), np.arange(0.0, 40.0, 1.0)))
+    ret, _ = sine_sea_pulses(
+        amp_m, wavelength_m, x, y, theta_deg=15.0, along_x=True, seabed_z_m=SEABED_Z_M
+    )
+    # the grid scanned row by row in 0.2 s: every neighbour within the fit's 1 s window
+    ret = dataclasses.replace(ret, t_emit_s=np.arange(len(ret)) * (0.2 / len(ret)))
+    return ret, 2.0 * np.pi / wavelength_m
+
+
+def _depth_errors(ret, amp_m, k):
+    pts = georeference(ret, surface_settings=FIT, refraction_settings=REFR).points
+    b = pts.select(pts.kind == 2)  # the bottom returns
+    true_depth = amp_m * np.cos(k * b.xyz_m[:, 0]) - SEABED_Z_M
+    return b.depth_m - true_depth
+
+
+def test_a_noisy_plane_tilt_is_not_carried_to_the_sounding():
+    # a flat sea whose echoes carry 0.2 ns (3 cm) of ranging noise: each local plane's tilt is
+    # noise (~0.005 rad), carried 7.8 m to the sounding (40 m deep, 11° in the water) it
+    # moved the sea there by ~4 cm; the plane's height alone errs by ~1 cm
+    ret, k = _pulses(0.0, 50.0)
+    n = len(ret)
+    sigma_s = 2e-10
+    noise = np.random.default_rng(7).normal(0.0, sigma_s, n)
+    ret = dataclasses.replace(
+        ret, t_surface_s=ret.t_surface_s + noise, t_surface_sigma_s=np.full(n, sigma_s)
+    )
+    err = _depth_errors(ret, 0.0, k)
+    rmse = float(np.sqrt(np.mean(err**2)))
+    # the plane's tilt carried whole (before this fix): bias +0.021 m, RMSE 0.042 m
+    assert rmse < 0.02, rmse
+    assert abs(float(np.mean(err))) < 0.01
+
+
+def test_a_long_wave_s_tilt_is_carried_to_the_sounding():
+    # a standing 120 m wave, 0.6 m amplitude (slopes up to 0.03): the 5 m planes follow it, and
+    # the survey's pairs show their rise comes true, so it is carried the 7.8 m to the sounding
+    # (read level from the entry, the sea above it would be off by up to 0.24 m). Left: the
+    # wave's curvature over the plane and the 7.8 m (a k² 7.8² / 2 = 5 cm at the crests)
+    ret, k = _pulses(0.6, 120.0)
+    err = _depth_errors(ret, 0.6, k)
+    rmse = float(np.sqrt(np.mean(err**2)))
+    assert rmse < 0.04, rmse
+
+
+def test_the_sea_above_the_sounding_is_kriged_from_the_echoes_around_it():
+    # a 12 m wave, 0.2 m amplitude, travelling at its deep-water speed sqrt(g / k) = 4.3 m/s
+    # under a grid shot in 0.2 s: the 5 m planes average it out, and the sounding lies 3.9 m
+    # (20 m deep, 11° in the water) from its entry, a third of a wavelength: neither the plane
+    # nor the entry's own echo tells the sea above it; the echoes shot around it do
+    amp, lam, depth = 0.2, 12.0, 20.0
+    k = 2.0 * np.pi / lam
+    speed = np.sqrt(9.80665 / k)
+    x, y = (a.ravel() for a in np.meshgrid(np.arange(0.0, 120.0, 1.0), np.arange(0.0, 40.0, 1.0)))
+    t = np.arange(x.size) * (0.2 / x.size)
+    # the sea at each pulse's time is the standing sine shifted by speed t: the pulse is traced
+    # on the sine at x - speed t and moved back by speed t (the geometry is the same along x)
+    ret, bottom = sine_sea_pulses(
+        amp, lam, x - speed * t, y, theta_deg=15.0, along_x=True, seabed_z_m=-depth
+    )
+    shift = np.column_stack([speed * t, np.zeros_like(t), np.zeros_like(t)])
+    ret = dataclasses.replace(ret, origin_meas_m=ret.origin_meas_m + shift, t_emit_s=t)
+    pts = georeference(ret, surface_settings=FIT, refraction_settings=REFR).points
+    b = pts.select(pts.kind == 2)
+    tb = t[b.pulse_id]
+    true_depth = amp * np.cos(k * (b.xyz_m[:, 0] - speed * tb)) + depth
+    # the points near the seabed (refracted at the plane's normal, not the facet's: 1.5 cm RMS)
+    assert np.sqrt(np.mean((b.xyz_m[:, 2] + depth) ** 2)) < 0.03
+    err = b.depth_m - true_depth
+    rmse = float(np.sqrt(np.mean(err**2)))
+    # the local plane and rho w s_E read before this: RMSE 0.23 m (the wave's own is 0.14 m)
+    assert rmse < 0.03, rmse
