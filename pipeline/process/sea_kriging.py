@@ -1,7 +1,7 @@
 """The sea above each sounding at its pulse's time, kriged from the surface echoes around it.
 
 A sounding's depth is read below the water surface above it, ``B``, at its pulse's time ``t``
-(what the truth of a moving sea means). ``B`` lies ``Delta`` (a quarter of the depth at 20° off
+(what the depth under a moving sea means). ``B`` lies ``Delta`` (a quarter of the depth at 20° off
 nadir) from where the pulse met the sea, and no echo was taken there at that instant; but a
 scanner's other shots see the sea around ``B`` within tenths of a second (a Palmer scan's next
 rotations, 0.05 s apart). The height of the sea there is predicted by **simple kriging** (the
