@@ -28,7 +28,12 @@ import numpy as np
 
 from pipeline.errors import NumericalError
 from pipeline.uncertainty.posterior_moves import BlockIndependenceMove
-from pipeline.uncertainty.posterior_target import PulseBatch, log_prob_blocks
+from pipeline.uncertainty.posterior_target import (
+    PulseBatch,
+    kernel_system,
+    log_prob_blocks,
+    prior_box,
+)
 from pipeline.uncertainty.waveform_kernel import log_post_rows_bounded
 from pipeline.uncertainty.waveform_model import N_PARAMS
 
@@ -70,16 +75,8 @@ def run_steps(data: PulseBatch, pos, system, st, n_steps: int, thin: int, rng, p
     lg_ok = np.ones((nw, n_p), dtype=np.bool_)
     n_store = n_steps // thin
     chain = np.empty((n_store, nw, n_p, N_PARAMS))
-    box = np.column_stack([data.lower, data.upper, data.t_last_s])
-    sysv = (
-        system.sample_interval_s,
-        system.pulse_sigma_s,
-        system.group_index,
-        system.offset_counts,
-        system.poisson,
-        system.floor_variance,
-        system.excess_noise_factor * system.counts_per_photoelectron,
-    )
+    box = prior_box(data)
+    sysv = kernel_system(system)
     rest, b_abs = term_bounds(data, system)
     args = (
         rest, b_abs, data.samples, data.n_valid, data.cos_water, box, data.ln_k_prior, sysv,

@@ -195,6 +195,33 @@ def _rows(waveforms: Any) -> list[np.ndarray]:
     return [np.asarray(w, dtype=np.float64) for w in waveforms]
 
 
+def prior_box(data: PulseBatch) -> np.ndarray:
+    """Prior box of each pulse as the compiled kernels take it.
+
+    Returns
+    -------
+    (n_pulses, 3) float64
+        Lower and upper bottom-time bounds and the last sample's time.
+    """
+    return np.column_stack([data.lower, data.upper, data.t_last_s])
+
+
+def kernel_system(system) -> tuple:
+    """The system figures the compiled kernels take, in their order.
+
+    See :func:`~pipeline.uncertainty.waveform_kernel.log_post_rows`.
+    """
+    return (
+        system.sample_interval_s,
+        system.pulse_sigma_s,
+        system.group_index,
+        system.offset_counts,
+        system.poisson,
+        system.floor_variance,
+        system.excess_noise_factor * system.counts_per_photoelectron,
+    )
+
+
 def _rows_log_post(th: np.ndarray, data: PulseBatch, system) -> np.ndarray:
     """Log posterior of walker rows ``th`` (N, 9), row ``k`` for pulse ``k % P``.
 
@@ -209,17 +236,9 @@ def _rows_log_post(th: np.ndarray, data: PulseBatch, system) -> np.ndarray:
         data.samples,
         data.n_valid,
         data.cos_water,
-        np.column_stack([data.lower, data.upper, data.t_last_s]),
+        prior_box(data),
         data.ln_k_prior,
-        (
-            system.sample_interval_s,
-            system.pulse_sigma_s,
-            system.group_index,
-            system.offset_counts,
-            system.poisson,
-            system.floor_variance,
-            system.excess_noise_factor * system.counts_per_photoelectron,
-        ),
+        kernel_system(system),
         data.exposure,
     )
     if np.isnan(out).any() or np.isposinf(out).any():
