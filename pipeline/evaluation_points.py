@@ -12,7 +12,11 @@ Arrays (``n`` rows per group; a group is empty when the run has none):
   ``pt_depth_m`` (below the fitted local surface), ``pt_true_depth_m`` and
   ``pt_error_m = measured - true`` (positive: too deep), as ``evaluation.json``'s ``error.points``.
 * ``tpu_*`` - the class-40 points the TPU propagated: ``tpu_true_depth_m``, ``tpu_error_m``,
-  ``tpu_sigma_depth_m`` (1 σ of the depth), ``tpu_group`` (photon window, else the row).
+  ``tpu_sigma_depth_m`` (1 σ of the depth), ``tpu_group`` (photon window, else the row),
+  ``tpu_x_m``, ``tpu_y_m``, and ``tpu_term_<name>``: each term's one-sigma change of the depth
+  (:data:`pipeline.uncertainty.tpu.RANDOM_TERMS`, ``CORRELATED_TERMS`` and the survey's own,
+  ``PointTpu.terms``; they add in quadrature to ``tpu_sigma_depth_m``), to see which term is
+  short where the coverage fails.
 * ``post_*`` - sampled depth posteriors with a start: ``post_true_depth_m``, ``post_median_m``,
   ``post_lo68_m``, ``post_hi68_m``, ``post_lo95_m``, ``post_hi95_m``, ``post_converged``; and
   ``post_wave_*_m`` (same keys) the waveform posterior alone, before the TPU nuisances
@@ -39,6 +43,7 @@ from pipeline.outputs.atomic import atomic_path
 from pipeline.process.classify import NO_BOTTOM_FOUND_AT, SEABED_CLASSES
 from pipeline.process.returns import PointFlag
 from pipeline.process.seabed_outliers import REJECTED
+from pipeline.uncertainty.tpu_settings import DEPTH
 
 __all__ = ["point_arrays", "write_evaluation_points", "rejected_arrays", "rejected_report"]
 
@@ -79,7 +84,11 @@ def point_arrays(processed, grid, unc, post, truth_depth_m, grid_truth_depth_m, 
         tpu_error_m=terr,
         tpu_sigma_depth_m=np.asarray(unc.tpu40.sigma_depth_m, dtype=np.float64),
         tpu_group=np.arange(n_tpu) if group is None else np.asarray(group).ravel(),
+        tpu_x_m=np.asarray(unc.points40.xyz_m[:, 0], dtype=np.float64),
+        tpu_y_m=np.asarray(unc.points40.xyz_m[:, 1], dtype=np.float64),
     )
+    for name, term in unc.tpu40.terms.items():
+        out[f"tpu_term_{name}"] = np.asarray(term[:, DEPTH], dtype=np.float64)
     out.update(_posterior_arrays(post, truth_depth_m))
     gerr, gtrue = grid_errors_m(grid, truth_depth_m=grid_truth_depth_m)
     xx, yy = np.meshgrid(grid.x_m, grid.y_m)

@@ -334,6 +334,12 @@ def test_ci_points_file_matches_the_run_level_evaluation(ci_suite):
         assert np.mean(z <= 1.0) == pytest.approx(cov[0]["fraction_within"], abs=1e-12)
         assert a["cell_error_m"].size == ev["error"]["grid"]["n"]
         assert np.all(np.isfinite(a["tpu_sigma_depth_m"])) and np.all(a["tpu_sigma_depth_m"] > 0)
+        # every term the TPU added is exported: their squares add up to the depth variance
+        # (a term added to the total but not to PointTpu.terms would leave a gap)
+        terms = [k for k in a if k.startswith("tpu_term_")]
+        total = np.sqrt(sum(a[k] ** 2 for k in terms))
+        assert len(terms) >= 10
+        np.testing.assert_allclose(total, a["tpu_sigma_depth_m"], rtol=1e-9)
 
 
 @pytest.mark.slow
