@@ -125,6 +125,10 @@ class WaterSurface:
     sea_field : SeaField or None
         The echoes that krige the sea above each sounding at its pulse's time
         (:mod:`pipeline.process.sea_kriging`); None: the plane (and ``sea_correlation``) is read.
+    sea_change_m : (n,) or None
+        The kriged change of the sea from each pulse's entry to above its sounding, held
+        (:func:`~pipeline.process.refraction.kriged_sea_change`; NaN: the plane's reading);
+        None: kriged where the points are made (the TPU holds it while it moves its inputs).
     """
 
     entry_m: np.ndarray
@@ -146,6 +150,7 @@ class WaterSurface:
     own_weight: np.ndarray | None = None
     sea_correlation: object | None = None
     sea_field: object | None = None
+    sea_change_m: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.entry_m.shape[0])

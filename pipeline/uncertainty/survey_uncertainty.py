@@ -35,7 +35,7 @@ from pipeline import iho
 from pipeline.process.classify import BATHYMETRIC_POINT
 from pipeline.process.context import ProcessingContext
 from pipeline.process.grid import Grid
-from pipeline.process.refraction import ProcessedPoints, seabed_points
+from pipeline.process.refraction import ProcessedPoints, kriged_sea_change, seabed_points
 from pipeline.process.returns import DetectedReturns, PointFlag, Points, ReturnKind
 from pipeline.uncertainty.cell_uncertainty import CellUncertainty, cell_uncertainty
 from pipeline.uncertainty.tpu import (
@@ -116,6 +116,11 @@ def survey_uncertainty(
         The bathymetry grid the cells belong to.
     """
     st, refr, ins = ctx.tpu, ctx.refraction, ctx.instrument
+    # the kriged sea change from entry to sounding, held while the TPU moves its inputs (its
+    # error is the sea terms'; kriged again at moved points it would jump with the neighbours)
+    surf = processed.surface
+    surf = dataclasses.replace(surf, sea_change_m=kriged_sea_change(returns, surf, refr))
+    processed = dataclasses.replace(processed, surface=surf)
     pts = processed.points
     is40 = (pts.classification == BATHYMETRIC_POINT) & (pts.kind == ReturnKind.BOTTOM)
     points40 = pts.select(is40)
