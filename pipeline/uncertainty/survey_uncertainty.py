@@ -62,6 +62,7 @@ __all__ = [
     "SurveyUncertainty",
     "survey_uncertainty",
     "with_tpu",
+    "with_held_sea",
     "with_posteriors",
     "take_tpu",
     "without_points",
@@ -116,11 +117,9 @@ def survey_uncertainty(
         The bathymetry grid the cells belong to.
     """
     st, refr, ins = ctx.tpu, ctx.refraction, ctx.instrument
-    # the kriged sea change from entry to sounding, held while the TPU moves its inputs (its
-    # error is the sea terms'; kriged again at moved points it would jump with the neighbours)
-    surf = processed.surface
-    surf = dataclasses.replace(surf, sea_change_m=kriged_sea_change(returns, surf, refr))
-    processed = dataclasses.replace(processed, surface=surf)
+    processed = dataclasses.replace(
+        processed, surface=with_held_sea(returns, processed.surface, refr)
+    )
     pts = processed.points
     is40 = (pts.classification == BATHYMETRIC_POINT) & (pts.kind == ReturnKind.BOTTOM)
     points40 = pts.select(is40)
@@ -222,6 +221,20 @@ def survey_uncertainty(
         cells=cells,
         summary=iho.order_summary(cells.order).to_dict(),
     )
+
+
+def with_held_sea(returns: DetectedReturns, surface, refraction_settings):
+    """``surface`` with its kriged sea change from entry to sounding held for the TPU.
+
+    The TPU moves one input at a time and georeferences again
+    (:func:`~pipeline.uncertainty.tpu.point_tpu`); kriged again at points moved by
+    millimetres, the sea change would jump wherever an echo enters or leaves the nearest ones
+    (tens of centimetres of "pointing" or "surface tilt" sensitivity that no input has). Its
+    own error is the TPU's sea terms' (``wave_entry``). A surface without a kriged sea is
+    returned as it is.
+    """
+    held = kriged_sea_change(returns, surface, refraction_settings)
+    return surface if held is None else dataclasses.replace(surface, sea_change_m=held)
 
 
 def with_tpu(points: Points, unc: SurveyUncertainty) -> Points:
