@@ -92,11 +92,13 @@ class DetectSettings:
     surface_echo_sigma: float = setting(
         10.0,
         gt=0.0,
-        doc="the surface step fit keeps its echo (Gaussian) term only where the echo's fitted "
-        "amplitude stands this many (residual-based, so optimistic) standard errors above 0; "
-        "else the column onset alone times the surface (calm water off nadir: no specular "
-        "echo). Set on the suite's tuning scenes 20, 43, 60 (calm) and 24 (7 m/s): 5 left "
-        "the calm ones 2-5 cm shallow, 50 made scene 24 0.19 m deep, 20 dropped clear echoes "
+        doc="a surface echo is clear (the step fit's echo-kept time taken as it is) where its "
+        "fitted amplitude stands this many (residual-based, so optimistic) standard errors "
+        "above 0 and above the column onset's peak; a weaker one's time is mixed from the "
+        "onset alone and the echo-kept fit by the survey's share of clear echoes "
+        "(surface_echo_prevalence_half). The 10 was set, as a yes/no switch, on the suite's "
+        "tuning scenes 20, 43, 60 (calm) and 24 (7 m/s): 5 left the calm ones 2-5 cm shallow, "
+        "50 made scene 24 0.19 m deep, 20 dropped clear echoes "
         "(SNR ~20) of the posterior tests' waveforms",
     )
     surface_echo_prevalence_half: float = setting(
@@ -418,7 +420,8 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
             shot_noise_counts, s.threshold_sigma,
         )  # fmt: skip
         sel = idx[good]
-        echo_state = np.where(np.isin(np.arange(n), sel), 0.0, echo_state)
+        echo_state = echo_state.copy()
+        echo_state[sel] = 0.0  # the merged fit times these surfaces itself
         t_idx_s[sel], t_idx_b[sel], amp_s[sel], amp_b[sel] = (
             ts[good],
             tb[good],
