@@ -35,8 +35,9 @@ do not depend on the pulse: they are tabulated once per call for each decay of
 :data:`DECAY_GRID` (a pulse's onset is interpolated, linearly in log decay, between the two
 around its own), and a compiled kernel (numba, cached on disk) forms each pulse's Gram sums,
 projections and residuals. Only a pulse whose window is cut by the waveform's ends evaluates
-its own ``g`` and ``h_k``. Each pulse's result depends on its own samples alone (a fixed loop
-order), whatever the batch.
+its own ``g`` and ``h_k``. Each pulse's fits depend on its own samples alone (a fixed loop
+order), whatever the batch; with ``echo_sigma``, an ambiguous pulse's time also depends on
+the batch's share of clear echoes (the survey's once :func:`mix_stored_echoes` has run).
 """
 
 from __future__ import annotations
