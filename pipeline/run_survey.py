@@ -31,6 +31,7 @@ from pipeline.process.context import (
     with_measured_attenuation,
 )
 from pipeline.process.returns import DetectedReturns, DetectorFlag
+from pipeline.process.surface_step import mix_stored_echoes
 from pipeline.stages import Plan, StageClock
 from pipeline.survey_chunks import ChunkJob, run_chunk
 from pipeline.survey_tiles import grid_by_tiles, tile_layout, write_points_by_tiles
@@ -215,6 +216,8 @@ def simulate_detections(
             done = min((c + 1) * chunk, lines.n_pulses_total)
             log(f"  chunk {c + 1}/{n_chunk}: {done} pulses simulated and detected")
     bar.close()
+    if job.waveform:  # an ambiguous surface echo's time from the survey's share of clear ones
+        mix_stored_echoes(store, ps.detect.surface_echo_prevalence_half, log)
     no_bottom = None
     if not job.waveform:
         no_bottom = agg.photon_summary()

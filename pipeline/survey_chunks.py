@@ -178,6 +178,8 @@ def _waveform_chunk(job: ChunkJob, clock: StageClock, paths):
         t_surface_s=found.t_surface_s + np.where(found.has_surface, wf.t0_s, 0.0),
         t_bottom_s=found.t_bottom_s + np.where(found.has_bottom, wf.t0_s, 0.0),
         t_column_s=found.t_column_s + np.where(found.has_column, wf.t0_s, 0.0),
+        t_surface_onset_s=found.t_surface_onset_s
+        + np.where(found.surface_echo_state < 0, wf.t0_s, 0.0),
     )
     return found, kept, nb
 

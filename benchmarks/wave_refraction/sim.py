@@ -6,10 +6,12 @@ import functools
 import pickle
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
 from pipeline import run_survey as RS
+from pipeline.detection_store import DetectionStore
 from pipeline.process.context import processing_context
 from pipeline.scene import load_scene
 from pipeline.simulate import survey
@@ -81,7 +83,8 @@ plan = make_plan(scene)
 ctx = processing_context(scene)
 clock = StageClock()
 t0 = time.time()
-sim = RS.simulate_detections(scene, plan, ctx, clock, log=print)
+with DetectionStore(Path(out).parent, ctx.instrument.air_index) as store:
+    sim = RS.simulate_detections(scene, plan, ctx, clock, store, log=print)
 print("sim s", time.time() - t0)
 summ = {k: np.concatenate([s[k] for s in SUM]) for k in SUM[0]}
 o = np.argsort(summ["pulse_id"])

@@ -92,12 +92,24 @@ class DetectSettings:
     surface_echo_sigma: float = setting(
         10.0,
         gt=0.0,
-        doc="the surface step fit keeps its echo (Gaussian) term only where the echo's fitted "
-        "amplitude stands this many (residual-based, so optimistic) standard errors above 0; "
-        "else the column onset alone times the surface (calm water off nadir: no specular "
-        "echo). Set on the suite's tuning scenes 20, 43, 60 (calm) and 24 (7 m/s): 5 left "
-        "the calm ones 2-5 cm shallow, 50 made scene 24 0.19 m deep, 20 dropped clear echoes "
+        doc="a surface echo is clear (the step fit's echo-kept time taken as it is) where its "
+        "fitted amplitude stands this many (residual-based, so optimistic) standard errors "
+        "above 0 and above the column onset's peak; a weaker one's time is mixed from the "
+        "onset alone and the echo-kept fit by the survey's share of clear echoes "
+        "(surface_echo_prevalence_half). The 10 was set, as a yes/no switch, on the suite's "
+        "tuning scenes 20, 43, 60 (calm) and 24 (7 m/s): 5 left the calm ones 2-5 cm shallow, "
+        "50 made scene 24 0.19 m deep, 20 dropped clear echoes "
         "(SNR ~20) of the posterior tests' waveforms",
+    )
+    surface_echo_prevalence_half: float = setting(
+        0.02,
+        gt=0.0,
+        lt=1.0,
+        doc="share of clear surface echoes (significant and above the column onset's peak) "
+        "among the survey's pulses at which an ambiguous echo's time is half the echo-kept "
+        "fit's and half the onset alone's (weight p / (p + this)). Set on the tuning scenes "
+        "of benchmarks/wave_refraction (seeds 7, 8: 5 m/s waves, flat 5 and 1.5 m/s) as the "
+        "smallest sum of squared surface-time biases among 0.005, 0.01, 0.02, 0.05",
     )
     trend_fwhm: float = setting(
         8.0, ge=2.0, le=100.0, doc="running-median width (system FWHMs) of the column trend"
@@ -121,6 +133,9 @@ class DetectSettings:
 
 
 _SIG = ("t_surface_sigma_s", "t_bottom_sigma_s")
+#: The surface step fit's parts the survey mixes once its share of clear echoes is known
+#: (:func:`~pipeline.process.surface_step.echo_weight`; run_survey drops them after)
+ECHO_FIELDS = ("surface_echo_state", "t_surface_onset_s", "surface_echo_shift_s")
 
 
 @dataclass(frozen=True)
@@ -136,6 +151,12 @@ class WaveformDetections:
     window's detection limit, :mod:`pipeline.process.photon_limit`; 0 where none) is reported.
     ``t_*_sigma_s``: each return's timing sigma from its own waveform
     (:mod:`pipeline.process.detect_precision`; 0 if absent or not given).
+    ``surface_echo_state`` (1 a clear surface echo, −1 an ambiguous one whose time the survey
+    mixes, 0 neither), ``t_surface_onset_s`` and ``surface_echo_shift_s`` (the onset alone's
+    time and the echo-kept fit's minus it, where −1; else 0): ``t_surface_s`` there is
+    ``t_surface_onset_s + w surface_echo_shift_s``, ``w`` from the block's share of clear
+    echoes until the survey sets it from all of them
+    (:func:`~pipeline.process.surface_step.echo_weight`).
     """
 
     has_surface: np.ndarray
@@ -156,6 +177,9 @@ class WaveformDetections:
     t_detection_limit_s: np.ndarray | None = None
     t_surface_sigma_s: np.ndarray | None = None
     t_bottom_sigma_s: np.ndarray | None = None
+    surface_echo_state: np.ndarray | None = None
+    t_surface_onset_s: np.ndarray | None = None
+    surface_echo_shift_s: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         # detectors without column returns (photon counting) leave them out; concatenating
@@ -170,6 +194,7 @@ class WaveformDetections:
             "t_no_bottom_s",
             "t_detection_limit_s",
             *_SIG,
+            *ECHO_FIELDS,
         ):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, np.zeros(n))
@@ -286,21 +311,28 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     fwhm_samples = pulse_fwhm_s / dt_s
     gap = max(2, math.ceil(1.5 * fwhm_samples))
     t_echo_s = t_idx_s  # the start of the merged fit, which models the echo itself
+    echo_state = t_onset_s = shift_s = np.zeros(n)
     if s.surface_step:
         # the column's own decay, past the surface echo: the onset the surface sits on
         k_col = None
         if s.surface_onset_decay:
             k_col = column_decay(filt, i_s, start=math.ceil(sep) + gap, length=2 * math.ceil(sep))
-        t_fit, t_echo = surface_step_fit(
+        t_fit, parts = surface_step_fit(
             filt,
             i_s,
             math.sqrt(2.0) * sigma_samples,
             k_col,
             echo_sigma=s.surface_echo_sigma,
-            with_echo_time=True,
+            prevalence_half=s.surface_echo_prevalence_half,
+            with_parts=True,
         )
         t_idx_s = np.where(has_s, t_fit, t_idx_s)
-        t_echo_s = np.where(has_s, t_echo, t_echo_s)
+        t_echo_s = np.where(has_s, parts.t_echo, t_echo_s)
+        # the survey sets an ambiguous echo's weight from all its pulses (this block's share
+        # of clear echoes stands in until then, run_survey): the two times and the state
+        echo_state = np.where(has_s & parts.clear, 1.0, np.where(has_s & parts.mixable, -1.0, 0.0))
+        t_onset_s = parts.t_onset
+        shift_s = parts.t_echo - parts.t_onset
     # a surface echo clipped at the top code: its filtered peak sits anywhere on the plateau;
     # the plateau's edges time it (one echo), or bound it (run on into the column: "merged")
     clip_s = clip_merged = np.zeros(n, dtype=bool)
@@ -311,6 +343,7 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
         clip_s = saturated & has_s & (i_s >= clip.first - 1)
         clip_merged = clip_s & clip.merged
         t_idx_s = np.where(clip_s, clip.t_idx, t_idx_s)
+        echo_state = np.where(clip_s, 0.0, echo_state)
         # the filtered peak of a Gaussian of σ through the matched filter: A / √2
         amp_s = np.where(clip_s, clip.amplitude / math.sqrt(2.0), amp_s)
         width_s = np.where(clip_s, math.sqrt(2.0) * sigma_samples, width_s)
@@ -387,6 +420,8 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
             shot_noise_counts, s.threshold_sigma,
         )  # fmt: skip
         sel = idx[good]
+        echo_state = echo_state.copy()
+        echo_state[sel] = 0.0  # the merged fit times these surfaces itself
         t_idx_s[sel], t_idx_b[sel], amp_s[sel], amp_b[sel] = (
             ts[good],
             tb[good],
@@ -440,4 +475,7 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
         column_confidence=np.where(has_c, _confidence(snr_c, s.threshold_sigma), zero),
         t_surface_sigma_s=np.where(has_s, sig_ts * dt_s, zero),
         t_bottom_sigma_s=np.where(has_b, sig_tb * dt_s, zero),
+        surface_echo_state=echo_state,
+        t_surface_onset_s=np.where(echo_state < 0, t_onset_s * dt_s, zero),
+        surface_echo_shift_s=np.where(echo_state < 0, shift_s * dt_s, zero),
     )

@@ -17,10 +17,17 @@ linear least squares), and the onset ``B h_k`` alone, for each candidate ``t_s``
 0.02-sample grid from 4 samples before the peak to 0.5 after (:data:`STEP_GRID`; the volume
 onset alone peaks up to ~3 samples after the surface), with ``k`` the pulse's own measured
 column decay; it keeps the candidate with the smallest residual and refines it by a parabola
-through the residuals. The echo term is kept only where its amplitude at the best candidate
-is significant (``echo_sigma`` standard errors, ``detect.surface_echo_sigma``): free to sit on
-the noise of a weak onset it pulls the time late by ~0.5 sample at SNR 4 (synthetic Poisson
-waveforms), which the onset alone does not.
+through the residuals. The echo term is taken as it is where the echo is clear: significant
+(``echo_sigma`` standard errors, ``detect.surface_echo_sigma``) and above the onset's own
+peak. A weaker echo is ambiguous: ``g`` is the shape of ``∂h/∂t_s``, so a weak echo and an
+onset earlier by ``≈ A σ √(2π) / B`` samples are nearly the same waveform. Read as an onset,
+the weak echoes of a wind sea time the surface early (−0.4 to −0.9 ns, issue 13); read as
+echoes, the onset's noise of calm water off nadir (no specular echo) times it late (+0.5 to
++0.9 ns; free to sit on noise, the echo term pulls it late by ~0.5 sample at SNR 4 on
+synthetic Poisson waveforms). A pulse alone cannot tell them apart; the survey's share of
+clear echoes can: an ambiguous pulse's time is the onset alone's moved toward the echo-kept
+one by :func:`echo_weight` of that share (empirical Bayes: the population sets the prior),
+set by :func:`mix_stored_echoes` once the survey's chunks are all detected.
 
 The candidates and the fitted samples sit at fixed offsets from the peak sample, so ``g`` and
 ``h_k`` at ``(j − c_k)/σ`` (sample offset ``j``, candidate offset ``c_k``) and their Gram sums
@@ -28,19 +35,30 @@ do not depend on the pulse: they are tabulated once per call for each decay of
 :data:`DECAY_GRID` (a pulse's onset is interpolated, linearly in log decay, between the two
 around its own), and a compiled kernel (numba, cached on disk) forms each pulse's Gram sums,
 projections and residuals. Only a pulse whose window is cut by the waveform's ends evaluates
-its own ``g`` and ``h_k``. Each pulse's result depends on its own samples alone (a fixed loop
-order), whatever the batch.
+its own ``g`` and ``h_k``. Each pulse's fits depend on its own samples alone (a fixed loop
+order), whatever the batch; with ``echo_sigma``, an ambiguous pulse's time also depends on
+the batch's share of clear echoes (the survey's once :func:`mix_stored_echoes` has run).
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
 from scipy.special import ndtr
 
-__all__ = ["surface_step_fit", "STEP_GRID", "DECAY_GRID", "column_onset"]
+__all__ = [
+    "surface_step_fit",
+    "StepParts",
+    "echo_weight",
+    "mixed_time",
+    "mix_stored_echoes",
+    "STEP_GRID",
+    "DECAY_GRID",
+    "column_onset",
+]
 
 #: Candidate surface times, samples from the peak sample (0.02-sample grid, 4 before to 0.5
 #: after: the column onset only pulls the peak late, by up to ~3 samples when it is alone).
@@ -50,7 +68,7 @@ STEP_GRID = np.arange(-4.0, 0.5001, 0.02)
 DECAY_GRID = np.concatenate([[0.0], np.geomspace(0.002, 1.0, 60)])
 
 
-def column_onset(u: np.ndarray, sigma: float, decay: float) -> np.ndarray:
+def column_onset(u: np.ndarray, sigma: float, decay: float | np.ndarray) -> np.ndarray:
     """The volume return's onset through the response: ``exp(−k u + (kσ)²/2) Φ(u/σ − kσ)``.
 
     Parameters
@@ -59,8 +77,9 @@ def column_onset(u: np.ndarray, sigma: float, decay: float) -> np.ndarray:
         Time after the surface, samples (any shape).
     sigma : float
         σ of the (filtered) system response, samples.
-    decay : float
-        Column decay ``k``, 1/sample (0: the smoothed step ``Φ(u/σ)``).
+    decay : float or ndarray
+        Column decay ``k``, 1/sample (0: the smoothed step ``Φ(u/σ)``); an array broadcasts
+        against ``u``.
     """
     ks = decay * sigma
     # the exponent is bounded where Φ is not negligible; clip it where Φ underflows anyway
@@ -77,25 +96,27 @@ def _onset(z: float, ks: float) -> float:
 
 @numba.njit(cache=True, nogil=True)
 def _nnls2(yy, gg, hh, gh, gy, hy):
-    """``y ≈ a g + b h`` with ``a, b ≥ 0`` from the Gram sums: residual and ``a``."""
+    """``y ≈ a g + b h`` with ``a, b ≥ 0`` from the Gram sums: residual, ``a`` and ``b``."""
     det = gg * hh - gh * gh
     if det > 1e-12 * gg * hh:
         a = (hh * gy - gh * hy) / det
         b = (gg * hy - gh * gy) / det
         if a >= 0.0 and b >= 0.0:
-            return yy - a * gy - b * hy, a
+            return yy - a * gy - b * hy, a, b
     # a bound is active: the better of the single terms (or neither)
-    best, a_best = yy, 0.0
+    best, a_best, b_best = yy, 0.0, 0.0
     if gy > 0.0 and yy - gy * gy / gg < best:
-        best, a_best = yy - gy * gy / gg, gy / gg
+        best, a_best, b_best = yy - gy * gy / gg, gy / gg, 0.0
     if hy > 0.0 and hh > 0.0 and yy - hy * hy / hh < best:
-        best, a_best = yy - hy * hy / hh, 0.0
-    return best, a_best
+        best, a_best, b_best = yy - hy * hy / hh, 0.0, hy / hh
+    return best, a_best, b_best
 
 
 @numba.njit(cache=True, nogil=True)
 def _step_sse(filt, i_peak, k_idx, k_w, offsets, grid, sg, decay, g_tab, h_tab, gg_tab, infl):
-    """Per pulse and candidate: residuals of echo + onset and of the onset alone; echo SNR.
+    """Per pulse and candidate: residuals (echo + onset, onset alone), echo SNR, amplitudes.
+
+    The amplitudes are the echo's and the onset's of the echo + onset fit, ``(n, k, 2)``.
 
     The echo's SNR is its amplitude over its standard error (residual noise, ``infl`` for the
     filtered samples' correlation).
@@ -105,6 +126,7 @@ def _step_sse(filt, i_peak, k_idx, k_w, offsets, grid, sg, decay, g_tab, h_tab, 
     sse = np.empty((n, k_n))
     sse1 = np.empty((n, k_n))
     snr = np.zeros((n, k_n))
+    amp = np.zeros((n, k_n, 2))
     y = np.empty(w_n)
     for p in range(n):
         i = i_peak[p]
@@ -134,13 +156,14 @@ def _step_sse(filt, i_peak, k_idx, k_w, offsets, grid, sg, decay, g_tab, h_tab, 
                 hy += h * y[j]
             if not cut:
                 gg = gg_tab[k]
-            sse[p, k], a = _nnls2(yy, gg, hh, gh, gy, hy)
+            sse[p, k], a, b = _nnls2(yy, gg, hh, gh, gy, hy)
+            amp[p, k, 0], amp[p, k, 1] = a, b
             sse1[p, k] = yy - hy * hy / hh if (hy > 0.0 and hh > 0.0) else yy
             det = gg * hh - gh * gh
             if a > 0.0 and det > 1e-12 * gg * hh:
                 var_a = max(sse[p, k], 0.0) / max(w_n - 3, 1) * infl * hh / det
                 snr[p, k] = a / math.sqrt(var_a) if var_a > 0.0 else np.inf
-    return sse, sse1, snr
+    return sse, sse1, snr, amp
 
 
 def decay_index(decay: np.ndarray | None, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -162,6 +185,94 @@ def decay_index(decay: np.ndarray | None, n: int) -> tuple[np.ndarray, np.ndarra
     return np.where(small, 0.0, k), np.where(small, 0, row), np.where(small, 0.0, w)
 
 
+class StepParts(NamedTuple):
+    """A batch's two surface times and which of them the survey's echo prevalence mixes.
+
+    Attributes
+    ----------
+    t_echo : (n,) ndarray
+        Time of the fit with the echo term kept, fractional sample.
+    t_onset : (n,) ndarray
+        Time of the onset alone (``t_echo`` where not ``mixable``).
+    clear : (n,) bool ndarray
+        The echo is unambiguous: significant (``echo_sigma``) and above the onset's own peak.
+    mixable : (n,) bool ndarray
+        Neither clear nor timed by the echo term of necessity (window cut, no onset minimum):
+        its time is ``t_onset + w (t_echo − t_onset)``, ``w`` from :func:`echo_weight`.
+    """
+
+    t_echo: np.ndarray
+    t_onset: np.ndarray
+    clear: np.ndarray
+    mixable: np.ndarray
+
+
+def echo_weight(n_clear: int, n_mixable: int, half: float) -> float:
+    """Weight of the echo-kept time of an ambiguous echo: ``p / (p + half)``.
+
+    ``p`` is the share of the pulses judged (clear + mixable) whose echo is clear (0 without
+    any judged). A weak echo and an earlier onset are nearly the same waveform (``g ∝
+    ∂h/∂t_s``), so a pulse alone cannot tell them apart: where clear echoes are common (a
+    wind sea) the weak ones are echoes too, where they are absent (calm water off nadir) an
+    "echo" is the onset's noise. The survey's share of clear echoes is the prior (empirical
+    Bayes, Efron 2010, *Large-Scale Inference*, ch. 1), ``half``
+    (``detect.surface_echo_prevalence_half``) the share that weighs both times equally.
+    """
+    n = n_clear + n_mixable
+    if n <= 0:
+        return 0.0
+    p = n_clear / n
+    return p / (p + half)
+
+
+def mixed_time(parts: StepParts, weight: float) -> np.ndarray:
+    """Each pulse's surface time (fractional sample), an ambiguous echo's weighted by ``weight``."""
+    mix = parts.t_onset + weight * (parts.t_echo - parts.t_onset)
+    return np.where(parts.mixable, mix, parts.t_echo)
+
+
+def mix_stored_echoes(store, half: float, log=print) -> float:
+    """Set each stored ambiguous surface echo's time from the survey's share of clear echoes.
+
+    Each chunk's detection weighed its ambiguous echoes by its own blocks' share; the survey's
+    share, from integer counts, makes every pulse's time independent of the chunking. The
+    parts (:data:`~pipeline.process.detect.ECHO_FIELDS`) are dropped from the store.
+
+    Parameters
+    ----------
+    store : DetectionStore
+        The survey's stored chunks (:class:`~pipeline.detection_store.DetectionStore`).
+    half : float
+        ``half`` of :func:`echo_weight`.
+    log : callable
+
+    Returns
+    -------
+    float
+        The weight of the echo-kept time.
+    """
+    from pipeline.process.detect import ECHO_FIELDS
+
+    n_clear = n_mix = 0
+    for c in range(len(store.chunks)):
+        state = store.load_chunk(c, ["surface_echo_state"])["surface_echo_state"]
+        n_clear += int(np.count_nonzero(state > 0))
+        n_mix += int(np.count_nonzero(state < 0))
+    w = echo_weight(n_clear, n_mix, half)
+    for c in range(len(store.chunks)):
+        d = store.load_chunk(c, ["t_surface_s", *ECHO_FIELDS])
+        mix = d["surface_echo_state"] < 0
+        t = np.where(mix, d["t_surface_onset_s"] + w * d["surface_echo_shift_s"], d["t_surface_s"])
+        store.replace_field(c, "t_surface_s", t)
+    for k in ECHO_FIELDS:
+        store.drop_field(k)
+    log(
+        f"  surface echoes: {n_clear} clear of {n_clear + n_mix} judged; an ambiguous one's "
+        f"time weighs the echo-kept fit {w:.3f}"
+    )
+    return w
+
+
 def surface_step_fit(
     filt: np.ndarray,
     i_peak: np.ndarray,
@@ -169,7 +280,9 @@ def surface_step_fit(
     decay: np.ndarray | None = None,
     echo_sigma: float | None = None,
     with_echo_time: bool = False,
-) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+    prevalence_half: float = 0.02,
+    with_parts: bool = False,
+) -> np.ndarray | tuple[np.ndarray, np.ndarray] | tuple[np.ndarray, StepParts]:
     """Surface time (fractional sample) of each waveform from the echo + column-onset fit.
 
     Parameters
@@ -179,21 +292,27 @@ def surface_step_fit(
     i_peak : (n,) int ndarray
         Sample of each surface peak.
     sg : float
-        σ of the filtered system response, samples.
+        σ of the (filtered) system response, samples.
     decay : (n,) ndarray, optional
         Each pulse's measured column decay, 1/sample (0 or None: the onset is a smoothed step).
     echo_sigma : float, optional
-        The surface echo (Gaussian) term is kept only where its fitted amplitude stands this
-        many standard errors above 0; elsewhere the onset alone times the surface (an echo
-        term free to sit on noise pulls a noisy onset late). None: always kept.
+        The surface echo (Gaussian) term is taken as it is only where its fitted amplitude
+        stands this many standard errors above 0 and above the onset's own peak (a clear
+        echo); elsewhere the time is the onset alone's moved toward the echo-kept one by
+        :func:`echo_weight` of this batch's share of clear echoes (a survey sets it from all
+        its pulses: :func:`mixed_time` of ``with_parts``). None: the echo is always kept.
     with_echo_time : bool
         Also return the time of the fit with the echo term kept (a start for later fits that
         model the echo, :func:`~pipeline.process.detect_merged.merged_bottoms`).
+    prevalence_half : float
+        ``half`` of :func:`echo_weight`.
+    with_parts : bool
+        Return the :class:`StepParts` instead of the echo-kept time (needs ``echo_sigma``).
 
     Returns
     -------
     (n,) ndarray, or two
-        Fitted surface time, samples from the first (and the echo-kept one).
+        Fitted surface time, samples from the first (and the echo-kept one, or the parts).
     """
     filt = np.ascontiguousarray(filt, dtype=np.float64)
     i_peak = np.asarray(i_peak, dtype=np.int64)
@@ -207,21 +326,47 @@ def surface_step_fit(
     k_dec, k_row, k_w = decay_index(decay, n)
     # noise of the filtered samples is correlated over ~2√π σ_raw samples (σ_raw = sg/√2)
     infl = max(1.0, 2.0 * math.sqrt(math.pi) * sg / math.sqrt(2.0))
-    sse2, sse1, snr = _step_sse(
+    sse2, sse1, snr, amp = _step_sse(
         filt, i_peak, k_row, k_w, offsets, STEP_GRID, float(sg), k_dec, g, h, (g * g).sum(1), infl
     )
-    sse = sse2
-    if echo_sigma is not None:
-        best = np.argmin(sse2, axis=1)
-        echo = snr[np.arange(n), best] >= echo_sigma
-        # the onset alone only where it is whole in the waveform (a window cut by the record's
-        # start repeats its first sample, which an onset fits as a step at the edge) and has a
-        # minimum inside the candidates (at the first one it found no onset to time)
-        cut = (i_peak + offsets[0] < 0) | (i_peak + offsets[-1] > filt.shape[1] - 1)
-        inside = np.argmin(sse1, axis=1) > 0
-        sse = np.where((echo | cut | ~inside)[:, None], sse2, sse1)
-    t_sel = _refined(sse, i_peak)
-    return (t_sel, _refined(sse2, i_peak)) if with_echo_time else t_sel
+    t_echo = _refined(sse2, i_peak)
+    if echo_sigma is None:
+        return (t_echo, t_echo) if with_echo_time else t_echo
+    rows = np.arange(n)
+    best = np.argmin(sse2, axis=1)
+    # clear: significant, and the echo's peak above the onset's (a weaker "echo" is also an
+    # onset earlier by ~ a σ √(2π) / b samples: the fit cannot tell which)
+    a_best, b_best = amp[rows, best, 0], amp[rows, best, 1]
+    clear = (snr[rows, best] >= echo_sigma) & (a_best >= b_best * onset_peak(sg, k_dec))
+    # the onset alone only where it is whole in the waveform (a window cut by the record's
+    # start repeats its first sample, which an onset fits as a step at the edge) and has a
+    # minimum inside the candidates (at the first one it found no onset to time)
+    cut = (i_peak + offsets[0] < 0) | (i_peak + offsets[-1] > filt.shape[1] - 1)
+    inside = np.argmin(sse1, axis=1) > 0
+    mixable = ~clear & ~cut & inside
+    t_onset = np.where(mixable, _refined(sse1, i_peak), t_echo)
+    parts = StepParts(t_echo, t_onset, clear, mixable)
+    w = echo_weight(int(clear.sum()), int(mixable.sum()), prevalence_half)
+    t_sel = mixed_time(parts, w)
+    if with_parts:
+        return t_sel, parts
+    return (t_sel, t_echo) if with_echo_time else t_sel
+
+
+def onset_peak(sg: float, decay: np.ndarray) -> np.ndarray:
+    """Peak value of each pulse's :func:`column_onset` (1 for a step; below for a decay).
+
+    Parameters
+    ----------
+    sg : float
+        σ of the response, samples.
+    decay : (n,) ndarray
+        Column decays, 1/sample.
+    """
+    # the peak lies within ~3 σ of the surface for every tabulated decay: a 0.02 σ grid
+    z = np.arange(-1.0, 4.0001, 0.02)
+    k = np.asarray(decay, dtype=np.float64)[:, None]
+    return column_onset(z[None, :] * sg, sg, k).max(axis=1)
 
 
 def _refined(sse: np.ndarray, i_peak: np.ndarray) -> np.ndarray:
