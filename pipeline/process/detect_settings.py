@@ -1,0 +1,78 @@
+"""What the full-waveform detector assumes and chooses (:mod:`pipeline.process.detect`).
+
+The settings alone, so the scene's keys (``process.detect.*``) are declared apart from the
+detector's code; :mod:`pipeline.process.detect` re-exports :class:`DetectSettings`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from pipeline.config import setting
+
+__all__ = ["DetectSettings"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class DetectSettings:
+    """Detection thresholds."""
+
+    threshold_sigma: float = setting(5.0, gt=0.0, le=100.0, doc="detection threshold, noise σ")
+    noise_fraction: float = setting(
+        0.1, gt=0.0, lt=0.9, doc="leading part of the window used for the noise floor"
+    )
+    min_separation_fwhm: float = setting(
+        2.5, ge=0.5, le=20.0, doc="surface-bottom separation below which returns merge"
+    )
+    fit_merged: bool = setting(True, doc="separate merged returns by a two-Gaussian fit")
+    surface_step: bool = setting(
+        True,
+        doc="time the surface with a Gaussian + column-onset step fit (unbiased by the "
+        "water-column return that starts with it)",
+    )
+    surface_onset_decay: bool = setting(
+        True,
+        doc="the column onset under the surface echo decays at the pulse's measured column rate "
+        "(an exponentially modified Gaussian); False: a plain smoothed step",
+    )
+    surface_echo_sigma: float = setting(
+        10.0,
+        gt=0.0,
+        doc="a surface echo is clear (the step fit's echo-kept time taken as it is) where its "
+        "fitted amplitude stands this many (residual-based, so optimistic) standard errors "
+        "above 0 and above the column onset's peak; a weaker one's time is mixed from the "
+        "onset alone and the echo-kept fit by the survey's share of clear echoes "
+        "(surface_echo_prevalence_half). The 10 was set, as a yes/no switch, on the suite's "
+        "tuning scenes 20, 43, 60 (calm) and 24 (7 m/s): 5 left the calm ones 2-5 cm shallow, "
+        "50 made scene 24 0.19 m deep, 20 dropped clear echoes "
+        "(SNR ~20) of the posterior tests' waveforms",
+    )
+    surface_echo_prevalence_half: float = setting(
+        0.02,
+        gt=0.0,
+        lt=1.0,
+        doc="share of clear surface echoes (significant and above the column onset's peak) "
+        "among the survey's pulses at which an ambiguous echo's time is half the echo-kept "
+        "fit's and half the onset alone's (weight p / (p + this)). Set on the tuning scenes "
+        "of benchmarks/wave_refraction (seeds 7, 8: 5 m/s waves, flat 5 and 1.5 m/s) as the "
+        "smallest sum of squared surface-time biases among 0.005, 0.01, 0.02, 0.05",
+    )
+    trend_fwhm: float = setting(
+        8.0, ge=2.0, le=100.0, doc="running-median width (system FWHMs) of the column trend"
+    )
+    column_returns: bool = setting(
+        True, doc="report the strongest significant in-column return between surface and bottom"
+    )
+    bottom_pick: str = setting(
+        "strongest",
+        choices=("strongest", "last"),
+        doc="bottom among the candidates: the strongest, or the last (a scattering layer "
+        "stronger than the seabed then stays an in-column return)",
+    )
+    max_plateau_fwhm: float = setting(
+        6.0,
+        ge=1.0,
+        le=100.0,
+        doc="longest clipped plateau (system FWHMs) taken for one echo; longer, it runs on "
+        "into the column and the bottom: the surface is not timed, no bottom is reported",
+    )
