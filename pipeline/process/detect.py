@@ -55,7 +55,7 @@ from pipeline.process.detect_settings import DetectSettings
 from pipeline.process.detect_timing import parabolic_peak
 from pipeline.process.flank_trend import flank_trend
 from pipeline.process.returns import DetectorFlag
-from pipeline.process.surface_step import surface_step_fit
+from pipeline.process.surface_step import ECHO_FIELDS, surface_step_fit
 
 __all__ = [
     "DetectSettings",
@@ -68,9 +68,6 @@ __all__ = [
 
 
 _SIG = ("t_surface_sigma_s", "t_bottom_sigma_s")
-#: The surface step fit's parts the survey mixes once its share of clear echoes is known
-#: (:func:`~pipeline.process.surface_step.echo_weight`; run_survey drops them after)
-ECHO_FIELDS = ("surface_echo_state", "t_surface_onset_s", "surface_echo_shift_s")
 
 
 @dataclass(frozen=True)

@@ -57,6 +57,7 @@ __all__ = [
     "mix_stored_echoes",
     "STEP_GRID",
     "DECAY_GRID",
+    "ECHO_FIELDS",
     "column_onset",
 ]
 
@@ -66,6 +67,10 @@ STEP_GRID = np.arange(-4.0, 0.5001, 0.02)
 #: Column decays tabulated (1/sample): 0 (a plain smoothed step) and 60 from 0.002 to 1 (11 %
 #: apart; a pulse interpolates between the two around its own decay, linearly in log).
 DECAY_GRID = np.concatenate([[0.0], np.geomspace(0.002, 1.0, 60)])
+#: The step fit's parts the survey mixes once its share of clear echoes is known
+#: (:func:`echo_weight`, :func:`mix_stored_echoes`; the detector stores them per pulse, the
+#: survey drops them after)
+ECHO_FIELDS = ("surface_echo_state", "t_surface_onset_s", "surface_echo_shift_s")
 
 
 def column_onset(u: np.ndarray, sigma: float, decay: float | np.ndarray) -> np.ndarray:
@@ -236,7 +241,7 @@ def mix_stored_echoes(store, half: float, log=print) -> float:
 
     Each chunk's detection weighed its ambiguous echoes by its own blocks' share; the survey's
     share, from integer counts, makes every pulse's time independent of the chunking. The
-    parts (:data:`~pipeline.process.detect.ECHO_FIELDS`) are dropped from the store.
+    parts (:data:`ECHO_FIELDS`) are dropped from the store.
 
     Parameters
     ----------
@@ -251,8 +256,6 @@ def mix_stored_echoes(store, half: float, log=print) -> float:
     float
         The weight of the echo-kept time.
     """
-    from pipeline.process.detect import ECHO_FIELDS
-
     n_clear = n_mix = 0
     for c in range(len(store.chunks)):
         state = store.load_chunk(c, ["surface_echo_state"])["surface_echo_state"]
