@@ -45,24 +45,12 @@ import numpy as np
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.detection_limit import BLOCK, DetectorModel, filtered_waveforms
 
-__all__ = [
-    "MIN_PULSES",
-    "MIN_SNR",
-    "TAIL_NOISE_FRACTION",
-    "ColumnStack",
-    "column_start_s",
-    "stack_column",
-    "stacked_decay_per_m",
-]
+__all__ = ["MIN_PULSES", "MIN_SNR", "ColumnStack", "stack_column", "stacked_decay_per_m"]
 
 #: Pulses a stack bin needs to enter the fit (its standard error is estimated from them).
 MIN_PULSES = 20
 #: A stack bin enters the fit while its mean is above this many standard errors.
 MIN_SNR = 3.0
-#: A column starts where its surface echo's filtered tail is below this share of the filtered
-#: noise σ (:func:`column_start_s`): a residual of 0.1 σ on a faint column of ~4 σ (clear
-#: water) is 2 % in its first bin and vanishes within a few bins.
-TAIL_NOISE_FRACTION = 0.1
 
 
 @dataclass(frozen=True)
@@ -109,47 +97,6 @@ class ColumnStack:
         return out
 
 
-def column_start_s(
-    t_surface_s: np.ndarray,
-    det: DetectorModel,
-    surface_amplitude: np.ndarray | None = None,
-    noise_sigma: np.ndarray | None = None,
-) -> np.ndarray:
-    """Time of each pulse's first column sample: past its surface echo's filtered tail.
-
-    The detector's minimum separation (``min_separation_fwhm`` FWHM) after the surface, or
-    later where the echo is bright: the matched-filtered echo is a Gaussian of ``√2 σ``,
-    ``A_f exp(−Δ² / 4σ²)``, below ``ε`` filtered noise σ from ``Δ = 2σ √ln(A_f / ε σ_n)`` on
-    (``ε`` = :data:`TAIL_NOISE_FRACTION`). A glint the digitiser clipped (nadir, calm water)
-    is ``10³-10⁵`` noise σ: 2.5 FWHM after it the tail is still tens of noise σ, far above the
-    column, and would steepen its decay. The digitiser is linear below its top code
-    (:mod:`pipeline.process.detect_clipped`, which times such an echo from the plateau's
-    edges and gives its amplitude), so past the tail such a pulse's column is measured as any.
-
-    Parameters
-    ----------
-    t_surface_s : (n,) ndarray
-        Surface echo time from the first sample, seconds.
-    det : DetectorModel
-    surface_amplitude, noise_sigma : (n,) ndarray, optional
-        Filtered echo peak and filtered noise σ, counts; without them the minimum separation.
-
-    Returns
-    -------
-    (n,) ndarray
-        Seconds from the first sample.
-    """
-    t_s = np.asarray(t_surface_s, dtype=np.float64)
-    gap_s = np.full(t_s.shape, det.min_separation_fwhm * det.pulse_fwhm_s)
-    if surface_amplitude is not None and noise_sigma is not None:
-        ratio = np.asarray(surface_amplitude, dtype=np.float64) / np.maximum(
-            TAIL_NOISE_FRACTION * np.asarray(noise_sigma, dtype=np.float64), 1e-300
-        )
-        tail_s = 2.0 * det.sigma_samples * det.dt_s * np.sqrt(np.log(np.maximum(ratio, 1.0)))
-        gap_s = np.maximum(gap_s, tail_s)
-    return t_s + gap_s
-
-
 def _accumulate(filt, first_idx, end_idx, dt_s) -> ColumnStack:
     """Stack of ``filt`` (n, m) from ``ceil(first_idx)`` to before ``end_idx``, shapes (n,)."""
     n, m = filt.shape
@@ -171,8 +118,6 @@ def stack_column(
     t_surface_s: np.ndarray,
     t_end_s: np.ndarray,
     det: DetectorModel,
-    surface_amplitude: np.ndarray | None = None,
-    noise_sigma: np.ndarray | None = None,
 ) -> ColumnStack:
     """Add the columns of a chunk's pulses, each aligned at its first column sample.
 
@@ -187,19 +132,18 @@ def stack_column(
         Each pulse's column ends before this time from the first sample (a separation before its
         bottom or in-column echo, or the detector's searched end), seconds.
     det : DetectorModel
-    surface_amplitude, noise_sigma : (n,) ndarray, optional
-        Each surface echo's filtered peak and the filtered noise σ (the detector's, counts):
-        where given, a column starts no earlier than where its surface echo's filtered tail
-        has fallen to :data:`TAIL_NOISE_FRACTION` of the noise (:func:`column_start_s`).
 
     Returns
     -------
     ColumnStack
-        Bins from each pulse's first column sample (:func:`column_start_s`); ``m`` bins.
+        Bins from the first column sample, ``surface + min_separation_fwhm × FWHM`` (where the
+        surface echo no longer masks the column); ``m`` bins.
     """
     samples = np.asarray(samples)
     n, m = samples.shape
-    first = column_start_s(t_surface_s, det, surface_amplitude, noise_sigma) / det.dt_s
+    first = (
+        np.asarray(t_surface_s, dtype=np.float64) + det.min_separation_fwhm * det.pulse_fwhm_s
+    ) / det.dt_s
     end = np.asarray(t_end_s, dtype=np.float64) / det.dt_s
     out = ColumnStack(np.zeros(m), np.zeros(m), np.zeros(m, dtype=np.int64), det.dt_s)
     for i in range(0, n, BLOCK):  # blocks bound the (pulses × samples) temporaries

@@ -79,13 +79,12 @@ def chunk_inputs(
         losses of the well-detected bottoms, SNR ≥ 2 × threshold
         (:func:`~pipeline.process.detection_limit.bottom_losses`); ``column_stack``, the
         :class:`~pipeline.process.column_stack.ColumnStack` of the columns of both sets of
-        pulses and of the clipped surfaces' (glints: past their tails), added over the chunks,
-        not concatenated.
+        pulses (added over the chunks, not concatenated).
     """
     det = detector_model(ctx, detect)
     n = found.has_surface.shape[0]
-    # a saturated pulse's own fit is not made: its surface level is clipped, so the depth a
-    # bottom would have shown down to is not measured (its column still enters the stack, below)
+    # a saturated pulse's column is clipped or follows a clipped surface: its decay, and so
+    # the depth a bottom would have shown down to, is not measured
     saturated = (found.flags & np.uint16(DetectorFlag.SATURATED)) != 0
     none = found.has_surface & ~found.has_bottom & ~saturated
     margin, alpha, t_max = np.zeros(n), np.ones(n), np.zeros(n)
@@ -122,23 +121,10 @@ def chunk_inputs(
     sep_s = det.min_separation_fwhm * det.pulse_fwhm_s
     m = samples.shape[1]
     searched_end_s = (m - max(2, math.ceil(1.5 * det.pulse_fwhm_s / det.dt_s))) * det.dt_s
-    # a clipped surface (a glint) hides no column: the stack starts past its tail
-    # (column_stack.column_start_s); only a plateau run on into the column hides it
-    clipped_in = (found.flags & np.uint16(DetectorFlag.CLIPPED_MERGED)) != 0
-    glint = saturated & found.has_surface & ~clipped_in
-    glint_bottom = glint & found.has_bottom
-    glint_bottom &= found.bottom_amplitude >= 2.0 * detect.threshold_sigma * found.noise_sigma
-    t_end = np.where(strong | glint_bottom, found.t_bottom_s - sep_s, searched_end_s)
+    t_end = np.where(strong, found.t_bottom_s - sep_s, searched_end_s)
     t_end = np.where(found.has_column, np.minimum(t_end, found.t_column_s - sep_s), t_end)
-    stacked = none | strong | (glint & (glint_bottom | ~found.has_bottom))
-    stack = stack_column(
-        samples[stacked],
-        found.t_surface_s[stacked],
-        t_end[stacked],
-        det,
-        surface_amplitude=found.surface_amplitude[stacked],
-        noise_sigma=found.noise_sigma[stacked],
-    )
+    stacked = none | strong
+    stack = stack_column(samples[stacked], found.t_surface_s[stacked], t_end[stacked], det)
     return {
         "column_stack": stack,
         "none": none,
