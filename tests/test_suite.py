@@ -382,11 +382,27 @@ def test_ci_no_gross_error_held_out(ci_suite):
     ],
 )
 def test_ci_tpu_95_coverage_floor(ci_suite, half_name):
-    # measured 96.7 % tuning (2026-11-25: the kriged sea change, the surface echo weighting)
+    # measured 95.0 % tuning (2026-11-25: the seabed gradient with its covariance, the wave
+    # facet across a profiler's line; 96.7 % before)
     assert 0.93 <= ci_suite["strata"][("all", "all")][half_name]["tpu"]["cov95"] <= 0.97
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="measured: TPU 68 % coverage 75.2 % tuning (too wide)")
-def test_ci_tpu_68_coverage_floor_tuning(ci_suite):
-    assert 0.64 <= ci_suite["strata"][("all", "all")]["tuning"]["tpu"]["cov68"] <= 0.72
+@pytest.mark.parametrize(
+    "half_name",
+    [
+        "tuning",
+        pytest.param(
+            "heldout",
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason="measured: held-out TPU 68 % coverage 85.7 % (too wide; 85.1 % before "
+                "the seabed gradient's covariance: the held-out scenes' widest terms are the "
+                "surface and bottom timing, seeds 9002, 9005, 9006; not the gradient)",
+            ),
+        ),
+    ],
+)
+def test_ci_tpu_68_coverage_floor(ci_suite, half_name):
+    # measured 68.5 % tuning (2026-11-25, the seabed gradient; 75.2 % before, too wide)
+    assert 0.64 <= ci_suite["strata"][("all", "all")][half_name]["tpu"]["cov68"] <= 0.72

@@ -38,6 +38,11 @@ from pipeline.process.grid import Grid
 from pipeline.process.refraction import ProcessedPoints, kriged_sea_change, seabed_points
 from pipeline.process.returns import DetectedReturns, PointFlag, Points, ReturnKind
 from pipeline.uncertainty.cell_uncertainty import CellUncertainty, cell_uncertainty
+from pipeline.uncertainty.seabed_gradient import (
+    GRADIENT_TERM,
+    gradient_sigma_depth_m,
+    horizontal_cov,
+)
 from pipeline.uncertainty.tpu import (
     PointTpu,
     pair_scatter,
@@ -46,7 +51,7 @@ from pipeline.uncertainty.tpu import (
     surface_tilt_sigma,
     timing_from_scatter,
 )
-from pipeline.uncertainty.tpu_facet import with_wave_facet
+from pipeline.uncertainty.tpu_facet import track_directions, with_wave_facet
 from pipeline.uncertainty.tpu_measured import (
     surface_variogram,
     with_surface_ranging,
@@ -126,8 +131,19 @@ def survey_uncertainty(
     bottom_xy = seabed_points(returns, processed.surface, refr).xyz_m[:, :2]
     xy40, d40 = points40.xyz_m[:, :2], points40.depth_m
     group = points40.pulse_id // ins.shots_per_window if ins.photon_counting else None
-    near = {"neighbours": st.gradient_neighbours, "radius_m": st.gradient_radius_m}
-    grad = seabed_gradient(xy40, d40, bottom_xy, group=group, **near)
+    near = {
+        "neighbours": st.gradient_neighbours,
+        "radius_m": st.gradient_radius_m,
+        "regional_radius_m": st.gradient_regional_radius_m,
+        "prior_slope_deg": st.gradient_prior_slope_deg,
+        "local_sigma": st.gradient_local_sigma,
+    }
+    # the seabed's own gradient: of its height below a level datum (depths below the sea
+    # at each pulse's time carry the waves' slope, which the surface terms hold; on suite
+    # tuning seed 109, 9 m/s over a plane, the depths' cells read 0.057 of relief slope)
+    grad, grad_cov = seabed_gradient(
+        xy40, -points40.xyz_m[:, 2], bottom_xy, group=group, return_cov=True, **near
+    )
     # the water surface measured over each sounding against its pulse's plane there: the
     # plane's tilt uncertainty, averaged over the bathymetric points
     bottom_ids = returns.pulse_id[returns.has_bottom]
@@ -206,7 +222,19 @@ def survey_uncertainty(
             grad[np.searchsorted(bottom_rows, tpu40.row)],
             refr.phase_index,
             tilt_sigma_rad=plane_tilt,
+            track_xy=track_directions(returns),
         )
+    # what the sounding's horizontal uncertainty makes of the gradient's own (unmeasured
+    # across a profiler's line: the slope prior)
+    bottom_rows = np.flatnonzero(returns.has_bottom)
+    tpu40 = with_random_term(
+        tpu40,
+        GRADIENT_TERM,
+        np.zeros(len(tpu40)),
+        gradient_sigma_depth_m(
+            grad_cov[np.searchsorted(bottom_rows, tpu40.row)], horizontal_cov(tpu40)
+        ),
+    )
     cells = cell_uncertainty(grid, tpu40)
     return SurveyUncertainty(
         tpu40=tpu40,

@@ -60,7 +60,7 @@ wave height            R   the local water surface off its fitted plane: the fit
                            with the own echo it is mostly in the depth below the plane).
 wave slope             R   facet slope under the footprint not in the fitted plane
                            (``wave_slope_sigma_rad`` per axis; :func:`cox_munk_slope_sigma`).
-                           Default 0: the survey then measures it (``wave_facet_x/y``,
+                           Default 0: the survey then measures it (``wave_facet_along/across``,
                            :mod:`pipeline.uncertainty.tpu_facet`: the sea's slope the fitted
                            planes do not follow, from the surface variogram's ``a h²`` rise;
                            refraction only, added after this function).

@@ -20,12 +20,17 @@ as ``gamma(h) = n + a h²`` at short lags, ``2 a`` the mean-square slope of the 
 planes do not follow along the pairs' directions. Isotropic sea: the same along both axes,
 ``s_u² = 2 a - t_u²``, ``t_u`` the plane's per-axis tilt sigma the ``surface_tilt_*`` terms
 already carry (the fit's standard error or the tilt measured over the sounding,
-:func:`~pipeline.uncertainty.tpu_neighbours.surface_tilt_sigma`): never a double count. Across
-a profiler's track the planes follow no slope at all, so what they miss there is ``2 a`` plus
-the along-track slope they do follow; that part is not added (the planes' slope scatter is fit
-noise on flat water, see :func:`unresolved_slope_sigma_rad`). Flat water: ``a = 0``, no term. A
-user's ``process.tpu.wave_slope_sigma_rad > 0`` wins (its ``wave_slope_*`` terms stand for it
-and this term is not added).
+:func:`~pipeline.uncertainty.tpu_neighbours.surface_tilt_sigma`): never a double count. The two
+axes are along and across each pulse's flight line (:func:`track_directions`). Across a
+profiler's track (a pulse whose plane is flagged ``SURFACE_ILL_CONDITIONED``: its neighbours
+are nearly collinear and the ridge keeps it level across) the plane follows no slope at all: it
+misses the whole sea's slope there, ``2 a_raw`` (the same variogram's rise with the heights
+taken above the survey's global plane, so the along-track slope the planes do follow is back
+in; isotropic sea), less the tilt term's share. Before, it got ``2 a``: on suite tuning seed 19
+(full-waveform profiler, 3.3 m/s, a 14° seabed sloping across the track) that sized the facet's
+slope at 0.021 rad where the sea's across-track slope the planes missed was 0.038 rad. Flat
+water: ``a = a_raw = 0``, no term. A user's ``process.tpu.wave_slope_sigma_rad > 0`` wins (its
+``wave_slope_*`` terms stand for it and this term is not added).
 
 Slopes shorter than the variogram's shortest lags (capillaries) are not in ``a``: they vary
 within the footprint, and their mean over it is small.
@@ -39,27 +44,56 @@ import warnings
 import numpy as np
 
 from pipeline.optics import refract_direction
+from pipeline.process.returns import DetectedReturns, PointFlag
 from pipeline.process.surface_fit import WaterSurface
 from pipeline.uncertainty.tpu_measured import SurfaceVariogram
 from pipeline.uncertainty.tpu_settings import DEPTH, PointTpu, X, Y, Z
 
-__all__ = ["FACET_TERMS", "unresolved_slope_sigma_rad", "facet_jacobian", "with_wave_facet"]
+__all__ = [
+    "FACET_TERMS",
+    "track_directions",
+    "unresolved_slope_sigma_rad",
+    "facet_jacobian",
+    "with_wave_facet",
+]
 
-#: Names of the two terms (facet slope along x, along y) in ``PointTpu.terms``.
-FACET_TERMS = ("wave_facet_x", "wave_facet_y")
+#: Names of the two terms (facet slope along and across the pulse's flight line).
+FACET_TERMS = ("wave_facet_along", "wave_facet_across")
+
+
+def track_directions(returns: DetectedReturns) -> np.ndarray:
+    """Unit horizontal direction of each pulse's flight line, ``(n, 2)``.
+
+    The principal axis of the measured origins of the pulses of each line (``line_id``; all
+    pulses as one line without it); x where a line's origins do not spread (one pulse).
+    """
+    n = len(returns)
+    out = np.tile([1.0, 0.0], (n, 1))
+    line = np.zeros(n, np.int64) if returns.line_id is None else np.asarray(returns.line_id)
+    xy = np.asarray(returns.origin_meas_m, dtype=np.float64)[:, :2]
+    for lid in np.unique(line):
+        m = line == lid
+        if np.count_nonzero(m) < 2:
+            continue
+        d = xy[m] - xy[m].mean(axis=0)
+        w, v = np.linalg.eigh(d.T @ d)
+        if w[-1] > 0.0:
+            out[m] = v[:, -1]
+    return out
 
 
 def unresolved_slope_sigma_rad(
     vg: SurfaceVariogram, surface: WaterSurface, tilt_sigma_rad=None, rows=None
 ) -> np.ndarray:
-    """Per-axis sigma of the facet slope the planes do not resolve, ``(k, 2)`` (x, y).
+    """Sigma of the facet slope the planes do not resolve, ``(k, 2)`` (along, across the track).
 
     Parameters
     ----------
     vg : SurfaceVariogram
-        The survey's surface variogram (its ``rise_per_m2``).
+        The survey's surface variogram (its ``rise_per_m2`` and ``raw_rise_per_m2``).
     surface : WaterSurface
-        The fitted planes of every pulse (which enter water; the fit's tilt sigma).
+        The fitted planes of every pulse (which enter water; the fit's tilt sigma; which are
+        ill-conditioned, level across their track).
     tilt_sigma_rad : (k,) array_like, optional
         Each row's plane tilt sigma (both axes) that the ``surface_tilt_*`` terms carry; its
         per-axis share ``/ sqrt 2`` is taken off. Default: the fit's ``normal_sigma_rad``.
@@ -68,22 +102,25 @@ def unresolved_slope_sigma_rad(
     """
     rows = np.arange(len(surface)) if rows is None else np.asarray(rows, dtype=np.int64)
     # the slope the planes miss along the pairs, the same along every axis (isotropic sea). The
-    # planes' own slope scatter is not added back across the axes they cannot follow: on flat
-    # water it is fit noise (suite tuning scene 24: 4e-4 across a Palmer line, where the fit's
-    # sigma says 1e-5 and the sea has 2e-5), and where it is sea it was small (scene 13: 2e-5
-    # along a profiler's track against 2 a = 8e-3)
+    # planes' own slope scatter is not added back across the axes they follow: on flat water
+    # it is fit noise (suite tuning scene 24: 4e-4 across a Palmer line, where the fit's sigma
+    # says 1e-5 and the sea has 2e-5). Across a blind plane the whole sea's slope is missed
     left = 2.0 * max(vg.rise_per_m2, 0.0)
+    whole = max(2.0 * max(vg.raw_rise_per_m2, 0.0), left)
     tilt = surface.normal_sigma_rad[rows] if tilt_sigma_rad is None else tilt_sigma_rad
     tilt2 = np.nan_to_num(np.asarray(tilt, dtype=np.float64)) ** 2 / 2.0
-    var = np.maximum(left - tilt2, 0.0)[:, None] * np.ones((1, 2))
+    blind = (surface.flags[rows] & np.uint16(PointFlag.SURFACE_ILL_CONDITIONED)) != 0
+    var = np.column_stack(
+        [np.maximum(left - tilt2, 0.0), np.maximum(np.where(blind, whole, left) - tilt2, 0.0)]
+    )
     return np.where(surface.is_water[rows, None], np.sqrt(var), 0.0)
 
 
-def _normal_with_slope(normal: np.ndarray, axis: int, step: float) -> np.ndarray:
-    """Upward unit normals whose surface slope along ``axis`` (0: x, 1: y) is moved by ``step``."""
+def _normal_with_slope(normal: np.ndarray, axis: np.ndarray, step: float) -> np.ndarray:
+    """Upward unit normals whose slope along the unit ``axis`` ``(n, 2)`` moves by ``step``."""
     nz = np.where(np.abs(normal[:, 2]) > 1e-12, normal[:, 2], 1e-12)
     grad = -normal[:, :2] / nz[:, None]
-    grad[:, axis] += step
+    grad = grad + step * axis
     out = np.column_stack([-grad, np.ones(len(normal))])
     return out / np.linalg.norm(out, axis=1, keepdims=True)
 
@@ -96,8 +133,11 @@ def facet_jacobian(
     seabed_gradient: np.ndarray,
     n_air: float,
     n_water: float,
+    track_xy: np.ndarray | None = None,
 ) -> np.ndarray:
     """Change of each sounding per unit facet slope, ``(n, 2, 4)``: axis, (x, y, z, depth).
+
+    The axes are along and across ``track_xy`` (default x, y).
 
     The range is unchanged; the in-water direction turns (Snell's law through the plane's
     normal with one slope component moved; central differences). Depth: below the plane above
@@ -115,16 +155,21 @@ def facet_jacobian(
         Depth gradient of the seabed under the soundings.
     n_air, n_water : float
         Phase indices.
+    track_xy : (n, 2), optional
+        Unit horizontal direction of the first axis (the second is 90° to its left).
     """
     n = len(direction)
+    u = np.tile([1.0, 0.0], (n, 1)) if track_xy is None else np.asarray(track_xy, np.float64)
+    axes = (u, np.column_stack([-u[:, 1], u[:, 0]]))
     length = np.linalg.norm(point_m - entry_m, axis=1)
     nz = np.where(np.abs(normal[:, 2]) > 1e-12, normal[:, 2], 1e-12)
     plane_grad = -normal[:, :2] / nz[:, None]
     out = np.zeros((n, 2, 4))
     h = 1e-4
     for axis in (0, 1):
-        t_p, _ = refract_direction(direction, _normal_with_slope(normal, axis, h), n_air, n_water)
-        t_m, _ = refract_direction(direction, _normal_with_slope(normal, axis, -h), n_air, n_water)
+        v = axes[axis]
+        t_p, _ = refract_direction(direction, _normal_with_slope(normal, v, h), n_air, n_water)
+        t_m, _ = refract_direction(direction, _normal_with_slope(normal, v, -h), n_air, n_water)
         db = length[:, None] * (t_p - t_m) / (2.0 * h)
         out[:, axis, :3] = db
         out[:, axis, DEPTH] = np.sum((plane_grad - seabed_gradient) * db[:, :2], axis=1) - db[:, 2]
@@ -166,6 +211,7 @@ def with_wave_facet(
     seabed_gradient: np.ndarray,
     n_water: float,
     tilt_sigma_rad=None,
+    track_xy=None,
 ) -> PointTpu:
     """``tpu`` with the two random :data:`FACET_TERMS` (module notes).
 
@@ -183,6 +229,8 @@ def with_wave_facet(
         The processing's phase index of water.
     tilt_sigma_rad : (n_pulses,) array_like, optional
         The plane tilt sigma each pulse's ``surface_tilt_*`` terms used (default: the fit's).
+    track_xy : (n_pulses, 2) array_like, optional
+        Each pulse's flight-line direction (:func:`track_directions`); default x.
     """
     r = np.asarray(tpu.row, dtype=np.int64)
     tilt = None if tilt_sigma_rad is None else np.asarray(tilt_sigma_rad, dtype=np.float64)[r]
@@ -195,6 +243,7 @@ def with_wave_facet(
         np.asarray(seabed_gradient, dtype=np.float64).reshape(-1, 2),
         surface.air_index,
         n_water,
+        None if track_xy is None else np.asarray(track_xy, dtype=np.float64)[r],
     )
     rows = {name: jac[:, a, :] * sig[:, a : a + 1] for a, name in enumerate(FACET_TERMS)}
     # a row without water has no facet (sigma 0) and may have no entry or plane: no term

@@ -104,6 +104,9 @@ class SurfaceVariogram:
         ``a`` of ``gamma(h) = n + a h²`` over the shortest pooled lags (``>= 0``): half the
         mean-square slope of the heights above the pulses' own planes along the pairs'
         directions, i.e. of the slope the planes do not follow (0: no rise measured).
+    raw_rise_per_m2 : float
+        The same of the heights above the survey's global plane instead: half the mean-square
+        slope of the whole sea along the pairs (what a plane that follows nothing misses).
     """
 
     lag_m: np.ndarray
@@ -111,6 +114,7 @@ class SurfaceVariogram:
     nugget_m2: np.ndarray
     pairs: int
     rise_per_m2: float = 0.0
+    raw_rise_per_m2: float = 0.0
 
     @classmethod
     def empty(cls) -> SurfaceVariogram:
@@ -186,22 +190,29 @@ def surface_variogram(
     if pairs is None:
         return SurfaceVariogram.empty()
     d, lag = pairs.s_i_m - pairs.s_j_m, pairs.lag_m
+    # the local plane's own rise put back: heights above the global plane
+    d_raw = d if pairs.rise_m is None else d - pairs.rise_m
     inc_i, _ = _incidence_deg(returns, surface, pairs.row_i)
     inc_j, _ = _incidence_deg(returns, surface, pairs.row_j)
     # pairs of like incidence only: the ranging error then is the same at every lag and only
     # the sea makes the variogram rise (an oscillating scanner pairs nadir and edge otherwise)
     like = np.abs(inc_i - inc_j) <= _LIKE_INCIDENCE_DEG
     d, lag, inc_pair = d[like], lag[like], 0.5 * (inc_i + inc_j)[like]
+    d_raw = d_raw[like]
     edges = np.asarray(LAG_EDGES_M)
     lag_bin = np.digitize(lag, edges) - 1
-    lags, gammas = [], []
+    lags, gammas, gammas_raw = [], [], []
     for b in range(edges.size - 1):
         m = lag_bin == b
         if np.count_nonzero(m) >= min_pairs:
             lags.append(float(np.mean(lag[m])))
             gammas.append(_robust_semivariance(d[m]))
-    # the rise at the shortest lags: the slope the planes do not follow (tpu_facet)
-    rise = _nugget_and_rise(np.array(lags[:_NUGGET_BINS]), np.array(gammas[:_NUGGET_BINS]))[1]
+            gammas_raw.append(_robust_semivariance(d_raw[m]))
+    # the rise at the shortest lags: the slope the planes do not follow (tpu_facet), and the
+    # whole sea's (what a plane blind along some axis misses there)
+    h0 = np.array(lags[:_NUGGET_BINS])
+    rise = _nugget_and_rise(h0, np.array(gammas[:_NUGGET_BINS]))[1]
+    raw_rise = _nugget_and_rise(h0, np.array(gammas_raw[:_NUGGET_BINS]))[1]
     bands = np.asarray(INCIDENCE_BANDS_DEG)
     inc_bin = np.digitize(inc_pair, bands) - 1
     nugget = np.full(bands.size - 1, np.nan)
@@ -217,7 +228,9 @@ def surface_variogram(
                 break
         if hs:
             nugget[b] = _nugget(np.array(hs), np.array(gs))
-    return SurfaceVariogram(np.array(lags), np.array(gammas), nugget, int(pairs.row_i.size), rise)
+    return SurfaceVariogram(
+        np.array(lags), np.array(gammas), nugget, int(pairs.row_i.size), rise, raw_rise
+    )
 
 
 def _incidence_deg(returns, surface, rows):

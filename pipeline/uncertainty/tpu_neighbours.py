@@ -13,11 +13,10 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from pipeline.constants import MAD_TO_SIGMA
 from pipeline.process.refraction import RefractionSettings
 from pipeline.process.returns import DetectedReturns
 from pipeline.process.surface_fit import WaterSurface
-from pipeline.process.surface_land import masked_median
+from pipeline.uncertainty.seabed_gradient import group_means, seabed_gradient
 from pipeline.uncertainty.tpu_settings import (
     DEPTH,
     RANDOM_TERMS,
@@ -28,92 +27,6 @@ from pipeline.uncertainty.tpu_terms import _inputs, _terms
 
 #: query points per neighbour search block (memory: ~1.5 kB each with 64 neighbours)
 _QUERY_BLOCK = 65536
-
-
-def _plane_fit(w, dx, dy, z, ridge):
-    """Batched weighted least-squares planes ``z = a + b dx + c dy``, ridge ``ridge`` on b, c."""
-    sw = w.sum(1)
-    sx, sy = (w * dx).sum(1), (w * dy).sum(1)
-    a = np.empty((len(sw), 3, 3))
-    a[:, 0, 0] = sw
-    a[:, 0, 1] = a[:, 1, 0] = sx
-    a[:, 0, 2] = a[:, 2, 0] = sy
-    a[:, 1, 1] = (w * dx * dx).sum(1) + ridge * sw
-    a[:, 2, 2] = (w * dy * dy).sum(1) + ridge * sw
-    a[:, 1, 2] = a[:, 2, 1] = (w * dx * dy).sum(1)
-    bad = sw < 3
-    a[bad] = np.eye(3)
-    rhs = np.stack([(w * z).sum(1), (w * dx * z).sum(1), (w * dy * z).sum(1)], axis=1)
-    rhs[bad] = 0.0
-    return np.linalg.solve(a, rhs[:, :, None])[:, :, 0]
-
-
-def _group_means(group, xy, dep):
-    """Mean position and depth of each group of soundings."""
-    _, inv = np.unique(np.asarray(group).ravel(), return_inverse=True)
-    cnt = np.bincount(inv).astype(np.float64)
-    xy = np.column_stack([np.bincount(inv, weights=xy[:, k]) / cnt for k in range(2)])
-    return xy, np.bincount(inv, weights=dep) / cnt
-
-
-def seabed_gradient(
-    xy_m: Any,
-    depth_m: Any,
-    query_xy_m: Any = None,
-    *,
-    group: Any = None,
-    neighbours: int = 16,
-    radius_m: float = 10.0,
-    ridge_m: float = 0.05,
-    chunk: int = 200_000,
-) -> np.ndarray:
-    """Depth gradient of the seabed from measured soundings, ``(m, 2)`` (m/m).
-
-    At each query point (default: each sounding), a plane ``depth = a + b dx + c dy`` through
-    the ``neighbours`` nearest soundings within ``radius_m``, by least squares with one robust
-    pass (residuals beyond 3 × 1.4826 MAD, at least 1 cm, dropped). A ridge of
-    ``count * ridge_m²`` on ``(b, c)`` keeps collinear soundings (a profiler track) solvable:
-    the slope across them tends to 0. Fewer than 3 soundings: 0.
-
-    Parameters
-    ----------
-    xy_m : (n, 2) array_like
-        Horizontal positions of the soundings.
-    depth_m : (n,) array_like
-        Their depths (positive down).
-    query_xy_m : (m, 2) array_like, optional
-    group : (n,) array_like, optional
-        Soundings sharing one detection (a photon-counting window's shots: one depth) carry
-        the same label and count as one, at their mean.
-    """
-    xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
-    dep = np.asarray(depth_m, dtype=np.float64).ravel()
-    q = xy if query_xy_m is None else np.asarray(query_xy_m, dtype=np.float64).reshape(-1, 2)
-    if group is not None:
-        xy, dep = _group_means(group, xy, dep)
-    out = np.zeros((len(q), 2))
-    if len(xy) < 3 or len(q) == 0:
-        return out
-    tree = cKDTree(xy)
-    k = min(neighbours, len(xy))
-    for lo in range(0, len(q), chunk):
-        qq = q[lo : lo + chunk]
-        _, idx = tree.query(qq, k=k, distance_upper_bound=radius_m, workers=-1)
-        idx = np.asarray(idx).reshape(len(qq), k)
-        valid = idx < len(xy)
-        ic = np.where(valid, idx, 0)
-        dx = np.where(valid, xy[ic, 0] - qq[:, :1], 0.0)
-        dy = np.where(valid, xy[ic, 1] - qq[:, 1:], 0.0)
-        z = np.where(valid, dep[ic], 0.0)
-        w = valid.astype(np.float64)
-        p = _plane_fit(w, dx, dy, z, ridge_m**2)
-        r = np.abs(z - (p[:, :1] + p[:, 1:2] * dx + p[:, 2:3] * dy))
-        scale = MAD_TO_SIGMA * masked_median(r, valid)
-        keep = valid & (r <= np.maximum(3.0 * scale, 0.01)[:, None])
-        w = keep.astype(np.float64)
-        p = _plane_fit(w, dx, dy, z, ridge_m**2)
-        out[lo : lo + chunk] = np.where((w.sum(1) >= 3)[:, None], p[:, 1:], 0.0)
-    return out
 
 
 def pair_scatter(
@@ -172,7 +85,7 @@ def pair_scatter(
         cnt = np.bincount(inv).astype(np.float64)
         if g is not None:
             g = np.column_stack([np.bincount(inv, weights=g[:, k]) / cnt for k in range(2)])
-        xy, dep = _group_means(group, xy, dep)
+        xy, dep = group_means(group, xy, dep)
         if key is not None:
             first = np.full(len(cnt), np.inf)
             np.minimum.at(first, inv, key)
@@ -217,7 +130,7 @@ def _pair_half_squares(xy, dep, g, i, j, max_separation_m):
     sep = xy[i] - xy[j]
     sep_sq = np.sum(sep**2, axis=1)
     diff = dep[i] - dep[j] - np.sum(0.5 * (g[i] + g[j]) * sep, axis=1)
-    return 0.5 * diff**2, sep_sq, sep_sq <= max_separation_m**2
+    return 0.5 * diff**2, sep_sq, np.sqrt(sep_sq) <= max_separation_m  # no overflow of a huge limit
 
 
 def surface_over_sounding(

@@ -101,6 +101,15 @@ class TpuSettings:
         16, ge=3, le=256, doc="soundings per local plane of the seabed gradient"
     )
     gradient_radius_m: float = setting(10.0, gt=0.0, doc="farthest sounding of that plane")
+    gradient_regional_radius_m: float = setting(
+        50.0, ge=0.0, doc="regional plane the local one leans on where it is blind (0: none)"
+    )
+    gradient_prior_slope_deg: float = setting(
+        10.0, gt=0.0, lt=90.0, doc="seabed slope per axis (1 sigma) assumed where no sounding tells"
+    )
+    gradient_local_sigma: float | None = setting(
+        None, ge=0.0, le=10.0, doc="local seabed slope's departure from regional (None: measured)"
+    )
     pair_max_separation_m: float = setting(
         2.0, gt=0.0, doc="farthest partner of a sounding in the measured scatter"
     )

@@ -257,6 +257,52 @@ def test_nadir_beam_through_the_unresolved_wave_facet_over_a_slope():
     )
 
 
+def test_wave_facet_across_a_profiler_whose_planes_follow_the_track():
+    """The same sea, but each plane follows the sea's slope along the track exactly (as a
+    profiler's fit does with its collinear neighbours) and stays level across it (flagged
+    ill-conditioned). Heights above the planes then hardly rise along the track; across it the
+    planes miss the whole sea's slope (isotropic), and over a seabed sloping 18.9° across, the
+    depth error sd is Snell's with the sea's full slope sigma."""
+    from pipeline.process.refraction import RefractionSettings
+    from pipeline.process.returns import PointFlag
+    from pipeline.uncertainty.tpu_facet import FACET_TERMS, track_directions, with_wave_facet
+
+    rng = np.random.default_rng(8)
+    lam = rng.uniform(10.0, 40.0, 40)
+    k = 2 * math.pi / lam
+    a = np.full(40, 0.3 * math.sqrt(2.0 / 40))
+    phi = rng.uniform(0.0, 2 * math.pi, 40)
+
+    def sea(x):
+        return np.sum(a * np.sin(np.outer(x, k) + phi), axis=1)
+
+    def slope(x):
+        return np.sum(a * k * np.cos(np.outer(x, k) + phi), axis=1)
+
+    ret, surf = track(sea, 0.005, n=12000)
+    x = surf.entry_m[:, 0]
+    nrm = np.column_stack([-slope(x), np.zeros_like(x), np.ones_like(x)])
+    surf = dataclasses.replace(
+        surf,
+        normal=nrm / np.linalg.norm(nrm, axis=1, keepdims=True),
+        entry_m=np.column_stack([surf.entry_m[:, :2], sea(x)]),
+        flags=surf.flags | np.uint16(PointFlag.SURFACE_ILL_CONDITIONED),
+    )
+    mss_axis = float(np.sum(a**2 * k**2) / 2.0)
+    vg = surface_variogram(ret, surf)
+    assert 2.0 * vg.rise_per_m2 < 0.1 * mss_axis  # the planes follow the track's slope
+    g = math.tan(math.radians(18.9))
+    grad = np.tile([0.0, g], (len(ret), 1))
+    rst = RefractionSettings(phase_index=1.34, group_index=N_G)
+    tpu = point_tpu(ret, surf, rst, seabed_gradient=grad)
+    along = track_directions(ret)
+    np.testing.assert_allclose(np.abs(along), np.tile([1.0, 0.0], (len(ret), 1)), atol=1e-9)
+    tpu = with_wave_facet(tpu, ret.direction_meas, surf, vg, grad[tpu.row], 1.34, track_xy=along)
+    want = _snell_depth_sd(math.sqrt(mss_axis), 5.0, g, 1.34 / N_AIR)
+    facet = np.sqrt(sum(tpu.terms[t][:, DEPTH] ** 2 for t in FACET_TERMS))
+    assert np.median(facet) == pytest.approx(want, rel=0.15)
+
+
 def test_no_wave_facet_on_a_flat_sea():
     """A flat sea (ranging noise only): the variogram does not rise, no facet term."""
     from pipeline.process.refraction import RefractionSettings
