@@ -8,8 +8,9 @@ heights below a level datum: depths below the sea at each pulse's time carry the
 slope), as a Bayesian linear regression at two scales (Gelman et al. 2013, *Bayesian Data
 Analysis*, §14.8, the normal linear model with a normal prior on the coefficients):
 
-1. **Regional**: a plane ``depth = a + b dx + c dy`` through the mean soundings of
-   ``regional_cell_m`` cells (the ``regional_neighbours`` nearest within ``regional_radius_m``),
+1. **Regional**: at each ``regional_cell_m`` cell (a sounding takes its nearest cell's), a
+   plane ``depth = a + b dx + c dy`` through the cells' mean soundings (the
+   ``regional_neighbours`` nearest within ``regional_radius_m``),
    its slope under a normal prior ``N(0, s_0² I)`` (``s_0 = tan(prior_slope_deg)`` per axis, the
    slope assumed where no sounding tells), the noise variance the cells' residual variance
    (which holds the relief a plane over tens of metres does not follow).
@@ -247,24 +248,33 @@ def seabed_gradient(
         if cells is not None and len(cells[1]) < 3:
             cells = None
 
-        def regional(at):
-            m = len(at)
-            prior = (np.zeros((m, 2)), np.tile(np.eye(2) / s0**2, (m, 1, 1)))
-            if cells is None:
-                return prior[0], np.tile(np.eye(2) * s0**2, (m, 1, 1))
-            return _robust_bayes(
-                cells[1], cells[2], at, regional_neighbours, regional_radius_m, *prior
+        # the regional plane of each cell (64 neighbours); a query takes its nearest cell's
+        # (the regional slope varies over tens of metres, a cell is 5 m)
+        reg = None
+        if cells is not None:
+            m = len(cells[1])
+            reg = _robust_bayes(
+                cells[1],
+                cells[2],
+                cells[1],
+                regional_neighbours,
+                regional_radius_m,
+                np.zeros((m, 2)),
+                np.tile(np.eye(2) / s0**2, (m, 1, 1)),
             )
-
-        if cells is not None and local_sigma is None:
-            local_sigma = _relief_slope_sigma(
-                xy, dep, cells, regional(cells[1])[0], regional_cell_m
-            )
+            if local_sigma is None:
+                local_sigma = _relief_slope_sigma(xy, dep, cells, reg[0], regional_cell_m)
+            tree = cKDTree(cells[1])
         if local_sigma is None:
             local_sigma = s0  # nothing measured it
         for lo in range(0, len(q), chunk):
             qq = q[lo : lo + chunk]
-            mean0, cov0 = regional(qq)
+            if reg is None:
+                mean0 = np.zeros((len(qq), 2))
+                cov0 = np.tile(np.eye(2) * s0**2, (len(qq), 1, 1))
+            else:
+                near = tree.query(qq, workers=-1)[1]
+                mean0, cov0 = reg[0][near], reg[1][near]
             prec0 = np.linalg.inv(cov0 + np.eye(2) * local_sigma**2)
             g, c = _robust_bayes(xy, dep, qq, neighbours, radius_m, mean0, prec0)
             out[lo : lo + chunk], cov[lo : lo + chunk] = g, c
