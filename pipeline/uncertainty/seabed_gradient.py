@@ -55,6 +55,7 @@ __all__ = [
     "seabed_gradient",
     "gradient_sigma_depth_m",
     "horizontal_cov",
+    "plane_gradient",
     "group_means",
 ]
 
@@ -93,7 +94,8 @@ def _relief_slope_sigma(xy, dep, cells, g_cell, cell_m) -> float | None:
     at separation ``h`` (``s`` the relief's slope along the pair, ``v`` the variance of each
     cell's mean from its soundings' scatter about the plane). Pooled over the survey
     (isotropic relief: a profiler's along-track pairs speak for across too), blunders beyond
-    5 × 1.4826 MAD of ``D`` dropped. None: fewer than 10 pairs of cells with 2+ soundings.
+    5 × 1.4826 MAD of ``D`` dropped, pairs under half a cell apart too, as ``sum(D² - v_i -
+    v_j) / sum(h²)``. None: fewer than 10 such pairs of cells with 2+ soundings.
     """
     inv, cxy, cdep, cnt = cells
     r = dep - cdep[inv] - np.sum(g_cell[inv] * (xy - cxy[inv]), axis=1)
@@ -108,19 +110,29 @@ def _relief_slope_sigma(xy, dep, cells, g_cell, cell_m) -> float | None:
         return None
     i, j = idx[has], idx[nb[has, 1]]
     sep = cxy[i] - cxy[j]
+    h2 = np.sum(sep**2, axis=1)
     d = cdep[i] - cdep[j] - np.sum(0.5 * (g_cell[i] + g_cell[j]) * sep, axis=1)
     mad = MAD_TO_SIGMA * np.median(np.abs(d - np.median(d)))
-    keep = np.abs(d) <= max(5.0 * mad, 1e-9)
-    est = (d**2 - var_mean[i] - var_mean[j]) / np.sum(sep**2, axis=1)
-    return float(math.sqrt(max(np.mean(est[keep]), 0.0)))
+    # cells whose centroids nearly touch (a line along a cell boundary) would divide their
+    # noise by a tiny h²: pairs at least half a cell apart, pooled as sums
+    keep = (np.abs(d - np.median(d)) <= max(5.0 * mad, 1e-9)) & (h2 >= (0.5 * cell_m) ** 2)
+    if np.count_nonzero(keep) < 10:
+        return None
+    num = np.sum(d[keep] ** 2 - var_mean[i[keep]] - var_mean[j[keep]])
+    return float(math.sqrt(max(num / np.sum(h2[keep]), 0.0)))
+
+
+#: Fewest soundings a plane's slope is read from (fewer: the prior); with 3 or 4 the residuals
+#: of an exact or nearly exact fit read no noise and the covariance would be ~10x too narrow.
+_MIN_SOUNDINGS = 6
 
 
 def _bayes_planes(w, dx, dy, z, noise_var, prior_mean, prior_prec):
     """Posterior mean and covariance of the slope of ``z = a + b dx + c dy``, batched.
 
     ``w`` (m, k) weights (0: unused), ``noise_var`` (m,), ``prior_mean`` (m, 2) and
-    ``prior_prec`` (m, 2, 2) of ``(b, c)``; ``a`` is free. Rows with fewer than 3 soundings:
-    the prior.
+    ``prior_prec`` (m, 2, 2) of ``(b, c)``; ``a`` is free. Rows with fewer than
+    :data:`_MIN_SOUNDINGS` soundings: the prior.
     """
     sw = w.sum(1)
     s = [w * dx, w * dy]
@@ -136,7 +148,7 @@ def _bayes_planes(w, dx, dy, z, noise_var, prior_mean, prior_prec):
     rhs /= noise_var[:, None]
     a[:, 1:, 1:] += prior_prec
     rhs[:, 1:] += np.einsum("mij,mj->mi", prior_prec, prior_mean)
-    bad = sw < 3
+    bad = sw < _MIN_SOUNDINGS
     a[bad] = np.eye(3)
     rhs[bad] = 0.0
     inv = np.linalg.inv(a)
@@ -265,17 +277,17 @@ def seabed_gradient(
             if local_sigma is None:
                 local_sigma = _relief_slope_sigma(xy, dep, cells, reg[0], regional_cell_m)
             tree = cKDTree(cells[1])
-        if local_sigma is None:
-            local_sigma = s0  # nothing measured it
+            if local_sigma is None:
+                local_sigma = s0  # nothing measured it
         for lo in range(0, len(q), chunk):
             qq = q[lo : lo + chunk]
-            if reg is None:
+            if reg is None:  # no regional step: the slope prior itself
                 mean0 = np.zeros((len(qq), 2))
-                cov0 = np.tile(np.eye(2) * s0**2, (len(qq), 1, 1))
+                prec0 = np.tile(np.eye(2) / s0**2, (len(qq), 1, 1))
             else:
                 near = tree.query(qq, workers=-1)[1]
                 mean0, cov0 = reg[0][near], reg[1][near]
-            prec0 = np.linalg.inv(cov0 + np.eye(2) * local_sigma**2)
+                prec0 = np.linalg.inv(cov0 + np.eye(2) * local_sigma**2)
             g, c = _robust_bayes(xy, dep, qq, neighbours, radius_m, mean0, prec0)
             out[lo : lo + chunk], cov[lo : lo + chunk] = g, c
     return (out, cov) if return_cov else out
@@ -309,3 +321,16 @@ def horizontal_cov(tpu) -> np.ndarray:
         h = np.asarray(v, dtype=np.float64)[:, [X, Y]]
         out += h[:, :, None] * h[:, None, :]
     return out
+
+
+def plane_gradient(surface, rows) -> np.ndarray:
+    """Height gradient of the fitted water planes of pulses ``rows``, ``(k, 2)``; 0 off water.
+
+    ``surface`` is a :class:`~pipeline.process.surface_fit.WaterSurface`.
+    """
+    rows = np.asarray(rows, dtype=np.int64)
+    nrm = np.asarray(surface.normal, dtype=np.float64)[rows]
+    nz = np.where(np.abs(nrm[:, 2]) > 1e-12, nrm[:, 2], 1.0)
+    p = -nrm[:, :2] / nz[:, None]
+    ok = np.asarray(surface.is_water)[rows] & (np.abs(nrm[:, 2]) > 1e-12)
+    return np.where(ok[:, None], np.nan_to_num(p), 0.0)

@@ -42,6 +42,7 @@ from pipeline.uncertainty.seabed_gradient import (
     GRADIENT_TERM,
     gradient_sigma_depth_m,
     horizontal_cov,
+    plane_gradient,
 )
 from pipeline.uncertainty.tpu import (
     PointTpu,
@@ -144,6 +145,11 @@ def survey_uncertainty(
     grad, grad_cov = seabed_gradient(
         xy40, -points40.xyz_m[:, 2], bottom_xy, group=group, return_cov=True, **near
     )
+    # the terms compare each sounding, moved, with the true depth below the sea at the moved
+    # position, read below the pulse's plane there: their gradient is the depth's below the
+    # sea, the seabed's plus the sea's slope (the plane's, what the depth reading follows)
+    bottom_rows = np.flatnonzero(returns.has_bottom)
+    grad = grad + plane_gradient(processed.surface, bottom_rows)
     # the water surface measured over each sounding against its pulse's plane there: the
     # plane's tilt uncertainty, averaged over the bathymetric points
     bottom_ids = returns.pulse_id[returns.has_bottom]
@@ -226,7 +232,6 @@ def survey_uncertainty(
         )
     # what the sounding's horizontal uncertainty makes of the gradient's own (unmeasured
     # across a profiler's line: the slope prior)
-    bottom_rows = np.flatnonzero(returns.has_bottom)
     tpu40 = with_random_term(
         tpu40,
         GRADIENT_TERM,

@@ -65,21 +65,25 @@ def track_directions(returns: DetectedReturns) -> np.ndarray:
     """Unit horizontal direction of each pulse's flight line, ``(n, 2)``.
 
     The principal axis of the measured origins of the pulses of each line (``line_id``; all
-    pulses as one line without it); x where a line's origins do not spread (one pulse).
+    pulses as one line without it: a multi-line survey without line ids gets one axis); x
+    where a line's origins do not spread (one pulse). The sign is arbitrary (the facet terms
+    enter squared).
     """
     n = len(returns)
-    out = np.tile([1.0, 0.0], (n, 1))
     line = np.zeros(n, np.int64) if returns.line_id is None else np.asarray(returns.line_id)
+    _, inv = np.unique(line, return_inverse=True)
+    inv = inv.ravel()
     xy = np.asarray(returns.origin_meas_m, dtype=np.float64)[:, :2]
-    for lid in np.unique(line):
-        m = line == lid
-        if np.count_nonzero(m) < 2:
-            continue
-        d = xy[m] - xy[m].mean(axis=0)
-        w, v = np.linalg.eigh(d.T @ d)
-        if w[-1] > 0.0:
-            out[m] = v[:, -1]
-    return out
+    cnt = np.bincount(inv).astype(np.float64)
+    mean = np.column_stack([np.bincount(inv, weights=xy[:, k]) / cnt for k in range(2)])
+    d = xy - mean[inv]
+    sxx = np.bincount(inv, weights=d[:, 0] ** 2)
+    syy = np.bincount(inv, weights=d[:, 1] ** 2)
+    sxy = np.bincount(inv, weights=d[:, 0] * d[:, 1])
+    # the major axis of each line's 2x2 scatter, at angle atan2(2 sxy, sxx - syy) / 2
+    ang = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
+    axis = np.column_stack([np.cos(ang), np.sin(ang)])
+    return axis[inv]
 
 
 def unresolved_slope_sigma_rad(
@@ -160,6 +164,7 @@ def facet_jacobian(
     """
     n = len(direction)
     u = np.tile([1.0, 0.0], (n, 1)) if track_xy is None else np.asarray(track_xy, np.float64)
+    u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-12)
     axes = (u, np.column_stack([-u[:, 1], u[:, 0]]))
     length = np.linalg.norm(point_m - entry_m, axis=1)
     nz = np.where(np.abs(normal[:, 2]) > 1e-12, normal[:, 2], 1e-12)

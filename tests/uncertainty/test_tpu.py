@@ -415,6 +415,56 @@ def test_relief_slope_is_measured_from_neighbouring_cells():
             assert got < 0.005
 
 
+def test_gradient_from_too_few_soundings_is_the_prior():
+    """Three soundings fit a plane exactly: their residuals read no noise, and a slope read
+    from them would claim ~1 cm of noise whatever the truth (0.2 m here). Too few soundings
+    give the prior's mean and sigma instead; from 8 on, the data speak."""
+    rng = np.random.default_rng(4)
+    s0 = math.tan(math.radians(10.0))
+    for n, prior in ((3, True), (5, True), (8, False)):
+        xy = rng.uniform(-1.0, 1.0, (n, 2))
+        depth = 3.0 + 0.2 * xy[:, 0] + rng.normal(0.0, 0.2, n)
+        g, c = seabed_gradient(xy, depth, np.zeros((1, 2)), regional_radius_m=0.0, return_cov=True)
+        if prior:
+            np.testing.assert_allclose(g[0], [0.0, 0.0], atol=1e-12)
+            np.testing.assert_allclose(np.sqrt(np.diag(c[0])), [s0, s0], rtol=1e-9)
+        else:
+            assert np.all(np.sqrt(np.diag(c[0])) < s0)
+
+
+def test_track_directions_per_line():
+    """Each line's own axis (a line at atan(0.5) from x, one along y), any sign; a line of one
+    pulse falls back to x."""
+    from pipeline.uncertainty.tpu_facet import track_directions
+
+    t = np.linspace(0.0, 100.0, 50)
+    o = np.vstack(
+        [
+            np.column_stack([t, 0.5 * t, np.full(50, 400.0)]),
+            np.column_stack([np.full(50, 30.0), t, np.full(50, 400.0)]),
+            [[5.0, 5.0, 400.0]],
+        ]
+    )
+    n = len(o)
+    ret = DetectedReturns(
+        pulse_id=np.arange(n),
+        origin_meas_m=o,
+        direction_meas=np.tile([0.0, 0.0, -1.0], (n, 1)),
+        has_surface=np.zeros(n, bool),
+        t_surface_s=np.zeros(n),
+        has_bottom=np.zeros(n, bool),
+        t_bottom_s=np.zeros(n),
+        surface_confidence=np.zeros(n),
+        bottom_confidence=np.zeros(n),
+        flags=np.zeros(n, np.uint16),
+        line_id=np.r_[np.zeros(50, int), np.ones(50, int), [7]],
+    )
+    d = track_directions(ret)
+    np.testing.assert_allclose(np.abs(d[0]), np.array([1.0, 0.5]) / math.hypot(1.0, 0.5))
+    np.testing.assert_allclose(np.abs(d[60]), [0.0, 1.0], atol=1e-12)
+    np.testing.assert_allclose(d[-1], [1.0, 0.0])
+
+
 def test_pair_scatter_recovers_the_random_error_not_the_shared_one():
     """Soundings along scan lines over a slope, each with its own noise (growing eastward) and
     a shared offset per scan line (navigation-like): successive soundings see the noise only."""
