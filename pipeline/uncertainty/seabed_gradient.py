@@ -86,6 +86,10 @@ def _cells(xy, dep, cell_m):
     return inv, cxy, cdep, np.bincount(inv).astype(np.float64)
 
 
+#: Fewest pairs of cells the relief's slope is measured from (a 40 m profiler line has ~9).
+_MIN_PAIRS = 5
+
+
 def _relief_slope_sigma(xy, dep, cells, g_cell, cell_m) -> float | None:
     """One-sigma departure of the seabed's local slope from the regional one, measured.
 
@@ -95,7 +99,8 @@ def _relief_slope_sigma(xy, dep, cells, g_cell, cell_m) -> float | None:
     cell's mean from its soundings' scatter about the plane). Pooled over the survey
     (isotropic relief: a profiler's along-track pairs speak for across too), blunders beyond
     5 × 1.4826 MAD of ``D`` dropped, pairs under half a cell apart too, as ``sum(D² - v_i -
-    v_j) / sum(h²)``. None: fewer than 10 such pairs of cells with 2+ soundings.
+    v_j) / sum(h²)``. None: fewer than :data:`_MIN_PAIRS` such pairs of cells with 2+
+    soundings.
     """
     inv, cxy, cdep, cnt = cells
     r = dep - cdep[inv] - np.sum(g_cell[inv] * (xy - cxy[inv]), axis=1)
@@ -106,7 +111,7 @@ def _relief_slope_sigma(xy, dep, cells, g_cell, cell_m) -> float | None:
     idx = np.flatnonzero(ok)
     dist, nb = cKDTree(cxy[idx]).query(cxy[idx], k=2, distance_upper_bound=2.0 * cell_m)
     has = np.isfinite(dist[:, 1])
-    if np.count_nonzero(has) < 10:
+    if np.count_nonzero(has) < _MIN_PAIRS:
         return None
     i, j = idx[has], idx[nb[has, 1]]
     sep = cxy[i] - cxy[j]
@@ -116,7 +121,7 @@ def _relief_slope_sigma(xy, dep, cells, g_cell, cell_m) -> float | None:
     # cells whose centroids nearly touch (a line along a cell boundary) would divide their
     # noise by a tiny h²: pairs at least half a cell apart, pooled as sums
     keep = (np.abs(d - np.median(d)) <= max(5.0 * mad, 1e-9)) & (h2 >= (0.5 * cell_m) ** 2)
-    if np.count_nonzero(keep) < 10:
+    if np.count_nonzero(keep) < _MIN_PAIRS:
         return None
     num = np.sum(d[keep] ** 2 - var_mean[i[keep]] - var_mean[j[keep]])
     return float(math.sqrt(max(num / np.sum(h2[keep]), 0.0)))

@@ -52,7 +52,11 @@ from pipeline.uncertainty.tpu import (
     surface_tilt_sigma,
     timing_from_scatter,
 )
-from pipeline.uncertainty.tpu_facet import track_directions, with_wave_facet
+from pipeline.uncertainty.tpu_facet import (
+    track_directions,
+    unresolved_slope_cov,
+    with_wave_facet,
+)
 from pipeline.uncertainty.tpu_measured import (
     surface_variogram,
     with_surface_ranging,
@@ -207,10 +211,14 @@ def survey_uncertainty(
         # one detection per photon window: the seabed's spread under the window's shots
         bottom_rows = np.flatnonzero(returns.has_bottom)
         g40 = grad[np.searchsorted(bottom_rows, tpu40.row)]
-        spread = window_footprint_sigma_m(
-            points40.xyz_m[:, :2], points40.pulse_id // ins.shots_per_window, g40
+        win = points40.pulse_id // ins.shots_per_window
+        seabed = window_footprint_sigma_m(points40.xyz_m[:, :2], win, g40)
+        # and the sea's slope under the window that the planes do not follow (depth only)
+        sea_cov = unresolved_slope_cov(
+            vg, processed.surface, track_directions(returns)[tpu40.row], rows=tpu40.row
         )
-        tpu40 = with_random_term(tpu40, WINDOW_TERM, spread, spread)
+        spread = window_footprint_sigma_m(points40.xyz_m[:, :2], win, g40, sea_cov)
+        tpu40 = with_random_term(tpu40, WINDOW_TERM, seabed, spread)
     # the waves between each pulse's water entry and its sounding (the variogram's wave part
     # beyond what the fitted plane's measured tilt already holds)
     surf = processed.surface

@@ -53,6 +53,7 @@ __all__ = [
     "FACET_TERMS",
     "track_directions",
     "unresolved_slope_sigma_rad",
+    "unresolved_slope_cov",
     "facet_jacobian",
     "with_wave_facet",
 ]
@@ -118,6 +119,22 @@ def unresolved_slope_sigma_rad(
         [np.maximum(left - tilt2, 0.0), np.maximum(np.where(blind, whole, left) - tilt2, 0.0)]
     )
     return np.where(surface.is_water[rows, None], np.sqrt(var), 0.0)
+
+
+def unresolved_slope_cov(
+    vg: SurfaceVariogram, surface: WaterSurface, track_xy, tilt_sigma_rad=None, rows=None
+) -> np.ndarray:
+    """:func:`unresolved_slope_sigma_rad` as a covariance in x, y, ``(k, 2, 2)``.
+
+    ``track_xy`` (``(k, 2)``): each row's flight-line direction (:func:`track_directions`).
+    """
+    sig = unresolved_slope_sigma_rad(vg, surface, tilt_sigma_rad, rows)
+    u = np.asarray(track_xy, dtype=np.float64).reshape(-1, 2)
+    u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-12)
+    v = np.column_stack([-u[:, 1], u[:, 0]])
+    return (sig[:, 0, None, None] ** 2) * u[:, :, None] * u[:, None, :] + (
+        sig[:, 1, None, None] ** 2
+    ) * v[:, :, None] * v[:, None, :]
 
 
 def _normal_with_slope(normal: np.ndarray, axis: np.ndarray, step: float) -> np.ndarray:

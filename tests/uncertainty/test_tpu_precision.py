@@ -88,6 +88,25 @@ def test_photon_window_spread_over_a_slope_is_the_uniform_rms():
     assert np.all(z <= np.sqrt(3) + 1e-9)
 
 
+def test_photon_window_spread_under_a_random_sea_slope():
+    """The same windows on a flat seabed under a sea whose slope along x, random per window
+    (the planes follow none of it), is normal with sigma s: each shot's depth misses by
+    beta (x - x_mean). Over many windows the rms of that error is the term, s L / sqrt(12);
+    drawn here, not restated."""
+    rng = np.random.default_rng(6)
+    n_win, per, length_m, s = 4000, 50, 0.4, 0.1
+    x = np.concatenate([w * 1.0 + np.linspace(0, length_m, per) for w in range(n_win)])
+    xy = np.column_stack([x, np.zeros_like(x)])
+    group = np.repeat(np.arange(n_win), per)
+    cov = np.tile(np.diag([s**2, 0.0]), (x.size, 1, 1))
+    sigma = window_footprint_sigma_m(xy, group, np.zeros((x.size, 2)), cov)
+    beta = np.repeat(rng.normal(0.0, s, n_win), per)
+    centre = np.repeat(x.reshape(n_win, per).mean(axis=1), per)
+    err = beta * (x - centre)
+    np.testing.assert_allclose(np.sqrt(np.mean(err**2)), np.sqrt(np.mean(sigma**2)), rtol=0.03)
+    assert np.mean(np.abs(err) <= 1.96 * sigma) == pytest.approx(0.95, abs=0.02)
+
+
 def test_a_random_term_adds_in_quadrature():
     ret, surf = survey(n_side=4)
     tpu = point_tpu(ret, surf, RST)
