@@ -364,23 +364,23 @@ def test_ci_no_gross_error_held_out(ci_suite):
     assert ci_suite["strata"][("all", "all")]["heldout"]["n_over_1m"] == 0
 
 
+def _halves(heldout_xfail_reason: str) -> list:
+    """Both halves; the held-out one a strict xfail carrying its measured figure."""
+    return [
+        "tuning",
+        pytest.param("heldout", marks=pytest.mark.xfail(strict=True, reason=heldout_xfail_reason)),
+    ]
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(
     "half_name",
-    [
-        "tuning",
-        pytest.param(
-            "heldout",
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason="measured: held-out TPU 95 % coverage 97.9 % (too wide: its points "
-                "gained, RMSE 0.057 -> 0.049 m, from the surface echo's population weighting "
-                "and the kriged sea change, the TPU's sea and surface timing terms did not "
-                "shrink with them); 93.9 % before the kriged sea (2026-11-25), 97.7 % before "
-                "the seabed gradient's covariance",
-            ),
-        ),
-    ],
+    _halves(
+        "measured: held-out TPU 95 % coverage 97.9 % (too wide: its points gained, RMSE 0.057 "
+        "-> 0.049 m, from the surface echo's population weighting and the kriged sea change, "
+        "the TPU's sea and surface timing terms did not shrink with them); 93.9 % before the "
+        "kriged sea (2026-11-25), 97.7 % before the seabed gradient's covariance"
+    ),
 )
 def test_ci_tpu_95_coverage_floor(ci_suite, half_name):
     # measured 95.5 % tuning (2026-11-25: the seabed gradient with its covariance, the wave
@@ -391,18 +391,11 @@ def test_ci_tpu_95_coverage_floor(ci_suite, half_name):
 @pytest.mark.slow
 @pytest.mark.parametrize(
     "half_name",
-    [
-        "tuning",
-        pytest.param(
-            "heldout",
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason="measured: held-out TPU 68 % coverage 85.8 % (too wide; 85.1 % before "
-                "the seabed gradient's covariance: the held-out scenes' widest terms are the "
-                "surface and bottom timing, seeds 9002, 9005, 9006; not the gradient)",
-            ),
-        ),
-    ],
+    _halves(
+        "measured: held-out TPU 68 % coverage 85.8 % (too wide; 85.1 % before the seabed "
+        "gradient's covariance: the held-out scenes' widest terms are the surface and bottom "
+        "timing, seeds 9002, 9005, 9006; not the gradient)"
+    ),
 )
 def test_ci_tpu_68_coverage_floor(ci_suite, half_name):
     # measured 69.0 % tuning (2026-11-25, the seabed gradient; 75.2 % before, too wide)

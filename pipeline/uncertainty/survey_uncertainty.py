@@ -207,17 +207,17 @@ def survey_uncertainty(
     order = np.argsort(tpu.pulse_id)
     pos = order[np.searchsorted(tpu.pulse_id[order], points40.pulse_id)]
     tpu40 = take_tpu(tpu, pos)
+    # each bathymetric point's row among the bottom pulses (of grad, grad_cov), and the
+    # flight-line direction of its pulse
+    at40 = np.searchsorted(bottom_rows, tpu40.row)
+    tracks = track_directions(returns)
     if group is not None:
         # one detection per photon window: the seabed's spread under the window's shots
-        bottom_rows = np.flatnonzero(returns.has_bottom)
-        g40 = grad[np.searchsorted(bottom_rows, tpu40.row)]
         win = points40.pulse_id // ins.shots_per_window
-        seabed = window_footprint_sigma_m(points40.xyz_m[:, :2], win, g40)
+        seabed = window_footprint_sigma_m(points40.xyz_m[:, :2], win, grad[at40])
         # and the sea's slope under the window that the planes do not follow (depth only)
-        sea_cov = unresolved_slope_cov(
-            vg, processed.surface, track_directions(returns)[tpu40.row], rows=tpu40.row
-        )
-        spread = window_footprint_sigma_m(points40.xyz_m[:, :2], win, g40, sea_cov)
+        sea_cov = unresolved_slope_cov(vg, processed.surface, tracks[tpu40.row], rows=tpu40.row)
+        spread = window_footprint_sigma_m(points40.xyz_m[:, :2], win, grad[at40], sea_cov)
         tpu40 = with_random_term(tpu40, WINDOW_TERM, seabed, spread)
     # the waves between each pulse's water entry and its sounding (the variogram's wave part
     # beyond what the fitted plane's measured tilt already holds)
@@ -225,7 +225,6 @@ def survey_uncertainty(
     tpu40 = with_wave_entry(tpu40, vg, surf.entry_m[tpu40.row, :2], surf.sea_correlation)
     if st.wave_slope_sigma_rad == 0.0:  # a user's facet slope (wave_slope_* terms) wins
         # the wave facet each beam refracted through that the fitted planes do not follow
-        bottom_rows = np.flatnonzero(returns.has_bottom)
         plane_tilt = surf.normal_sigma_rad.copy()  # what the surface_tilt_* terms carried
         plane_tilt[bottom_rows] = np.maximum(plane_tilt[bottom_rows], np.nan_to_num(tilt))
         tpu40 = with_wave_facet(
@@ -233,10 +232,10 @@ def survey_uncertainty(
             returns.direction_meas,
             surf,
             vg,
-            grad[np.searchsorted(bottom_rows, tpu40.row)],
+            grad[at40],
             refr.phase_index,
             tilt_sigma_rad=plane_tilt,
-            track_xy=track_directions(returns),
+            track_xy=tracks,
         )
     # what the sounding's horizontal uncertainty makes of the gradient's own (unmeasured
     # across a profiler's line: the slope prior)
@@ -244,9 +243,7 @@ def survey_uncertainty(
         tpu40,
         GRADIENT_TERM,
         np.zeros(len(tpu40)),
-        gradient_sigma_depth_m(
-            grad_cov[np.searchsorted(bottom_rows, tpu40.row)], horizontal_cov(tpu40)
-        ),
+        gradient_sigma_depth_m(grad_cov[at40], horizontal_cov(tpu40)),
     )
     cells = cell_uncertainty(grid, tpu40)
     return SurveyUncertainty(

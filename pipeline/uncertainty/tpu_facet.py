@@ -121,6 +121,18 @@ def unresolved_slope_sigma_rad(
     return np.where(surface.is_water[rows, None], np.sqrt(var), 0.0)
 
 
+def _track_axes(track_xy, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unit along-track and across-track (90° to its left) axes, each ``(n, 2)``.
+
+    Without a track: x and y.
+    """
+    if track_xy is None:
+        return np.tile([1.0, 0.0], (n, 1)), np.tile([0.0, 1.0], (n, 1))
+    u = np.asarray(track_xy, dtype=np.float64).reshape(-1, 2)
+    u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-12)
+    return u, np.column_stack([-u[:, 1], u[:, 0]])
+
+
 def unresolved_slope_cov(
     vg: SurfaceVariogram, surface: WaterSurface, track_xy, tilt_sigma_rad=None, rows=None
 ) -> np.ndarray:
@@ -129,9 +141,7 @@ def unresolved_slope_cov(
     ``track_xy`` (``(k, 2)``): each row's flight-line direction (:func:`track_directions`).
     """
     sig = unresolved_slope_sigma_rad(vg, surface, tilt_sigma_rad, rows)
-    u = np.asarray(track_xy, dtype=np.float64).reshape(-1, 2)
-    u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-12)
-    v = np.column_stack([-u[:, 1], u[:, 0]])
+    u, v = _track_axes(track_xy, len(sig))
     return (sig[:, 0, None, None] ** 2) * u[:, :, None] * u[:, None, :] + (
         sig[:, 1, None, None] ** 2
     ) * v[:, :, None] * v[:, None, :]
@@ -180,9 +190,7 @@ def facet_jacobian(
         Unit horizontal direction of the first axis (the second is 90° to its left).
     """
     n = len(direction)
-    u = np.tile([1.0, 0.0], (n, 1)) if track_xy is None else np.asarray(track_xy, np.float64)
-    u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-12)
-    axes = (u, np.column_stack([-u[:, 1], u[:, 0]]))
+    axes = _track_axes(track_xy, n)
     length = np.linalg.norm(point_m - entry_m, axis=1)
     nz = np.where(np.abs(normal[:, 2]) > 1e-12, normal[:, 2], 1e-12)
     plane_grad = -normal[:, :2] / nz[:, None]
