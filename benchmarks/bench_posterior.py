@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import math
 import sys
 import time
@@ -234,8 +235,19 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=None, help="truths' seed (default 101 / 202)")
     ap.add_argument("--posterior-only", action="store_true", help="sections 1 only")
     ap.add_argument("--dump", default=None, help="npz of the per-pulse summaries")
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a PosteriorSettings field for this run (VALUE in JSON), repeatable",
+    )
     args = ap.parse_args()
     st = PosteriorSettings()
+    for kv in args.set:
+        key, value = kv.split("=", 1)
+        st = dataclasses.replace(st, **{key: json.loads(value)})
+    print(f"settings changed: {args.set or 'none'}")
     seeds = (101, 202) if args.seed is None else (args.seed, args.seed + 1)
     dump = None if args.dump is None else {}
     s_fw = calibrate(

@@ -44,6 +44,14 @@ Sampling
    acceptance fraction must lie in ``acceptance_range`` (0.15, 0.8). Otherwise the pulse is
    flagged :attr:`PosteriorFlag.NOT_CONVERGED` / :attr:`PosteriorFlag.ACCEPTANCE` (its
    summaries are still given). Converged pulses leave the batch; the rest continue.
+5. Restart, once: the pulses still unconverged after ``restart_steps`` (1500) production
+   steps refit their independence proposal to the second half of their own production, which
+   becomes burn-in, and start a new chain (``max_steps`` counts both). The burn-in's walkers
+   start in a ball of half the Laplace sigma and 150 steps do not spread them over a posterior
+   much wider or more skewed than the Laplace estimate (weak water columns, a free bottom
+   width): the proposal fitted to them is too narrow and the chain crawls. Adaptation stops at
+   the restart, so every chain is still an exact MCMC of its pulse's posterior; pulses
+   converged earlier are untouched (``tests/uncertainty/test_posterior_restart.py``).
 
 Seabed point
 ------------
@@ -235,7 +243,11 @@ def sample_batch(
         p0[:, N_PARAMS * i : N_PARAMS * (i + 1)] = ball
     pos = p0.reshape(st.n_walkers, n_p, N_PARAMS)
     centres = modes.copy()
-    if st.burn_steps:
+    # the independence proposal adapts at the end of each burn-in round (a Student-t fitted to
+    # the round's second half), then stays fixed: a later round starts from walkers the
+    # refitted proposal has already spread over the posterior (fitted to a first round that
+    # left them near the start's ball, it missed wide or skewed posteriors)
+    for _ in range(st.burn_rounds if st.burn_steps else 0):
         pos, (burn, _) = _run(
             data,
             np.arange(n_p),
@@ -247,7 +259,6 @@ def sample_batch(
             rng,
             (centres, scales * st.proposal_scale**2),
         )
-        # adapt the independence proposal once, at the end of the burn-in (fixed afterwards)
         half = burn[burn.shape[0] // 2 :]
         for i in range(n_p):
             x = half[:, :, i].reshape(-1, N_PARAMS)
@@ -263,8 +274,11 @@ def sample_batch(
     n_steps = np.zeros(n_p, dtype=np.int64)
     tau = np.full((n_p, N_PARAMS), np.inf)
     active = np.arange(n_p)
+    spent = np.zeros(n_p, dtype=np.int64)  # production steps discarded by a restart
+    restarted = False
     while active.size:
-        chunk = min(st.chunk_steps, st.max_steps - int(n_steps[active[0]]))
+        a0 = active[0]
+        chunk = min(st.chunk_steps, st.max_steps - int(spent[a0] + n_steps[a0]))
         chunk = max(st.thin, chunk - chunk % st.thin)  # whole stored steps
         sub_prop = (proposal[0][active], proposal[1][active])
         new_pos, (chain, acc) = _run(
@@ -282,12 +296,31 @@ def sample_batch(
         n_stored[active] += chain.shape[0]
         # the active pulses started together: their chains are equally long, checked at once
         steps = int(n_steps[active[0]])
-        if steps < st.min_steps and steps < st.max_steps:
+        if steps < st.min_steps and spent[a0] + steps < st.max_steps:
             continue
         t_a = st.thin * integrated_time_blocks(stored, active, k0 + chain.shape[0])
         tau[active] = np.where(np.isfinite(t_a), t_a, np.inf)
-        done = (steps >= st.tau_factor * tau[active].max(axis=1)) | (steps >= st.max_steps)
+        done = (steps >= st.tau_factor * tau[active].max(axis=1)) | (
+            spent[active] + steps >= st.max_steps
+        )
         active = active[~done]
+        if active.size and not restarted and st.restart_steps and steps >= st.restart_steps:
+            # once: the chains still unconverged refit their proposal to their own production
+            # so far (its second half) and start afresh, what came before becoming burn-in
+            # (adaptation stops there, so each chain stays an exact MCMC: Roberts & Rosenthal
+            # 2007 ask no more of finitely many adaptations)
+            restarted = True
+            k1 = k0 + chain.shape[0]
+            for i in active:
+                x = stored[k1 // 2 : k1, :, i].reshape(-1, N_PARAMS)
+                cov = np.cov(x, rowvar=False)
+                if np.all(np.linalg.eigvalsh(cov) > 1e-12 * np.max(np.diag(cov))):
+                    centres[i], scales[i] = x.mean(axis=0), cov
+            proposal = (centres, scales * st.proposal_scale**2)
+            spent[active] += n_steps[active]
+            n_steps[active] = 0
+            n_stored[active] = 0
+            acc_sum[active] = 0.0
     short = n_steps < st.tau_factor * tau.max(axis=1)
     flags[short] |= np.uint16(PosteriorFlag.NOT_CONVERGED)
     acc = acc_sum / np.maximum(n_steps, 1)

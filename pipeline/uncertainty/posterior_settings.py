@@ -35,7 +35,15 @@ class PosteriorSettings:
     """Sampler settings and prior bounds."""
 
     n_walkers: int = setting(16, ge=16, le=1024, doc="emcee walkers (>= 2 x 9 parameters - 2)")
-    burn_steps: int = setting(150, ge=0, doc="steps discarded after the start")
+    burn_steps: int = setting(150, ge=0, doc="steps discarded after the start, per round")
+    burn_rounds: int = setting(
+        1, ge=1, le=10, doc="burn-in rounds, the independence proposal refitted after each"
+    )
+    restart_steps: int | None = setting(
+        1500,
+        ge=10,
+        doc="production steps after which unconverged chains refit the proposal and restart",
+    )
     chunk_steps: int = setting(100, ge=10, doc="production steps between convergence checks")
     max_steps: int = setting(4000, ge=10, doc="production steps at most")
     tau_factor: float = setting(50.0, gt=0.0, doc="converged: chain >= this x autocorr. time")

@@ -316,6 +316,27 @@ def test_intervals_are_calibrated(fw_batch):
     assert np.mean(all_chains.converged[:120]) >= 0.6
 
 
+def gaussian_target(monkeypatch, waves, means, covs):
+    """Make each pulse's log posterior ``-(x - m)' C^-1 (x - m) / 2`` (``means``, ``covs``: one
+    per waveform of ``waves``): a Gaussian likelihood under a flat prior, whose posterior is
+    normal with mean ``m`` and covariance ``C``."""
+    import pipeline.uncertainty.posterior as posterior_module
+
+    keys = {make_pulse_batch([w], FW).samples[0].tobytes(): i for i, w in enumerate(waves)}
+    prec = [np.linalg.inv(c) for c in covs]
+
+    def gaussian_blocks(theta_, data, system):
+        x = np.atleast_2d(theta_).reshape(-1, len(data), N_PARAMS)
+        blocks = np.empty(x.shape[:2])
+        for j in range(len(data)):
+            i = keys[data.samples[j][data.valid[j]].tobytes()]
+            d = x[:, j] - means[i]
+            blocks[:, j] = -0.5 * np.einsum("wi,ij,wj->w", d, prec[i], d)
+        return np.column_stack([blocks.sum(axis=1), blocks])
+
+    monkeypatch.setattr(posterior_module, "log_prob_blocks", gaussian_blocks)
+
+
 def test_converged_chains_sample_a_known_gaussian_posterior(monkeypatch):
     """The whole sampler (starts, burn-in, adapted proposal, chunks, convergence, thinning)
     against a posterior known in closed form: a Gaussian likelihood under the flat prior.
@@ -328,7 +349,6 @@ def test_converged_chains_sample_a_known_gaussian_posterior(monkeypatch):
     ``m`` and ``C``: the whitened draws have mean 0 and covariance I, and the analytic 68 % /
     95 % depth intervals hold 68 % / 95 % of the draws.
     """
-    import pipeline.uncertainty.posterior as posterior_module
     from pipeline.uncertainty.waveform_model import covariance
 
     rng = np.random.default_rng(51)
@@ -342,19 +362,7 @@ def test_converged_chains_sample_a_known_gaussian_posterior(monkeypatch):
         c = np.outer(sd, sd) * (c @ c.T) / np.sqrt(np.outer(np.diag(c @ c.T), np.diag(c @ c.T)))
         m_all.append(t + sd * rng.uniform(0.25, 0.75, N_PARAMS) * rng.choice([-1, 1], N_PARAMS))
         c_all.append(c)
-    keys = {make_pulse_batch([w], FW).samples[0].tobytes(): i for i, w in enumerate(waves)}
-    prec = [np.linalg.inv(c) for c in c_all]
-
-    def gaussian_blocks(theta_, data, system):
-        x = np.atleast_2d(theta_).reshape(-1, len(data), N_PARAMS)
-        blocks = np.empty(x.shape[:2])
-        for j in range(len(data)):
-            i = keys[data.samples[j][data.valid[j]].tobytes()]
-            d = x[:, j] - m_all[i]
-            blocks[:, j] = -0.5 * np.einsum("wi,ij,wj->w", d, prec[i], d)
-        return np.column_stack([blocks.sum(axis=1), blocks])
-
-    monkeypatch.setattr(posterior_module, "log_prob_blocks", gaussian_blocks)
+    gaussian_target(monkeypatch, waves, m_all, c_all)
     chains = sample_batch(waves, FW, FAST, seed=7)
     ok = chains.converged
     assert ok.sum() >= 8, chains.flags  # a Gaussian target: (nearly) every pulse converges
