@@ -83,9 +83,11 @@ class WaveformDetections:
     window's detection limit, :mod:`pipeline.process.photon_limit`; 0 where none) is reported.
     ``t_*_sigma_s``: each return's timing sigma from its own waveform
     (:mod:`pipeline.process.detect_precision`; 0 if absent or not given).
-    ``surface_echo_state`` (1 a clear surface echo, −1 an ambiguous one whose time the survey
-    mixes, 0 neither), ``t_surface_onset_s`` and ``surface_echo_shift_s`` (the onset alone's
-    time and the echo-kept fit's minus it, where −1; else 0): ``t_surface_s`` there is
+    ``surface_echo_state`` (1 a clear surface echo on a column onset, 2 a clear echo without
+    one (land, or a column too weak to tell: not counted in the share), −1 an ambiguous one
+    whose time the survey mixes, 0 neither), ``t_surface_onset_s`` and
+    ``surface_echo_shift_s`` (the onset alone's time and the echo-kept fit's minus it, where
+    −1; else 0): ``t_surface_s`` there is
     ``t_surface_onset_s + w surface_echo_shift_s``, ``w`` from the block's share of clear
     echoes until the survey sets it from all of them
     (:func:`~pipeline.process.surface_step.echo_weight`).
@@ -262,7 +264,11 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
         t_echo_s = np.where(has_s, parts.t_echo, t_echo_s)
         # the survey sets an ambiguous echo's weight from all its pulses (this block's share
         # of clear echoes stands in until then, run_survey): the two times and the state
-        echo_state = np.where(has_s & parts.clear, 1.0, np.where(has_s & parts.mixable, -1.0, 0.0))
+        echo_state = np.select(
+            [has_s & parts.on_column, has_s & parts.clear, has_s & parts.mixable],
+            [1.0, 2.0, -1.0],
+            0.0,
+        )
         t_onset_s = parts.t_onset
         shift_s = parts.t_echo - parts.t_onset
     # a surface echo clipped at the top code: its filtered peak sits anywhere on the plateau;

@@ -119,18 +119,18 @@ def _nnls2(yy, gg, hh, gh, gy, hy):
 
 @numba.njit(cache=True, nogil=True)
 def _step_sse(filt, i_peak, k_idx, k_w, offsets, grid, sg, decay, g_tab, h_tab, gg_tab, infl):
-    """Per pulse and candidate: residuals (echo + onset, onset alone), echo SNR, amplitudes.
+    """Per pulse and candidate: residuals (echo + onset, onset alone), SNRs, amplitudes.
 
     The amplitudes are the echo's and the onset's of the echo + onset fit, ``(n, k, 2)``.
 
-    The echo's SNR is its amplitude over its standard error (residual noise, ``infl`` for the
-    filtered samples' correlation).
+    The SNRs ``(n, k, 2)`` are the echo's and the onset's amplitudes over their standard errors
+    (residual noise, ``infl`` for the filtered samples' correlation).
     """
     n, m = filt.shape
     k_n, w_n = g_tab.shape
     sse = np.empty((n, k_n))
     sse1 = np.empty((n, k_n))
-    snr = np.zeros((n, k_n))
+    snr = np.zeros((n, k_n, 2))
     amp = np.zeros((n, k_n, 2))
     y = np.empty(w_n)
     for p in range(n):
@@ -165,9 +165,12 @@ def _step_sse(filt, i_peak, k_idx, k_w, offsets, grid, sg, decay, g_tab, h_tab, 
             amp[p, k, 0], amp[p, k, 1] = a, b
             sse1[p, k] = yy - hy * hy / hh if (hy > 0.0 and hh > 0.0) else yy
             det = gg * hh - gh * gh
-            if a > 0.0 and det > 1e-12 * gg * hh:
-                var_a = max(sse[p, k], 0.0) / max(w_n - 3, 1) * infl * hh / det
-                snr[p, k] = a / math.sqrt(var_a) if var_a > 0.0 else np.inf
+            if det > 1e-12 * gg * hh:
+                var1 = max(sse[p, k], 0.0) / max(w_n - 3, 1) * infl / det
+                if a > 0.0:
+                    snr[p, k, 0] = a / math.sqrt(var1 * hh) if var1 > 0.0 else np.inf
+                if b > 0.0:
+                    snr[p, k, 1] = b / math.sqrt(var1 * gg) if var1 > 0.0 else np.inf
     return sse, sse1, snr, amp
 
 
@@ -204,12 +207,19 @@ class StepParts(NamedTuple):
     mixable : (n,) bool ndarray
         Neither clear nor timed by the echo term of necessity (window cut, no onset minimum):
         its time is ``t_onset + w (t_echo − t_onset)``, ``w`` from :func:`echo_weight`.
+    on_column : (n,) bool ndarray
+        A clear echo on a significant column onset (``echo_sigma``): a water surface's. Only
+        these count as clear in the share :func:`echo_weight` reads: a land or roof echo is as
+        clear but has no column under it, and counted as a sea's it pushed every ambiguous
+        echo of a calm sea beside a shore to the echo-kept time (late; issue 13, suite seed 0:
+        half the swath on land, +0.46 ns, the depths 6 cm short).
     """
 
     t_echo: np.ndarray
     t_onset: np.ndarray
     clear: np.ndarray
     mixable: np.ndarray
+    on_column: np.ndarray
 
 
 def echo_weight(n_clear: int, n_mixable: int, half: float) -> float:
@@ -259,7 +269,7 @@ def mix_stored_echoes(store, half: float, log=print) -> float:
     n_clear = n_mix = 0
     for c in range(len(store.chunks)):
         state = store.load_chunk(c, ["surface_echo_state"])["surface_echo_state"]
-        n_clear += int(np.count_nonzero(state > 0))
+        n_clear += int(np.count_nonzero(state == 1))  # a clear echo on a column onset
         n_mix += int(np.count_nonzero(state < 0))
     w = echo_weight(n_clear, n_mix, half)
     for c in range(len(store.chunks)):
@@ -340,7 +350,8 @@ def surface_step_fit(
     # clear: significant, and the echo's peak above the onset's (a weaker "echo" is also an
     # onset earlier by ~ a σ √(2π) / b samples: the fit cannot tell which)
     a_best, b_best = amp[rows, best, 0], amp[rows, best, 1]
-    clear = (snr[rows, best] >= echo_sigma) & (a_best >= b_best * onset_peak(sg, k_dec))
+    clear = (snr[rows, best, 0] >= echo_sigma) & (a_best >= b_best * onset_peak(sg, k_dec))
+    on_column = clear & (snr[rows, best, 1] >= echo_sigma)
     # the onset alone only where it is whole in the waveform (a window cut by the record's
     # start repeats its first sample, which an onset fits as a step at the edge) and has a
     # minimum inside the candidates (at the first one it found no onset to time)
@@ -348,8 +359,8 @@ def surface_step_fit(
     inside = np.argmin(sse1, axis=1) > 0
     mixable = ~clear & ~cut & inside
     t_onset = np.where(mixable, _refined(sse1, i_peak), t_echo)
-    parts = StepParts(t_echo, t_onset, clear, mixable)
-    w = echo_weight(int(clear.sum()), int(mixable.sum()), prevalence_half)
+    parts = StepParts(t_echo, t_onset, clear, mixable, on_column)
+    w = echo_weight(int(on_column.sum()), int(mixable.sum()), prevalence_half)
     t_sel = mixed_time(parts, w)
     if with_parts:
         return t_sel, parts

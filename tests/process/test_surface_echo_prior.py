@@ -82,3 +82,28 @@ def test_calm_water_s_onset_alone_is_not_read_as_an_echo():
         e = err[column == c]
         assert abs(np.mean(e)) < 0.2, (c, np.mean(e), np.std(e))
         assert np.std(e) < 0.6, (c, np.std(e))
+
+
+def test_land_echoes_do_not_count_as_a_sea_s_clear_echoes():
+    # calm water beside a shore: half the pulses hit land, a clear Gaussian echo with no water
+    # column under it (a hard target's). Counted as clear sea echoes they made the share of
+    # clear echoes 0.5, so every calm-water onset was moved to the echo-kept time: late by
+    # ~0.5 sample (issue 13, suite seed 0: +0.46 ns, the depths 6 cm short)
+    rng = np.random.default_rng(7)
+    n = 3000
+    y_sea, t_sea = _waveforms(np.zeros(n), np.full(n, 30.0), rng)
+    t_land = PRE + 6.0 + rng.uniform(0.0, 1.0, n)
+    u = np.arange(M)[None, :] - t_land[:, None]
+    land = 300.0 * np.exp(-0.5 * (u / SIGMA) ** 2)
+    y_land = BASE + rng.poisson(land) + rng.normal(0.0, E_NOISE, land.shape)
+    det = detect_full_waveform(
+        np.concatenate([y_sea, y_land]), DT_S, FWHM_S, noise_samples=PRE, shot_noise_counts=1.0
+    )
+    assert det.has_surface.all()
+    err_sea = det.t_surface_s[:n] / DT_S - t_sea
+    err_land = det.t_surface_s[n:] / DT_S - t_land
+    # the sea's onsets as in calm water alone (the test above), the land echoes as echoes
+    assert abs(np.mean(err_sea)) < 0.2, (np.mean(err_sea), np.std(err_sea))
+    assert abs(np.mean(err_land)) < 0.05, np.mean(err_land)
+    # the land's echoes are clear (state 2: without a column onset), not counted in the share
+    assert np.mean(det.surface_echo_state[n:] == 2) > 0.95
