@@ -29,6 +29,11 @@ clear echoes can: an ambiguous pulse's time is the onset alone's moved toward th
 one by :func:`echo_weight` of that share (empirical Bayes: the population sets the prior),
 set by :func:`mix_stored_echoes` once the survey's chunks are all detected.
 
+An onset alone whose best candidate is the first lies before the candidates: a weak column
+under a slow decay rises for several samples after the surface and first crosses the peak
+threshold late. Those pulses (not clear) are fitted again with the candidates moved back
+(:data:`ONSET_LOOKBACK_SAMPLES`, at most :data:`ONSET_LOOKBACK_PASSES` times).
+
 The candidates and the fitted samples sit at fixed offsets from the peak sample, so ``g`` and
 ``h_k`` at ``(j − c_k)/σ`` (sample offset ``j``, candidate offset ``c_k``) and their Gram sums
 do not depend on the pulse: they are tabulated once per call for each decay of
@@ -64,6 +69,10 @@ __all__ = [
 #: Candidate surface times, samples from the peak sample (0.02-sample grid, 4 before to 0.5
 #: after: the column onset only pulls the peak late, by up to ~3 samples when it is alone).
 STEP_GRID = np.arange(-4.0, 0.5001, 0.02)
+#: An onset-alone fit whose best candidate is the first is fitted again with the candidates
+#: this many samples earlier (the grid's span before the peak), at most this many times.
+ONSET_LOOKBACK_SAMPLES = 4
+ONSET_LOOKBACK_PASSES = 2
 #: Column decays tabulated (1/sample): 0 (a plain smoothed step) and 60 from 0.002 to 1 (11 %
 #: apart; a pulse interpolates between the two around its own decay, linearly in log).
 DECAY_GRID = np.concatenate([[0.0], np.geomspace(0.002, 1.0, 60)])
@@ -339,9 +348,8 @@ def surface_step_fit(
     k_dec, k_row, k_w = decay_index(decay, n)
     # noise of the filtered samples is correlated over ~2√π σ_raw samples (σ_raw = sg/√2)
     infl = max(1.0, 2.0 * math.sqrt(math.pi) * sg / math.sqrt(2.0))
-    sse2, sse1, snr, amp = _step_sse(
-        filt, i_peak, k_row, k_w, offsets, STEP_GRID, float(sg), k_dec, g, h, (g * g).sum(1), infl
-    )
+    tabs = (offsets, STEP_GRID, float(sg), k_dec, g, h, (g * g).sum(1), infl)
+    sse2, sse1, snr, amp = _step_sse(filt, i_peak, k_row, k_w, *tabs)
     t_echo = _refined(sse2, i_peak)
     if echo_sigma is None:
         return (t_echo, t_echo) if with_echo_time else t_echo
@@ -352,19 +360,39 @@ def surface_step_fit(
     a_best, b_best = amp[rows, best, 0], amp[rows, best, 1]
     clear = (snr[rows, best, 0] >= echo_sigma) & (a_best >= b_best * onset_peak(sg, k_dec))
     on_column = clear & (snr[rows, best, 1] >= echo_sigma)
+    # an onset alone whose best candidate is the first lies earlier than the candidates: a weak
+    # column under a slow decay rises for several samples and first crosses the peak threshold
+    # late (calm water off nadir, no echo: suite CI seed 9001, half its water pulses, the
+    # surface +3.2 ns late). Those are fitted again with the candidates moved back.
+    i_fit = i_peak.copy()
+    for _ in range(ONSET_LOOKBACK_PASSES):
+        edge = ~clear & ~_cut(i_fit, offsets, filt.shape[1]) & (np.argmin(sse1, axis=1) == 0)
+        back = i_fit[edge] - ONSET_LOOKBACK_SAMPLES
+        edge[edge] = ~_cut(back, offsets, filt.shape[1])
+        if not edge.any():
+            break
+        i_fit[edge] -= ONSET_LOOKBACK_SAMPLES
+        sub = np.flatnonzero(edge)
+        sse2[sub], sse1[sub], _, _ = _step_sse(filt[sub], i_fit[sub], k_row[sub], k_w[sub], *tabs)
+        t_echo[sub] = _refined(sse2[sub], i_fit[sub])
     # the onset alone only where it is whole in the waveform (a window cut by the record's
     # start repeats its first sample, which an onset fits as a step at the edge) and has a
     # minimum inside the candidates (at the first one it found no onset to time)
-    cut = (i_peak + offsets[0] < 0) | (i_peak + offsets[-1] > filt.shape[1] - 1)
+    cut = _cut(i_fit, offsets, filt.shape[1])
     inside = np.argmin(sse1, axis=1) > 0
     mixable = ~clear & ~cut & inside
-    t_onset = np.where(mixable, _refined(sse1, i_peak), t_echo)
+    t_onset = np.where(mixable, _refined(sse1, i_fit), t_echo)
     parts = StepParts(t_echo, t_onset, clear, mixable, on_column)
     w = echo_weight(int(on_column.sum()), int(mixable.sum()), prevalence_half)
     t_sel = mixed_time(parts, w)
     if with_parts:
         return t_sel, parts
     return (t_sel, t_echo) if with_echo_time else t_sel
+
+
+def _cut(i_fit: np.ndarray, offsets: np.ndarray, m: int) -> np.ndarray:
+    """Whether each fit's window leaves the ``m`` samples of the waveform."""
+    return (i_fit + offsets[0] < 0) | (i_fit + offsets[-1] > m - 1)
 
 
 def onset_peak(sg: float, decay: np.ndarray) -> np.ndarray:
