@@ -184,7 +184,8 @@ def sample_batch(
     Returns
     -------
     PulseChains
-        ``n_steps`` per pulse: a pulse stops at the first chunk boundary where it converged.
+        ``n_steps`` per pulse: a pulse stops at the first chunk boundary where it converged
+        (a restarted pulse's: the steps of its new chain).
     """
     st = settings or PosteriorSettings()
     data = make_pulse_batch(waveforms, system, st, cos_water, exposure)
@@ -243,11 +244,7 @@ def sample_batch(
         p0[:, N_PARAMS * i : N_PARAMS * (i + 1)] = ball
     pos = p0.reshape(st.n_walkers, n_p, N_PARAMS)
     centres = modes.copy()
-    # the independence proposal adapts at the end of each burn-in round (a Student-t fitted to
-    # the round's second half), then stays fixed: a later round starts from walkers the
-    # refitted proposal has already spread over the posterior (fitted to a first round that
-    # left them near the start's ball, it missed wide or skewed posteriors)
-    for _ in range(st.burn_rounds if st.burn_steps else 0):
+    if st.burn_steps:
         pos, (burn, _) = _run(
             data,
             np.arange(n_p),
@@ -259,6 +256,8 @@ def sample_batch(
             rng,
             (centres, scales * st.proposal_scale**2),
         )
+        # adapt the independence proposal once, at the end of the burn-in (fixed afterwards,
+        # but for one restart of the chains still unconverged after restart_steps)
         half = burn[burn.shape[0] // 2 :]
         for i in range(n_p):
             x = half[:, :, i].reshape(-1, N_PARAMS)

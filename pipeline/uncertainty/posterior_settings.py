@@ -35,10 +35,7 @@ class PosteriorSettings:
     """Sampler settings and prior bounds."""
 
     n_walkers: int = setting(16, ge=16, le=1024, doc="emcee walkers (>= 2 x 9 parameters - 2)")
-    burn_steps: int = setting(150, ge=0, doc="steps discarded after the start, per round")
-    burn_rounds: int = setting(
-        1, ge=1, le=10, doc="burn-in rounds, the independence proposal refitted after each"
-    )
+    burn_steps: int = setting(150, ge=0, doc="steps discarded after the start")
     restart_steps: int | None = setting(
         1500,
         ge=10,
