@@ -270,7 +270,7 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
             0.0,
         )
         t_onset_s = parts.t_onset
-        shift_s = parts.t_echo - parts.t_onset
+        shift_s = parts.t_mix_echo - parts.t_onset
     # a surface echo clipped at the top code: its filtered peak sits anywhere on the plateau;
     # the plateau's edges time it (one echo), or bound it (run on into the column: "merged")
     clip_s = clip_merged = np.zeros(n, dtype=bool)

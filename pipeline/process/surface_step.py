@@ -72,7 +72,7 @@ STEP_GRID = np.arange(-4.0, 0.5001, 0.02)
 #: An onset-alone fit whose best candidate is the first is fitted again with the candidates
 #: this many samples earlier (the grid's span before the peak), at most this many times.
 ONSET_LOOKBACK_SAMPLES = 4
-ONSET_LOOKBACK_PASSES = 2
+ONSET_LOOKBACK_PASSES = 6
 #: Column decays tabulated (1/sample): 0 (a plain smoothed step) and 60 from 0.002 to 1 (11 %
 #: apart; a pulse interpolates between the two around its own decay, linearly in log).
 DECAY_GRID = np.concatenate([[0.0], np.geomspace(0.002, 1.0, 60)])
@@ -215,13 +215,17 @@ class StepParts(NamedTuple):
         The echo is unambiguous: significant (``echo_sigma``) and above the onset's own peak.
     mixable : (n,) bool ndarray
         Neither clear nor timed by the echo term of necessity (window cut, no onset minimum):
-        its time is ``t_onset + w (t_echo − t_onset)``, ``w`` from :func:`echo_weight`.
+        its time is ``t_onset + w (t_mix_echo − t_onset)``, ``w`` from :func:`echo_weight`.
     on_column : (n,) bool ndarray
         A clear echo on a significant column onset (``echo_sigma``): a water surface's. Only
         these count as clear in the share :func:`echo_weight` reads: a land or roof echo is as
         clear but has no column under it, and counted as a sea's it pushed every ambiguous
         echo of a calm sea beside a shore to the echo-kept time (late; issue 13, suite seed 0:
         half the swath on land, +0.46 ns, the depths 6 cm short).
+    t_mix_echo : (n,) ndarray
+        The echo-kept time an ambiguous echo is mixed with: ``t_echo``, but where the onset
+        alone was fitted with the candidates moved back (:func:`_onset_lookback`), the
+        echo-kept fit there (a weak echo on that onset, not the peak's).
     """
 
     t_echo: np.ndarray
@@ -229,6 +233,7 @@ class StepParts(NamedTuple):
     clear: np.ndarray
     mixable: np.ndarray
     on_column: np.ndarray
+    t_mix_echo: np.ndarray
 
 
 def echo_weight(n_clear: int, n_mixable: int, half: float) -> float:
@@ -251,7 +256,7 @@ def echo_weight(n_clear: int, n_mixable: int, half: float) -> float:
 
 def mixed_time(parts: StepParts, weight: float) -> np.ndarray:
     """Each pulse's surface time (fractional sample), an ambiguous echo's weighted by ``weight``."""
-    mix = parts.t_onset + weight * (parts.t_echo - parts.t_onset)
+    mix = parts.t_onset + weight * (parts.t_mix_echo - parts.t_onset)
     return np.where(parts.mixable, mix, parts.t_echo)
 
 
@@ -363,18 +368,10 @@ def surface_step_fit(
     # an onset alone whose best candidate is the first lies earlier than the candidates: a weak
     # column under a slow decay rises for several samples and first crosses the peak threshold
     # late (calm water off nadir, no echo: suite CI seed 9001, half its water pulses, the
-    # surface +3.2 ns late). Those are fitted again with the candidates moved back.
-    i_fit = i_peak.copy()
-    for _ in range(ONSET_LOOKBACK_PASSES):
-        edge = ~clear & ~_cut(i_fit, offsets, filt.shape[1]) & (np.argmin(sse1, axis=1) == 0)
-        back = i_fit[edge] - ONSET_LOOKBACK_SAMPLES
-        edge[edge] = ~_cut(back, offsets, filt.shape[1])
-        if not edge.any():
-            break
-        i_fit[edge] -= ONSET_LOOKBACK_SAMPLES
-        sub = np.flatnonzero(edge)
-        sse2[sub], sse1[sub], _, _ = _step_sse(filt[sub], i_fit[sub], k_row[sub], k_w[sub], *tabs)
-        t_echo[sub] = _refined(sse2[sub], i_fit[sub])
+    # surface +3.2 ns late). Its onset alone is fitted again with the candidates moved back,
+    # kept where that finds a minimum inside them; the echo-kept time at the peak stays the
+    # merged fit's start, the mixing reads the moved window's (t_mix_echo)
+    i_fit, sse2_fit = _onset_lookback(filt, i_peak, sse1, sse2, ~clear, k_row, k_w, k_dec, tabs)
     # the onset alone only where it is whole in the waveform (a window cut by the record's
     # start repeats its first sample, which an onset fits as a step at the edge) and has a
     # minimum inside the candidates (at the first one it found no onset to time)
@@ -382,12 +379,45 @@ def surface_step_fit(
     inside = np.argmin(sse1, axis=1) > 0
     mixable = ~clear & ~cut & inside
     t_onset = np.where(mixable, _refined(sse1, i_fit), t_echo)
-    parts = StepParts(t_echo, t_onset, clear, mixable, on_column)
+    moved = i_fit != i_peak
+    t_mix_echo = t_echo.copy()
+    t_mix_echo[moved] = _refined(sse2_fit[moved], i_fit[moved])
+    parts = StepParts(t_echo, t_onset, clear, mixable, on_column, t_mix_echo)
     w = echo_weight(int(on_column.sum()), int(mixable.sum()), prevalence_half)
     t_sel = mixed_time(parts, w)
     if with_parts:
         return t_sel, parts
     return (t_sel, t_echo) if with_echo_time else t_sel
+
+
+def _onset_lookback(filt, i_peak, sse1, sse2, candidates, k_row, k_w, k_dec, tabs):
+    """Move the onset-alone fit back where its best candidate is the first; ``sse1`` in place.
+
+    ``candidates`` (n,) bool: the pulses that may move. Up to :data:`ONSET_LOOKBACK_PASSES`
+    times, a pulse whose onset-alone residual is smallest at the first candidate is fitted
+    again with the candidates :data:`ONSET_LOOKBACK_SAMPLES` earlier (never leaving the
+    waveform); a pulse that still finds no minimum inside them keeps its fit at the peak.
+    Returns each pulse's fitted peak sample (``i_peak`` where not moved) and the echo-kept
+    residuals there (``sse2`` where not moved; a copy).
+    """
+    offsets, m = tabs[0], filt.shape[1]
+    i_fit = i_peak.copy()
+    sse1_peak, sse2_fit = sse1.copy(), sse2.copy()
+    for _ in range(ONSET_LOOKBACK_PASSES):
+        edge = candidates & ~_cut(i_fit, offsets, m) & (np.argmin(sse1, axis=1) == 0)
+        edge[edge] = ~_cut(i_fit[edge] - ONSET_LOOKBACK_SAMPLES, offsets, m)
+        if not edge.any():
+            break
+        i_fit[edge] -= ONSET_LOOKBACK_SAMPLES
+        sub = np.flatnonzero(edge)
+        sse2_fit[sub], sse1[sub], _, _ = _step_sse(
+            filt[sub], i_fit[sub], k_row[sub], k_w[sub], offsets, *tabs[1:3], k_dec[sub],
+            *tabs[4:],
+        )  # fmt: skip
+    lost = (i_fit != i_peak) & (np.argmin(sse1, axis=1) == 0)
+    i_fit[lost] = i_peak[lost]
+    sse1[lost], sse2_fit[lost] = sse1_peak[lost], sse2[lost]
+    return i_fit, sse2_fit
 
 
 def _cut(i_fit: np.ndarray, offsets: np.ndarray, m: int) -> np.ndarray:

@@ -130,7 +130,8 @@ class PulseChains:
     tau_steps : (P, 9) ndarray
         Integrated autocorrelation time per pulse and parameter, in steps.
     n_steps : (P,) int64
-        Production steps per pulse.
+        Production steps per pulse (a restarted pulse's: its new chain's; the steps its
+        restart discarded are not counted).
     flags : (P,) uint16
         :class:`PosteriorFlag` bits.
     """
@@ -303,11 +304,18 @@ def sample_batch(
             spent[active] + steps >= st.max_steps
         )
         active = active[~done]
-        if active.size and not restarted and st.restart_steps and steps >= st.restart_steps:
+        if (
+            active.size
+            and not restarted
+            and st.restart_steps
+            and steps >= st.restart_steps
+            and st.max_steps - steps >= st.min_steps  # room for a new chain's first check
+        ):
             # once: the chains still unconverged refit their proposal to their own production
             # so far (its second half) and start afresh, what came before becoming burn-in
             # (adaptation stops there, so each chain stays an exact MCMC: Roberts & Rosenthal
-            # 2007 ask no more of finitely many adaptations)
+            # 2007 ask no more of finitely many adaptations). All of them restart (their
+            # chains must stay equally long), a degenerate refit keeping its old proposal
             restarted = True
             k1 = k0 + chain.shape[0]
             for i in active:

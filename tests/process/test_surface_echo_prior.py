@@ -114,7 +114,7 @@ def test_a_weak_slow_onset_is_timed_at_the_surface_not_where_it_crosses_the_thre
     # decay: the filtered onset rises for a few samples and its first peak above the threshold
     # can lie more than the candidates' 4 samples after the surface; fitted there, the onset
     # alone found no minimum and the echo term sat on the noise (suite CI seed 9001: half the
-    # water pulses, +3.2 ns). Mean errors, samples: before 1.35 / 0.43, now 0.40 / 0.16
+    # water pulses, +3.2 ns). Mean errors, samples: before 1.35 / 0.43, now 0.28 / 0.17
     rng = np.random.default_rng(8)
     for column, decay, limit in ((8.0, 0.015, 0.6), (10.0, 0.02, 0.25)):
         n = 2000
