@@ -31,7 +31,7 @@ from pipeline.process.context import (
     with_measured_attenuation,
 )
 from pipeline.process.returns import DetectedReturns, DetectorFlag
-from pipeline.process.surface_step import mix_stored_echoes
+from pipeline.process.surface_echo_mix import mix_stored_echoes
 from pipeline.stages import Plan, StageClock
 from pipeline.survey_chunks import ChunkJob, run_chunk
 from pipeline.survey_tiles import grid_by_tiles, tile_layout, write_points_by_tiles

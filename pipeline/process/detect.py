@@ -90,7 +90,7 @@ class WaveformDetections:
     −1; else 0): ``t_surface_s`` there is
     ``t_surface_onset_s + w surface_echo_shift_s``, ``w`` from the block's share of clear
     echoes until the survey sets it from all of them
-    (:func:`~pipeline.process.surface_step.echo_weight`).
+    (:func:`~pipeline.process.surface_echo_mix.echo_weight`).
     """
 
     has_surface: np.ndarray
