@@ -131,7 +131,7 @@ def _nnls2(yy, gg, hh, gh, gy, hy):
 
 
 @numba.njit(cache=True, nogil=True)
-def _step_sse(filt, i_peak, k_idx, k_w, offsets, grid, sg, decay, g_tab, h_tab, gg_tab, infl):
+def _step_sse(filt, i_peak, k_idx, k_w, decay, offsets, grid, sg, g_tab, h_tab, gg_tab, infl):
     """Per pulse and candidate: residuals (echo + onset, onset alone), SNRs, amplitudes.
 
     The amplitudes are the echo's and the onset's of the echo + onset fit, ``(n, k, 2)``.
@@ -259,8 +259,8 @@ def surface_step_fit(
     k_dec, k_row, k_w = decay_index(decay, n)
     # noise of the filtered samples is correlated over ~2√π σ_raw samples (σ_raw = sg/√2)
     infl = max(1.0, 2.0 * math.sqrt(math.pi) * sg / math.sqrt(2.0))
-    tabs = (offsets, STEP_GRID, float(sg), k_dec, g, h, (g * g).sum(1), infl)
-    sse2, sse1, snr, amp = _step_sse(filt, i_peak, k_row, k_w, *tabs)
+    tabs = (offsets, STEP_GRID, float(sg), g, h, (g * g).sum(1), infl)
+    sse2, sse1, snr, amp = _step_sse(filt, i_peak, k_row, k_w, k_dec, *tabs)
     t_echo = _refined(sse2, i_peak)
     if echo_sigma is None:
         return (t_echo, t_echo) if with_echo_time else t_echo
@@ -317,9 +317,8 @@ def _onset_lookback(filt, i_peak, sse1, sse2, candidates, k_row, k_w, k_dec, tab
         i_fit[edge] -= ONSET_LOOKBACK_SAMPLES
         sub = np.flatnonzero(edge)
         sse2_fit[sub], sse1[sub], _, _ = _step_sse(
-            filt[sub], i_fit[sub], k_row[sub], k_w[sub], offsets, *tabs[1:3], k_dec[sub],
-            *tabs[4:],
-        )  # fmt: skip
+            filt[sub], i_fit[sub], k_row[sub], k_w[sub], k_dec[sub], *tabs
+        )
     lost = (i_fit != i_peak) & (np.argmin(sse1, axis=1) == 0)
     i_fit[lost] = i_peak[lost]
     sse1[lost], sse2_fit[lost] = sse1_peak[lost], sse2[lost]

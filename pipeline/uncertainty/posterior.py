@@ -259,12 +259,7 @@ def sample_batch(
         )
         # adapt the independence proposal once, at the end of the burn-in (fixed afterwards,
         # but for one restart of the chains still unconverged after restart_steps)
-        half = burn[burn.shape[0] // 2 :]
-        for i in range(n_p):
-            x = half[:, :, i].reshape(-1, N_PARAMS)
-            cov = np.cov(x, rowvar=False)
-            if np.all(np.linalg.eigvalsh(cov) > 1e-12 * np.max(np.diag(cov))):
-                centres[i], scales[i] = x.mean(axis=0), cov
+        _refit_proposal(burn[burn.shape[0] // 2 :], range(n_p), centres, scales)
     proposal = (centres, scales * st.proposal_scale**2)
     # production in chunks; converged pulses leave, the others continue from where they are
     # the stored chains, (steps, walkers, P, 9), grown by doubling; n_stored per pulse
@@ -318,11 +313,7 @@ def sample_batch(
             # chains must stay equally long), a degenerate refit keeping its old proposal
             restarted = True
             k1 = k0 + chain.shape[0]
-            for i in active:
-                x = stored[k1 // 2 : k1, :, i].reshape(-1, N_PARAMS)
-                cov = np.cov(x, rowvar=False)
-                if np.all(np.linalg.eigvalsh(cov) > 1e-12 * np.max(np.diag(cov))):
-                    centres[i], scales[i] = x.mean(axis=0), cov
+            _refit_proposal(stored[k1 // 2 : k1], active, centres, scales)
             proposal = (centres, scales * st.proposal_scale**2)
             spent[active] += n_steps[active]
             n_steps[active] = 0
@@ -343,6 +334,18 @@ def sample_batch(
     edge = (d_lo <= data.lower[:, 0] + 1e-3 * span) | (d_hi >= data.upper[:, 0] - 1e-3 * span)
     flags[edge] |= np.uint16(PosteriorFlag.AT_PRIOR_BOUND)
     return PulseChains(draws, modes, acc, tau, n_steps, flags)
+
+
+def _refit_proposal(chain, pulses, centres, scales) -> None:
+    """Centre and scale the pulses' independence proposals on ``chain`` (steps, walkers, P, 9).
+
+    In place; a pulse whose sample covariance is degenerate keeps its old proposal.
+    """
+    for i in pulses:
+        x = chain[:, :, i].reshape(-1, N_PARAMS)
+        cov = np.cov(x, rowvar=False)
+        if np.all(np.linalg.eigvalsh(cov) > 1e-12 * np.max(np.diag(cov))):
+            centres[i], scales[i] = x.mean(axis=0), cov
 
 
 def _run(data: PulseBatch, pulses, pos, system, st, n_steps: int, thin: int, rng, proposal):

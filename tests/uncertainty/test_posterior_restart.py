@@ -19,15 +19,10 @@ from pipeline.uncertainty.waveform_model import (
     covariance,
     draw_waveform,
     fisher_information,
-    in_water_delay_s,
 )
-from tests.uncertainty.test_posterior import FW, gaussian_target
+from tests.uncertainty.test_posterior import FW, gaussian_target, theta, window
 
 DEPTHS_K = [(2, 0.2), (4, 0.3), (6, 0.15), (3, 0.4), (5, 0.25), (7, 0.2), (2.5, 0.3), (4.5, 0.2)]
-
-
-def _theta(depth, k):
-    return np.array([depth, 10.0, np.log(2000), np.log(600), np.log(800), np.log(k), 4.0, 0, 0])
 
 
 def _gaussian_targets(monkeypatch, width):
@@ -36,9 +31,8 @@ def _gaussian_targets(monkeypatch, width):
     Returns the waveforms and each pulse's target mean and covariance.
     """
     rng = np.random.default_rng(5)
-    thetas = [_theta(d, k) for d, k in DEPTHS_K]
-    n = [int(np.ceil(t[1] + in_water_delay_s(t[0], 1.0, 1.3638) / 1e-9 + 12)) for t in thetas]
-    waves = [draw_waveform(t, m, FW, rng) for t, m in zip(thetas, n, strict=True)]
+    thetas = [theta(depth=d, k=k) for d, k in DEPTHS_K]
+    waves = [draw_waveform(t, window(t), FW, rng) for t in thetas]
     cov = [
         width**2 * covariance(fisher_information(t, w.size, FW))
         for t, w in zip(thetas, waves, strict=True)
