@@ -1,7 +1,7 @@
 """Calibration and cost of the depth posterior, the point TPU and the cell uncertainty.
 
 Run: .venv/bin/python benchmarks/bench_posterior.py [--pulses 500] [--pc-pulses 200]
-[--seed S] [--posterior-only] [--dump FILE.npz]
+[--seed S] [--posterior-only] [--dump FILE.npz] [--set KEY=JSON] [--threads N]
 Writes nothing but stdout (and ``--dump``'s per-pulse summaries); results are recorded by hand
 in benchmarks/RESULTS_posterior.md. ``--seed`` draws another set of truths and noise (the
 held-out check of a change tuned on the default set).
@@ -242,7 +242,20 @@ def main() -> None:
         metavar="KEY=VALUE",
         help="a PosteriorSettings field for this run (VALUE in JSON), repeatable",
     )
+    ap.add_argument(
+        "--threads",
+        type=int,
+        default=None,
+        help="threads of the sampler's log-densities (default: every core, as `bathy run`)",
+    )
     args = ap.parse_args()
+    if args.threads is not None:
+        import numba
+
+        numba.set_num_threads(args.threads)
+    import numba
+
+    print(f"sampler threads: {numba.get_num_threads()}")
     st = PosteriorSettings()
     for kv in args.set:
         key, value = kv.split("=", 1)

@@ -20,6 +20,7 @@ Results do not depend on where a task ran: every task is a pure function of ``(s
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import time
@@ -28,7 +29,7 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
-__all__ = ["Executor", "default_workers"]
+__all__ = ["Executor", "default_workers", "kernel_threads"]
 
 #: What each pool process received through the initializer (``None`` in the parent).
 _SHARED: Any = None
@@ -40,6 +41,25 @@ def default_workers() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # not on Linux
         return max(1, os.cpu_count() or 1)
+
+
+@contextlib.contextmanager
+def kernel_threads(n: int) -> Iterator[int]:
+    """Run the compiled kernels' parallel loops on ``n`` threads (at most numba's pool) inside.
+
+    Only kernels whose rows are independent run in parallel (the posterior's log-densities:
+    :func:`pipeline.uncertainty.posterior_loop.run_steps`), so their values do not depend on
+    ``n``. Yields the threads used; the previous count is restored on leaving.
+    """
+    import numba
+
+    before = numba.get_num_threads()
+    used = max(1, min(int(n), numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(used)
+    try:
+        yield used
+    finally:
+        numba.set_num_threads(before)
 
 
 def _install(shared: Any) -> None:
@@ -87,12 +107,17 @@ class Executor:
         self.workers = default_workers() if workers is None else int(workers)
         self.ahead = ahead if ahead is not None else 2 * self.workers
         self.map_wall_s = 0.0  # wall seconds inside map(), the consumer's work included
+        # threads of this process's parallel kernels: the workers asked for, or with a
+        # cluster (whose threads are elsewhere) this machine's cores
+        self.local_threads = default_workers() if self._client else self.workers
 
     def describe(self) -> dict[str, Any]:
         """Where the tasks ran, JSON-ready (the manifest's ``execution``).
 
-        ``{"workers", "scheduler", "engine", "map_wall_s"}``; ``map_wall_s``: wall seconds
-        spent in :meth:`map` (the chunk loop's, its consumer's work included).
+        ``{"workers", "scheduler", "engine", "map_wall_s", "local_threads"}``;
+        ``map_wall_s``: wall seconds spent in :meth:`map` (the chunk loop's, its consumer's
+        work included); ``local_threads``: threads of the kernels run in this process
+        (:func:`kernel_threads`).
         """
         engine = "dask" if self._client else ("process_pool" if self.workers > 1 else "serial")
         return {
@@ -100,6 +125,7 @@ class Executor:
             "scheduler": self.scheduler,
             "engine": engine,
             "map_wall_s": self.map_wall_s,
+            "local_threads": self.local_threads,
         }
 
     def __enter__(self) -> Executor:

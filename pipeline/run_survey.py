@@ -351,7 +351,10 @@ def run_survey(
     log(f"  rejected bathymetric points (class 7, withheld): {rejected}")
     post = None
     if plan.runs("posterior"):
-        with clock.stage("posterior"):
+        from pipeline.parallel import kernel_threads
+
+        threads = (executor or Executor(workers=1)).local_threads
+        with clock.stage("posterior"), kernel_threads(threads):
             # imported here: a survey without posteriors never imports emcee
             from pipeline.uncertainty.survey_posterior import survey_posteriors
             from pipeline.uncertainty.survey_uncertainty import with_posteriors

@@ -13,10 +13,14 @@ Student-t draws and the uniforms of the Metropolis tests have fixed shapes). So 
 the draws only, are formed there with numpy's own operations (the same rounding); the compiled
 kernel (:func:`_advance`) then runs the steps: the DE proposals (elementwise, same operation
 order, so the same bits), the model (:func:`~pipeline.uncertainty.waveform_kernel.
-log_post_rows`, as before) and the accept/reject tests. The proposal density of a walker a DE
-step moved is computed in the kernel (its matrix product rounds differently from numpy's BLAS
-by ~1e-16 relative: an accept decision could differ only for a uniform within that of the
-threshold).
+log_post_one`, row by row as before) and the accept/reject tests. The proposal density of a
+walker a DE step moved is computed in the kernel (its matrix product rounds differently from
+numpy's BLAS by ~1e-16 relative: an accept decision could differ only for a uniform within
+that of the threshold).
+
+Every core: the pulses of a batch never share walkers, so :func:`_advance` runs each pulse's
+steps on its own, the pulses on numba's threads (:func:`pipeline.parallel.kernel_threads` sets
+how many; ``bathy run`` uses its ``--workers``): the same chains for any number of threads.
 """
 
 from __future__ import annotations
@@ -34,7 +38,7 @@ from pipeline.uncertainty.posterior_target import (
     log_prob_blocks,
     prior_box,
 )
-from pipeline.uncertainty.waveform_kernel import log_post_rows_bounded
+from pipeline.uncertainty.waveform_kernel import log_post_one
 from pipeline.uncertainty.waveform_model import N_PARAMS
 
 __all__ = ["run_steps", "term_bounds"]
@@ -218,7 +222,7 @@ def _log_g_one(x, centre, inv_chol, dof):
     return -0.5 * (dof + d) * math.log1p(total / dof)
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, parallel=True)
 def _advance(
     coords, lp, lg, lg_ok, kind, halves, j1s, j2s, jit, de_log_u, q_ind, lg_q, ind_log_u,
     centre, inv_chol, dof, chain, done, thin, counts, proposed,
@@ -229,15 +233,40 @@ def _advance(
     ``lg`` (nw, P) the walkers' log proposal densities (valid where ``lg_ok``), ``chain`` the
     stored steps (step ``done + t`` is stored after it when ``(done + t + 1) % thin == 0``),
     ``counts`` (2, P) the accepted proposals of DE / independence, ``proposed`` (2,) the
-    walker updates of each. Returns -1, or the first walker row whose log posterior is NaN or
-    ``+inf`` (or whose proposal holds NaN): the caller raises.
+    walker updates of each. Returns -1, or a walker row (``walker * P + pulse``) whose log
+    posterior is NaN or ``+inf`` (or whose proposal holds NaN): the caller raises.
+
+    The pulses' ensembles never meet (a DE move's complementary walkers are the same pulse's),
+    so each pulse runs all the steps on its own (:func:`_advance_pulse`), the pulses side by
+    side on every core (``numba.set_num_threads``): the same bits for any number of threads.
     """
+    n_p = coords.shape[1]
+    bad = np.empty(n_p, dtype=np.int64)
+    for p in numba.prange(n_p):
+        bad[p] = _advance_pulse(
+            p, coords, lp, lg, lg_ok, kind, halves, j1s, j2s, jit, de_log_u, q_ind, lg_q,
+            ind_log_u, centre, inv_chol, dof, chain, done, thin, counts, rest, b_abs, samples,
+            n_valid, cos_water, box, ln_k_prior, system, exposure,
+        )  # fmt: skip
+    for p in range(n_p):
+        if bad[p] >= 0:
+            return bad[p]
+    for t in range(kind.shape[0]):  # every walker is proposed a move at every step
+        proposed[kind[t]] += coords.shape[0]
+    return -1
+
+
+@numba.njit(cache=True, nogil=True)
+def _advance_pulse(
+    p, coords, lp, lg, lg_ok, kind, halves, j1s, j2s, jit, de_log_u, q_ind, lg_q, ind_log_u,
+    centre, inv_chol, dof, chain, done, thin, counts, rest, b_abs, samples, n_valid, cos_water,
+    box, ln_k_prior, system, exposure,
+):  # fmt: skip
+    """:func:`_advance`'s steps for pulse ``p`` alone (its walkers, its draws, its counts)."""
     nw, n_p, d = coords.shape
-    n_half = np.zeros(2, dtype=np.int64)
-    for w in range(nw):
-        n_half[w % 2] += 1
     sel = np.empty(nw, dtype=np.int64)
     comp = np.empty(nw, dtype=np.int64)
+    q = np.empty(d)
     k_de, k_ind = 0, 0
     for t in range(kind.shape[0]):
         if kind[t] == 0:  # DE: red-blue halves, each block on its own Metropolis test
@@ -250,74 +279,58 @@ def _advance(
                     else:
                         comp[nc] = w
                         nc += 1
-                q = np.empty((ns * n_p, d))
+                # the complementary half does not move during this half's update: each
+                # walker's proposal, value and test in turn are those of the whole half at once
                 for a in range(ns):
                     wa = sel[a]
-                    for p in range(n_p):
-                        c2 = comp[j2s[k_de, half, a, p]]
-                        c1 = comp[j1s[k_de, half, a, p]]
-                        r = jit[k_de, half, a, p]
-                        for i in range(d):
-                            g = _DE_GAMMA0 * (coords[c2, p, i] - coords[c1, p, i])
-                            q[a * n_p + p, i] = (coords[wa, p, i] + g) + r
-                bad = _bad_rows(q)
-                if bad >= 0:
-                    return bad
-                # accepted iff log u < new - old: rows shown to fall below are cut short
-                thr = np.empty(ns * n_p)
-                for a in range(ns):
-                    for p in range(n_p):
-                        th_ = de_log_u[k_de, half, a, p] + lp[sel[a], p]
-                        thr[a * n_p + p] = th_ - _margin(th_, lp[sel[a], p], b_abs[p])
-                new = log_post_rows_bounded(
-                    q, thr, rest, samples, n_valid, cos_water, box, ln_k_prior, system, exposure
-                )
-                for a in range(ns):
-                    wa = sel[a]
-                    for p in range(n_p):
-                        v = new[a * n_p + p]
-                        if math.isnan(v) or v == np.inf:
-                            return a * n_p + p
-                        if de_log_u[k_de, half, a, p] < v - lp[wa, p]:
-                            coords[wa, p, :] = q[a * n_p + p]
-                            lp[wa, p] = v
-                            lg_ok[wa, p] = False
-                            counts[0, p] += 1.0
-            proposed[0] += nw
+                    c2 = comp[j2s[k_de, half, a, p]]
+                    c1 = comp[j1s[k_de, half, a, p]]
+                    r = jit[k_de, half, a, p]
+                    for i in range(d):
+                        g = _DE_GAMMA0 * (coords[c2, p, i] - coords[c1, p, i])
+                        q[i] = (coords[wa, p, i] + g) + r
+                    if _has_nan(q):
+                        return wa * n_p + p
+                    # accepted iff log u < new - old: rows shown to fall below are cut short
+                    th_ = de_log_u[k_de, half, a, p] + lp[wa, p]
+                    v = log_post_one(
+                        q, p, th_ - _margin(th_, lp[wa, p], b_abs[p]), rest, samples, n_valid,
+                        cos_water, box, ln_k_prior, system, exposure,
+                    )  # fmt: skip
+                    if math.isnan(v) or v == np.inf:
+                        return wa * n_p + p
+                    if de_log_u[k_de, half, a, p] < v - lp[wa, p]:
+                        coords[wa, p, :] = q
+                        lp[wa, p] = v
+                        lg_ok[wa, p] = False
+                        counts[0, p] += 1.0
             k_de += 1
         else:  # independence Metropolis-Hastings from the fixed Student-t
-            qk = q_ind[k_ind].reshape(nw * n_p, d)
-            bad = _bad_rows(qk)
-            if bad >= 0:
-                return bad
-            # accepted iff log u < new - old + lg(x) - lg(q): rows shown below are cut short
-            thr = np.empty(nw * n_p)
             for w in range(nw):
-                for p in range(n_p):
-                    if not lg_ok[w, p]:
-                        lg[w, p] = _log_g_one(coords[w, p], centre[p], inv_chol[p], dof)
-                        lg_ok[w, p] = True
-                    th_ = ind_log_u[k_ind, w, p] + lp[w, p] - lg[w, p] + lg_q[k_ind, w, p]
-                    thr[w * n_p + p] = th_ - _margin(th_, lp[w, p], b_abs[p] + abs(lg[w, p]))
-            new = log_post_rows_bounded(
-                qk, thr, rest, samples, n_valid, cos_water, box, ln_k_prior, system, exposure
-            )
-            for w in range(nw):
-                for p in range(n_p):
-                    v = new[w * n_p + p]
-                    if math.isnan(v) or v == np.inf:
-                        return w * n_p + p
-                    log_alpha = v - lp[w, p] + lg[w, p] - lg_q[k_ind, w, p]
-                    if ind_log_u[k_ind, w, p] < log_alpha:
-                        coords[w, p, :] = q_ind[k_ind, w, p]
-                        lp[w, p] = v
-                        lg[w, p] = lg_q[k_ind, w, p]
-                        counts[1, p] += 1.0
-            proposed[1] += nw
+                qw = q_ind[k_ind, w, p]
+                if _has_nan(qw):
+                    return w * n_p + p
+                if not lg_ok[w, p]:
+                    lg[w, p] = _log_g_one(coords[w, p], centre[p], inv_chol[p], dof)
+                    lg_ok[w, p] = True
+                # accepted iff log u < new - old + lg(x) - lg(q): rows shown below are cut short
+                th_ = ind_log_u[k_ind, w, p] + lp[w, p] - lg[w, p] + lg_q[k_ind, w, p]
+                v = log_post_one(
+                    qw, p, th_ - _margin(th_, lp[w, p], b_abs[p] + abs(lg[w, p])), rest, samples,
+                    n_valid, cos_water, box, ln_k_prior, system, exposure,
+                )  # fmt: skip
+                if math.isnan(v) or v == np.inf:
+                    return w * n_p + p
+                log_alpha = v - lp[w, p] + lg[w, p] - lg_q[k_ind, w, p]
+                if ind_log_u[k_ind, w, p] < log_alpha:
+                    coords[w, p, :] = qw
+                    lp[w, p] = v
+                    lg[w, p] = lg_q[k_ind, w, p]
+                    counts[1, p] += 1.0
             k_ind += 1
         step = done + t + 1
         if step % thin == 0:
-            chain[step // thin - 1] = coords
+            chain[step // thin - 1, :, p, :] = coords[:, p, :]
     return -1
 
 
@@ -332,10 +345,9 @@ def _margin(thr, lp, scale):
 
 
 @numba.njit(cache=True, nogil=True)
-def _bad_rows(q):
-    """First row of ``q`` holding NaN, or -1."""
-    for k in range(q.shape[0]):
-        for i in range(q.shape[1]):
-            if math.isnan(q[k, i]):
-                return k
-    return -1
+def _has_nan(x):
+    """Whether the vector ``x`` holds a NaN."""
+    for i in range(x.shape[0]):
+        if math.isnan(x[i]):
+            return True
+    return False

@@ -217,26 +217,38 @@ def log_post_rows_bounded(
     either way (early rejection: Solonen et al. 2012, *Bayesian Analysis* 7(3), 715-736), and
     the rest of the row is not computed.
     """
-    n, n_p = theta.shape[0], samples.shape[0]
-    dt, s, group_index, offset, poisson, floor, shot = system
-    out = np.full(n, -np.inf)
-    for k in range(n):
-        p = k % n_p
-        inside = True
-        for j in range(9):
-            if not (box[p, j] <= theta[k, j] <= box[p, 9 + j]):
-                inside = False
-        t_b = theta[k, 1] * 1e-9 + 2.0 * group_index * theta[k, 0] / (_C * cos_water[p])
-        if not (inside and t_b <= box[p, 18]):
-            continue
-        sig = ln_k_prior[p, 1]
-        z = (theta[k, 5] - ln_k_prior[p, 0]) / sig if np.isfinite(sig) else 0.0
-        ll = _log_lik_row(
-            theta[k], cos_water[p], samples[p], exposure[p], n_valid[p], dt, s, group_index,
-            offset, poisson, floor, shot, rest[p], thr[k] + 0.5 * z * z,
+    out = np.empty(theta.shape[0])
+    n_p = samples.shape[0]
+    for k in range(theta.shape[0]):
+        out[k] = log_post_one(
+            theta[k], k % n_p, thr[k], rest, samples, n_valid, cos_water, box, ln_k_prior,
+            system, exposure,
         )  # fmt: skip
-        out[k] = ll - 0.5 * z * z
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def log_post_one(th, p, thr, rest, samples, n_valid, cos_water, box, ln_k_prior, system, exposure):
+    """One row ``th`` (9,) of pulse ``p``: :func:`log_post_rows_bounded`'s value.
+
+    ``thr`` is the row's threshold; a pure function of its inputs (rows may run in any order,
+    on any thread).
+    """
+    dt, s, group_index, offset, poisson, floor, shot = system
+    inside = True
+    for j in range(9):
+        if not (box[p, j] <= th[j] <= box[p, 9 + j]):
+            inside = False
+    t_b = th[1] * 1e-9 + 2.0 * group_index * th[0] / (_C * cos_water[p])
+    if not (inside and t_b <= box[p, 18]):
+        return -np.inf
+    sig = ln_k_prior[p, 1]
+    z = (th[5] - ln_k_prior[p, 0]) / sig if np.isfinite(sig) else 0.0
+    ll = _log_lik_row(
+        th, cos_water[p], samples[p], exposure[p], n_valid[p], dt, s, group_index, offset,
+        poisson, floor, shot, rest[p], thr + 0.5 * z * z,
+    )  # fmt: skip
+    return ll - 0.5 * z * z
 
 
 @numba.njit(cache=True, nogil=True)

@@ -9,6 +9,7 @@ import dataclasses
 import math
 
 import emcee
+import numba
 import numpy as np
 import pytest
 
@@ -75,6 +76,28 @@ def test_compiled_loop_is_emcees_ensemble_sampler(
     ref_acc = (de.accepted + ind.accepted) / (de.proposed + ind.proposed)
     np.testing.assert_array_equal(acc, ref_acc)
     assert np.all((ref_acc > 0.05) & (ref_acc < 0.95))  # a test of both branches
+
+
+@pytest.mark.parametrize("system", [FW, PC], ids=["gaussian", "poisson"])
+def test_chains_do_not_depend_on_the_kernel_threads(system):
+    """The log-densities of a step's walkers run on every core (``kernel_threads``); each row
+    is a pure function of its inputs, so one thread and two give the same chains, bit for bit
+    (a whole batch through the sampler: starts, burn-in, production and convergence)."""
+    from pipeline.parallel import kernel_threads
+    from pipeline.uncertainty.posterior import sample_batch
+
+    rng = np.random.default_rng(21)
+    th, data = _pulses(system, rng, n=5)
+    waves = [data.samples[i, : int(data.n_valid[i])] for i in range(5)]
+    st = PosteriorSettings(max_steps=400, min_steps=100)
+    out = []
+    for n in (1, 2):
+        with kernel_threads(n) as used:
+            assert used == min(n, numba.config.NUMBA_NUM_THREADS)
+            out.append(sample_batch(waves, system, st, seed=4, theta0=th))
+    np.testing.assert_array_equal(out[0].draws, out[1].draws)
+    np.testing.assert_array_equal(out[0].n_steps, out[1].n_steps)
+    assert numba.get_num_threads() == numba.config.NUMBA_NUM_THREADS  # restored
 
 
 @pytest.mark.parametrize("system", [FW, PC], ids=["gaussian", "poisson"])
