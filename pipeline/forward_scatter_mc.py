@@ -34,16 +34,21 @@ in every process and run.
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import math
+import os
 from dataclasses import dataclass
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 
 from pipeline import water_optics as wo
 from pipeline.forward_scatter import ScatterTables
+from pipeline.outputs.atomic import atomic_path
 
-__all__ = ["TracedTables", "water_tables", "MAX_EXCESS", "TAU_BLEND"]
+__all__ = ["TracedTables", "water_tables", "cache_dir", "MAX_EXCESS", "TAU_BLEND"]
 
 #: Excess path (in scattering lengths) beyond which a photon is dropped.
 MAX_EXCESS = 10.0
@@ -111,13 +116,14 @@ def _trace(phase_per_sr, n_photons: int, seed: int) -> tuple[np.ndarray, ...]:
                 r_rel > 0.0, np.searchsorted(_LOG_RHO, np.log(np.maximum(r_rel, 1e-300))), 0
             )
             flat = plane * (nr + 1) + j
-            direct = ~scattered[idx][who]
+            # the unscattered landings do not depend on the absorption weight
+            zero += np.bincount(flat, weights=~scattered[idx][who], minlength=shape)
             for i, alpha in enumerate(_ALPHA):
                 w = np.exp(-alpha * excess)
                 cnt[i] += np.bincount(flat, weights=w, minlength=shape)
-                zero[i] += np.bincount(flat, weights=direct, minlength=shape)
-                s1[i] += np.bincount(flat, weights=w * excess, minlength=shape)
-                s2[i] += np.bincount(flat, weights=w * excess * excess, minlength=shape)
+                we = w * excess
+                s1[i] += np.bincount(flat, weights=we, minlength=shape)
+                s2[i] += np.bincount(flat, weights=we * excess, minlength=shape)
         pos[idx] = p1
         s[idx] += step
         zmax[idx] = np.maximum(zmax[idx], p1[:, 2])
@@ -193,8 +199,49 @@ def water_tables() -> tuple[TracedTables, ScatterTables]:
 
     Particles: Fournier-Forand, Petzold fit. Sea water: ``b_w L`` stays below ~0.1 at any depth
     a bottom is seen, and its wide phase function makes an accepted event rarer still.
+
+    The traced tables are a constant of the code (fixed photons, fixed seed) that costs ~3 s of
+    CPU to trace, in every process of every run: they are kept on disk once traced
+    (:func:`_cached_h`), under a name that changes with the code that makes them.
     """
-    return (
-        TracedTables.from_phase(wo.ff_phase_per_sr),
-        ScatterTables.from_phase(wo.seawater_phase_per_sr),
-    )
+    h = _cached_h(lambda: TracedTables.from_phase(wo.ff_phase_per_sr).h)
+    single = ScatterTables.from_phase(wo.ff_phase_per_sr)
+    traced = TracedTables(_ALPHA.copy(), _LOG_TAU.copy(), _LOG_RHO.copy(), h, single)
+    return traced, ScatterTables.from_phase(wo.seawater_phase_per_sr)
+
+
+def cache_dir() -> Path:
+    """Folder of the traced tables.
+
+    ``$BATHY_CACHE_DIR``, else ``$XDG_CACHE_HOME/bathy``, else ``~/.cache/bathy``.
+    """
+    if os.environ.get("BATHY_CACHE_DIR"):
+        return Path(os.environ["BATHY_CACHE_DIR"])
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "bathy"
+
+
+def _cached_h(trace) -> np.ndarray:
+    """``trace()``'s array, read from the cache when there, else traced and stored.
+
+    The file name holds a hash of the sources that determine the tables (this module and the
+    phase functions') and of numpy's version, so a change to either traces them anew. Reads
+    that fail (a missing, foreign or damaged file) trace; writes that fail (a read-only home)
+    only cost the time. The file appears whole or not at all
+    (:func:`~pipeline.outputs.atomic.atomic_path`): processes racing to store it store the
+    same bytes.
+    """
+    key = hashlib.sha256(np.__version__.encode())
+    for path in (Path(__file__), Path(wo.__file__)):
+        key.update(path.read_bytes())
+    path = cache_dir() / f"forward_scatter_{key.hexdigest()[:24]}.npy"
+    try:
+        h = np.load(path, allow_pickle=False)
+        if h.shape == (3, _ALPHA.size, _LOG_TAU.size, _LOG_RHO.size):
+            return h
+    except (OSError, ValueError):
+        pass
+    h = trace()
+    with contextlib.suppress(OSError):
+        with atomic_path(path) as tmp, open(tmp, "wb") as f:
+            np.save(f, h, allow_pickle=False)
+    return h

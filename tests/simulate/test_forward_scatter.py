@@ -157,3 +157,42 @@ def test_budget_bottom_echo_is_delayed_and_skewed_with_depth_attenuation_and_ang
     assert np.all(np.diff(delays) > 0)
     assert _moments(scene("small_angle", c=0.3), 10.0)[1] > d1
     assert _moments(scene("small_angle"), 10.0, off_nadir_deg=20.0)[1] > d1
+
+
+def test_water_tables_from_the_disk_cache_are_the_traced_ones(tmp_path, monkeypatch):
+    """The traced tables kept on disk (``forward_scatter_mc._cached_h``) are the tracing's,
+    bit for bit; a damaged file is traced again and replaced; a cache folder that cannot be
+    written costs only the time."""
+    import pipeline.forward_scatter_mc as mc
+    from pipeline import water_optics as wo
+
+    traced = TracedTables.from_phase(wo.ff_phase_per_sr)
+    monkeypatch.setenv("BATHY_CACHE_DIR", str(tmp_path / "cache"))
+    calls = []
+
+    def trace():
+        calls.append(1)
+        return traced.h
+
+    for _ in range(2):  # traced and stored once, then read
+        h = mc._cached_h(trace)
+        np.testing.assert_array_equal(h, traced.h)
+    assert len(calls) == 1
+    (stored,) = (tmp_path / "cache").iterdir()
+    assert np.array_equal(np.load(stored), traced.h)
+    stored.write_bytes(stored.read_bytes()[:100])  # damaged
+    np.testing.assert_array_equal(mc._cached_h(trace), traced.h)
+    assert len(calls) == 2 and np.array_equal(np.load(stored), traced.h)
+    blocked = tmp_path / "file"
+    blocked.write_text("not a folder")
+    monkeypatch.setenv("BATHY_CACHE_DIR", str(blocked / "cache"))
+    np.testing.assert_array_equal(mc._cached_h(trace), traced.h)
+    # what every run uses: the same tables, whole
+    mc.water_tables.cache_clear()
+    monkeypatch.setenv("BATHY_CACHE_DIR", str(tmp_path / "cache"))
+    got, _ = mc.water_tables()
+    np.testing.assert_array_equal(got.h, traced.h)
+    np.testing.assert_array_equal(got.log_tau, traced.log_tau)
+    probe = (np.array([0.01, 0.3, 4.0]), np.array([0.02, 0.5, 3.0]), np.array([0.0, 0.4, 2.0]))
+    np.testing.assert_array_equal(got.at(*probe), traced.at(*probe))
+    mc.water_tables.cache_clear()
