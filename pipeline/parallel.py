@@ -29,7 +29,7 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
-__all__ = ["Executor", "default_workers", "kernel_threads"]
+__all__ = ["Executor", "choose_threading_layer", "default_workers", "kernel_threads"]
 
 #: What each pool process received through the initializer (``None`` in the parent).
 _SHARED: Any = None
@@ -43,6 +43,20 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def choose_threading_layer() -> None:
+    """OpenMP for numba's parallel kernels, else numba's own workqueue; not TBB.
+
+    The TBB that wheels bring along is often older than numba accepts: numba then warns on
+    every run before it falls back. OpenMP also lets several Python threads launch kernels at
+    once (the workqueue would abort). A user's ``NUMBA_THREADING_LAYER`` or
+    ``NUMBA_THREADING_LAYER_PRIORITY`` wins. Call before the first parallel kernel runs.
+    """
+    import numba
+
+    if not ({"NUMBA_THREADING_LAYER", "NUMBA_THREADING_LAYER_PRIORITY"} & set(os.environ)):
+        numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
+
+
 @contextlib.contextmanager
 def kernel_threads(n: int) -> Iterator[int]:
     """Run the compiled kernels' parallel loops on ``n`` threads (at most numba's pool) inside.
@@ -53,6 +67,7 @@ def kernel_threads(n: int) -> Iterator[int]:
     """
     import numba
 
+    choose_threading_layer()
     before = numba.get_num_threads()
     used = max(1, min(int(n), numba.config.NUMBA_NUM_THREADS))
     numba.set_num_threads(used)

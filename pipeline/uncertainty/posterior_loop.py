@@ -31,6 +31,7 @@ import numba
 import numpy as np
 
 from pipeline.errors import NumericalError
+from pipeline.parallel import choose_threading_layer
 from pipeline.uncertainty.posterior_moves import BlockIndependenceMove
 from pipeline.uncertainty.posterior_target import (
     PulseBatch,
@@ -42,6 +43,8 @@ from pipeline.uncertainty.waveform_kernel import log_post_one
 from pipeline.uncertainty.waveform_model import N_PARAMS
 
 __all__ = ["run_steps", "term_bounds"]
+
+choose_threading_layer()  # before any parallel kernel runs (no TBB warning)
 
 _DE, _IND = 0, 1
 #: emcee's DEMove defaults (as :class:`~pipeline.uncertainty.posterior_moves.BlockDEMove`).
