@@ -46,6 +46,7 @@ __all__ = [
     "water_cosine",
     "take_surface",
     "draws_to_seabed",
+    "draws_to_seabed_rows",
     "seabed_posteriors",
 ]
 
@@ -167,24 +168,57 @@ def draws_to_seabed(
     refraction_settings: RefractionSettings | None = None,
 ):
     """Refraction-corrected seabed points (``Points``) of every posterior draw of one pulse."""
-    k = chain_draws.shape[0]
-    ts = t0_s + chain_draws[:, 1] * 1e-9
-    tb = ts + in_water_delay_s(chain_draws[:, 0], cos_water, system.group_index)
-    idx = np.full(k, row)
-    ones = np.ones(k, dtype=bool)
+    return draws_to_seabed_rows(
+        [chain_draws], np.array([row]), np.array([t0_s]), returns, surface, system,
+        np.array([cos_water]), refraction_settings,
+    )[0]  # fmt: skip
+
+
+def draws_to_seabed_rows(
+    draws: list,
+    rows: np.ndarray,
+    t0_s: np.ndarray,
+    returns: DetectedReturns,
+    surface: WaterSurface,
+    system: WaveformSystem,
+    cos_water: np.ndarray,
+    refraction_settings: RefractionSettings | None = None,
+) -> list:
+    """:func:`draws_to_seabed` of several pulses in one pass of the refraction.
+
+    ``draws[j]`` (k_j, 9) are pulse ``rows[j]``'s draws, ``t0_s[j]`` its record's start and
+    ``cos_water[j]`` its in-water cosine. Every draw is georeferenced on its own (row by row:
+    the same points as one pulse at a time); the pass's fixed costs are paid once.
+
+    Returns
+    -------
+    list of Points
+        One per pulse, its draws' points in order.
+    """
+    if not draws:
+        return []
+    k = np.array([d.shape[0] for d in draws])
+    th = np.concatenate(draws)
+    idx = np.repeat(np.asarray(rows), k)
+    ts = np.repeat(np.asarray(t0_s, dtype=np.float64), k) + th[:, 1] * 1e-9
+    cw = np.repeat(np.asarray(cos_water, dtype=np.float64), k)
+    tb = ts + in_water_delay_s(th[:, 0], cw, system.group_index)
+    ones = np.ones(idx.size, dtype=bool)
     ret = DetectedReturns(
-        pulse_id=np.full(k, returns.pulse_id[row]),
+        pulse_id=returns.pulse_id[idx],
         origin_meas_m=returns.origin_meas_m[idx],
         direction_meas=returns.direction_meas[idx],
         has_surface=ones,
         t_surface_s=ts,
         has_bottom=ones,
         t_bottom_s=tb,
-        surface_confidence=np.full(k, max(returns.surface_confidence[row], 1e-6)),
-        bottom_confidence=np.full(k, max(returns.bottom_confidence[row], 1e-6)),
+        surface_confidence=np.maximum(returns.surface_confidence[idx], 1e-6),
+        bottom_confidence=np.maximum(returns.bottom_confidence[idx], 1e-6),
         flags=returns.flags[idx],
     )
-    return seabed_points(ret, take_surface(surface, idx), refraction_settings)
+    pts = seabed_points(ret, take_surface(surface, idx), refraction_settings)
+    ends = np.cumsum(k)
+    return [pts.select(np.arange(e - n, e)) for e, n in zip(ends, k, strict=True)]
 
 
 def seabed_posteriors(
@@ -297,11 +331,14 @@ def seabed_posteriors(
             theta_med[j] = np.median(chains.draws[k], axis=0)
             if not surface.is_water[r]:
                 flags[j] |= np.uint16(PosteriorFlag.NO_START)
-            if flags[j] & PosteriorFlag.NO_START:
-                continue
-            pts = draws_to_seabed(
-                chains.draws[k], int(r), float(t0[r]), returns, surface, system, float(cosw[r]), rst
-            )
+        # the batch's draws onto the seabed in one pass of the refraction
+        sampled = [k for k in range(len(part)) if not flags[b0 + k] & PosteriorFlag.NO_START]
+        on_seabed = draws_to_seabed_rows(
+            [chains.draws[k] for k in sampled], part[sampled], t0[part[sampled]], returns,
+            surface, system, cosw[part[sampled]], rst,
+        )  # fmt: skip
+        for k, pts in zip(sampled, on_seabed, strict=True):
+            j, r = b0 + k, part[k]
             for key, v in interval_summary(pts.depth_m).items():
                 wave[key][j] = v
             # marginalised over the nuisances: every draw moved by its own Gaussian draw

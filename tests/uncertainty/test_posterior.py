@@ -34,7 +34,12 @@ from pipeline.uncertainty.posterior import (
     sample_batch,
     start_theta,
 )
-from pipeline.uncertainty.seabed_posterior import draws_to_seabed, seabed_posteriors, water_cosine
+from pipeline.uncertainty.seabed_posterior import (
+    draws_to_seabed,
+    draws_to_seabed_rows,
+    seabed_posteriors,
+    water_cosine,
+)
 from pipeline.uncertainty.waveform_model import (
     N_PARAMS,
     WaveformSystem,
@@ -472,6 +477,13 @@ def test_seabed_posterior_through_refraction():
     t_s_draw = float(t0[r0]) + chains.draws[0, :, 1] * 1e-9
     below = (C * t_s_draw / (2 * N_AIR) - surface.range_to_entry_m[r0]) * -d[r0, 2]
     np.testing.assert_allclose(pts.depth_m, chains.draws[0, :, 0] + below, atol=1e-4)
+    # several pulses' draws in one pass of the refraction: each pulse's points as alone
+    draws = [chains.draws[0], chains.draws[0][::-1] + 0.01, chains.draws[0][:7]]
+    many = draws_to_seabed_rows(draws, rows[:3], t0[rows[:3]], ret, surface, FW, cw[rows[:3]], rst)
+    for dr, r, got in zip(draws, rows[:3], many, strict=True):
+        alone = draws_to_seabed(dr, int(r), float(t0[r]), ret, surface, FW, float(cw[r]), rst)
+        np.testing.assert_array_equal(got.xyz_m, alone.xyz_m)
+        np.testing.assert_array_equal(got.depth_m, alone.depth_m)
 
 
 def test_a_pulse_without_bottom_is_flagged_not_sampled():
