@@ -38,6 +38,7 @@ import contextlib
 import hashlib
 import math
 import os
+import platform
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -220,28 +221,53 @@ def cache_dir() -> Path:
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "bathy"
 
 
+def _source_key() -> str | None:
+    """Hash of what makes the traced tables, read once at import (None: no sources to read).
+
+    numpy's version, the machine and the CPU features its loops dispatch on (their ``exp`` and
+    ``log`` may differ in the last bit between instruction sets), this module's and the phase
+    functions' sources as they were imported (an edit after import must not store the old
+    tables under the new sources' name).
+    """
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__ as features
+    except ImportError:  # another numpy layout: the version and the machine still key it
+        features = {}
+    key = hashlib.sha256(f"{np.__version__} {platform.machine()}".encode())
+    key.update(" ".join(sorted(k for k, on in features.items() if on)).encode())
+    try:
+        for path in (Path(__file__), Path(wo.__file__)):
+            key.update(path.read_bytes())
+    except OSError:
+        return None
+    return key.hexdigest()[:24]
+
+
+_SOURCE_KEY = _source_key()
+
+
 def _cached_h(trace) -> np.ndarray:
     """``trace()``'s array, read from the cache when there, else traced and stored.
 
-    The file name holds a hash of the sources that determine the tables (this module and the
-    phase functions') and of numpy's version, so a change to either traces them anew. Reads
-    that fail (a missing, foreign or damaged file) trace; writes that fail (a read-only home)
-    only cost the time. The file appears whole or not at all
-    (:func:`~pipeline.outputs.atomic.atomic_path`): processes racing to store it store the
-    same bytes.
+    The file name holds :func:`_source_key`, so a change of the code or the machine traces the
+    tables anew. A read that fails in any way (a missing, empty, foreign or damaged file, no
+    home folder) traces; a write that fails (a read-only home) only costs the time. The file
+    appears whole or not at all (:func:`~pipeline.outputs.atomic.atomic_path`): processes
+    racing to store it store the same bytes.
     """
-    key = hashlib.sha256(np.__version__.encode())
-    for path in (Path(__file__), Path(wo.__file__)):
-        key.update(path.read_bytes())
-    path = cache_dir() / f"forward_scatter_{key.hexdigest()[:24]}.npy"
-    try:
-        h = np.load(path, allow_pickle=False)
-        if h.shape == (3, _ALPHA.size, _LOG_TAU.size, _LOG_RHO.size):
-            return h
-    except (OSError, ValueError):
-        pass
+    shape = (3, _ALPHA.size, _LOG_TAU.size, _LOG_RHO.size)
+    path = None
+    if _SOURCE_KEY is not None:
+        try:
+            path = cache_dir() / f"forward_scatter_{_SOURCE_KEY}.npy"
+            h = np.load(path, allow_pickle=False)
+            if isinstance(h, np.ndarray) and h.dtype == np.float64 and h.shape == shape:
+                return h
+        except Exception:  # any unreadable cache is traced again
+            pass
     h = trace()
-    with contextlib.suppress(OSError):
-        with atomic_path(path) as tmp, open(tmp, "wb") as f:
-            np.save(f, h, allow_pickle=False)
+    if path is not None:
+        with contextlib.suppress(OSError):
+            with atomic_path(path) as tmp, open(tmp, "wb") as f:
+                np.save(f, h, allow_pickle=False)
     return h

@@ -63,7 +63,11 @@ def kernel_threads(n: int) -> Iterator[int]:
 
     Only kernels whose rows are independent run in parallel (the posterior's log-densities:
     :func:`pipeline.uncertainty.posterior_loop.run_steps`), so their values do not depend on
-    ``n``. Yields the threads used; the previous count is restored on leaving.
+    ``n``. Yields the threads used; the previous count is restored on leaving. The count is
+    numba's per calling thread; outside this block the kernels use every core (numba's
+    default), so code that samples posteriors inside a process pool should set 1. Under the
+    workqueue layer (no OpenMP on the machine) two Python threads must not run the kernels
+    at once: numba aborts.
     """
     import numba
 

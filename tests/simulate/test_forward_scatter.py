@@ -161,8 +161,8 @@ def test_budget_bottom_echo_is_delayed_and_skewed_with_depth_attenuation_and_ang
 
 def test_water_tables_from_the_disk_cache_are_the_traced_ones(tmp_path, monkeypatch):
     """The traced tables kept on disk (``forward_scatter_mc._cached_h``) are the tracing's,
-    bit for bit; a damaged file is traced again and replaced; a cache folder that cannot be
-    written costs only the time."""
+    bit for bit; a damaged, empty or foreign file is traced again and replaced; a cache folder
+    that cannot be written costs only the time."""
     import pipeline.forward_scatter_mc as mc
     from pipeline import water_optics as wo
 
@@ -180,9 +180,13 @@ def test_water_tables_from_the_disk_cache_are_the_traced_ones(tmp_path, monkeypa
     assert len(calls) == 1
     (stored,) = (tmp_path / "cache").iterdir()
     assert np.array_equal(np.load(stored), traced.h)
-    stored.write_bytes(stored.read_bytes()[:100])  # damaged
+    for damage in (stored.read_bytes()[:100], b"", b"PK\x03\x04 not a zip"):
+        stored.write_bytes(damage)  # truncated, empty (a crash before its data), foreign
+        np.testing.assert_array_equal(mc._cached_h(trace), traced.h)
+        assert np.array_equal(np.load(stored), traced.h)
+    np.save(stored, traced.h.astype(np.float32))  # right shape, wrong type
     np.testing.assert_array_equal(mc._cached_h(trace), traced.h)
-    assert len(calls) == 2 and np.array_equal(np.load(stored), traced.h)
+    assert len(calls) == 5
     blocked = tmp_path / "file"
     blocked.write_text("not a folder")
     monkeypatch.setenv("BATHY_CACHE_DIR", str(blocked / "cache"))
