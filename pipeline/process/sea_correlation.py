@@ -185,11 +185,15 @@ def surface_pairs(
         return None
     p = surface.surface_point_m[idx]
     anchor = idx[i]
-    s_i = p[i, 2] - surface.surface_z_m(anchor, p[i, 0], p[i, 1])
-    plane_j = surface.surface_z_m(anchor, p[j, 0], p[j, 1])
+    x_i, y_i, x_j, y_j = p[i, 0], p[i, 1], p[j, 0], p[j, 1]
+    z_i = surface.surface_z_m(anchor, x_i, y_i)
+    s_i = p[i, 2] - z_i
+    plane_j = surface.surface_z_m(anchor, x_j, y_j)
     s_j = p[j, 2] - plane_j
-    rise = plane_j - surface.level_z_m(anchor, p[i, :2], p[j, :2])
-    lag = np.hypot(p[i, 0] - p[j, 0], p[i, 1] - p[j, 1])
+    # the anchor's level carried to the partner (WaterSurface.level_z_m, with the anchor
+    # plane's height at the anchor already in hand)
+    rise = plane_j - (z_i + surface.global_z_m(x_j, y_j) - surface.global_z_m(x_i, y_i))
+    lag = np.hypot(x_i - x_j, y_i - y_j)
     return SurfacePairs(anchor, idx[j], s_i, s_j, lag, rise)
 
 
