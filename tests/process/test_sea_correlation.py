@@ -17,7 +17,7 @@ def _survey(height_m, x_m, t_s, pulse_id=None):
         flags=np.zeros(n, np.uint16),
         surface_point_m=pts,
         surface_z_m=lambda index, x, y: np.zeros(np.shape(x)),
-        level_z_m=lambda index, at_xy, xy: np.zeros(len(xy)),
+        global_z_m=lambda x, y: np.zeros(np.shape(x)),
     )
     returns = SimpleNamespace(
         has_surface=np.ones(n, bool),
