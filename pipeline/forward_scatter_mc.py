@@ -34,22 +34,17 @@ in every process and run.
 
 from __future__ import annotations
 
-import contextlib
-import hashlib
 import math
-import os
-import platform
 from dataclasses import dataclass
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 
 from pipeline import water_optics as wo
 from pipeline.forward_scatter import ScatterTables
-from pipeline.outputs.atomic import atomic_path
+from pipeline.table_cache import cached_table, code_key
 
-__all__ = ["TracedTables", "water_tables", "cache_dir", "MAX_EXCESS", "TAU_BLEND"]
+__all__ = ["TracedTables", "water_tables", "MAX_EXCESS", "TAU_BLEND"]
 
 #: Excess path (in scattering lengths) beyond which a photon is dropped.
 MAX_EXCESS = 10.0
@@ -203,7 +198,7 @@ def water_tables() -> tuple[TracedTables, ScatterTables]:
 
     The traced tables are a constant of the code (fixed photons, fixed seed) that costs ~3 s of
     CPU to trace, in every process of every run: they are kept on disk once traced
-    (:func:`_cached_h`), under a name that changes with the code that makes them.
+    (:mod:`pipeline.table_cache`), under a name that changes with the code that makes them.
     """
     h = _cached_h(lambda: TracedTables.from_phase(wo.ff_phase_per_sr).h)
     single = ScatterTables.from_phase(wo.ff_phase_per_sr)
@@ -211,63 +206,11 @@ def water_tables() -> tuple[TracedTables, ScatterTables]:
     return traced, ScatterTables.from_phase(wo.seawater_phase_per_sr)
 
 
-def cache_dir() -> Path:
-    """Folder of the traced tables.
-
-    ``$BATHY_CACHE_DIR``, else ``$XDG_CACHE_HOME/bathy``, else ``~/.cache/bathy``.
-    """
-    if os.environ.get("BATHY_CACHE_DIR"):
-        return Path(os.environ["BATHY_CACHE_DIR"])
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "bathy"
-
-
-def _source_key() -> str | None:
-    """Hash of what makes the traced tables, read once at import (None: no sources to read).
-
-    numpy's version, the machine and the CPU features its loops dispatch on (their ``exp`` and
-    ``log`` may differ in the last bit between instruction sets), this module's and the phase
-    functions' sources as they were imported (an edit after import must not store the old
-    tables under the new sources' name).
-    """
-    try:
-        from numpy._core._multiarray_umath import __cpu_features__ as features
-    except ImportError:  # another numpy layout: the version and the machine still key it
-        features = {}
-    key = hashlib.sha256(f"{np.__version__} {platform.machine()}".encode())
-    key.update(" ".join(sorted(k for k, on in features.items() if on)).encode())
-    try:
-        for path in (Path(__file__), Path(wo.__file__)):
-            key.update(path.read_bytes())
-    except OSError:
-        return None
-    return key.hexdigest()[:24]
-
-
-_SOURCE_KEY = _source_key()
+#: What makes the traced tables: this module and the phase functions' (hashed at import).
+_SOURCE_KEY = code_key([__file__, wo.__file__])
 
 
 def _cached_h(trace) -> np.ndarray:
-    """``trace()``'s array, read from the cache when there, else traced and stored.
-
-    The file name holds :func:`_source_key`, so a change of the code or the machine traces the
-    tables anew. A read that fails in any way (a missing, empty, foreign or damaged file, no
-    home folder) traces; a write that fails (a read-only home) only costs the time. The file
-    appears whole or not at all (:func:`~pipeline.outputs.atomic.atomic_path`): processes
-    racing to store it store the same bytes.
-    """
+    """``trace()``'s array, kept on disk once traced (:func:`pipeline.table_cache.cached_table`)."""
     shape = (3, _ALPHA.size, _LOG_TAU.size, _LOG_RHO.size)
-    path = None
-    if _SOURCE_KEY is not None:
-        try:
-            path = cache_dir() / f"forward_scatter_{_SOURCE_KEY}.npy"
-            h = np.load(path, allow_pickle=False)
-            if isinstance(h, np.ndarray) and h.dtype == np.float64 and h.shape == shape:
-                return h
-        except Exception:  # any unreadable cache is traced again
-            pass
-    h = trace()
-    if path is not None:
-        with contextlib.suppress(OSError):
-            with atomic_path(path) as tmp, open(tmp, "wb") as f:
-                np.save(f, h, allow_pickle=False)
-    return h
+    return cached_table("forward_scatter", "traced Fournier-Forand", _SOURCE_KEY, trace, shape)

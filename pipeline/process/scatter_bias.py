@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 from scipy.interpolate import RegularGridInterpolator
@@ -49,6 +50,7 @@ from pipeline.forward_scatter_mc import water_tables
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.detect import flank_trend
 from pipeline.process.detect_timing import parabolic_peak
+from pipeline.table_cache import cached_table, code_key
 
 __all__ = [
     "ForwardScatterSettings",
@@ -265,30 +267,45 @@ def _fitted_centre(w, tau, det: DetectorTiming, iterations: int = 40):
     return p[:, 1].reshape(w.size, _PHASES.size).mean(axis=1)
 
 
+#: What the peak-shift tables are computed by: every processing module (hashed at import; an
+#: edit anywhere in processing recomputes them, ~1 s, rather than risk a stale table).
+_SOURCE_KEY = code_key([Path(__file__).parent])
+
+
 @lru_cache(maxsize=8)
 def _shift_table(
     det: DetectorTiming | None, estimator: str = "detector"
 ) -> RegularGridInterpolator:
     """Peak offset (sigma units) of the mixture echo on the ``(w, log10 tau)`` grid.
 
-    ``det`` None: the continuous peak of the matched filter's output (sigma sqrt 2).
+    ``det`` None: the continuous peak of the matched filter's output (sigma sqrt 2). A
+    constant of the code and ``det``: kept on disk once computed (:mod:`pipeline.table_cache`).
     """
-    tau = 10.0**_LOG_TAU
+    coarse = det is not None and estimator == "gaussian_fit"
+    # the Gaussian fits are smooth in both; a coarser grid keeps them to ~1 s
+    w_grid, log_tau = (_W_GRID[::4], _LOG_TAU[::4]) if coarse else (_W_GRID, _LOG_TAU)
+    table = cached_table(
+        "peak_shift",
+        f"{det!r} {estimator}",
+        _SOURCE_KEY,
+        lambda: _shift_values(det, estimator, w_grid, log_tau),
+        (w_grid.size, log_tau.size),
+    )
+    return RegularGridInterpolator((w_grid, log_tau), table)
+
+
+def _shift_values(det, estimator, w_grid, log_tau) -> np.ndarray:
+    """:func:`_shift_table`'s values, ``(w_grid.size, log_tau.size)``."""
+    tau = 10.0**log_tau
     if det is None:
-        table = np.empty((_W_GRID.size, _LOG_TAU.size))
-        for i, w in enumerate(_W_GRID):
+        table = np.empty((w_grid.size, log_tau.size))
+        for i, w in enumerate(w_grid):
             f = _filtered_mixture(w, math.sqrt(0.5) * tau[:, None], _X[None, :])
             table[i] = math.sqrt(2.0) * _continuous_peak(f)
-    else:
-        if estimator == "gaussian_fit":
-            # smooth in both; a coarser grid keeps the fits to ~1 s
-            w_grid, log_tau = _W_GRID[::4], _LOG_TAU[::4]
-            ww, tt = np.meshgrid(w_grid, 10.0**log_tau, indexing="ij")
-            table = _fitted_centre(ww.ravel(), tt.ravel(), det).reshape(ww.shape)
-            return RegularGridInterpolator((w_grid, log_tau), table)
-        ww, tt = np.meshgrid(_W_GRID, tau, indexing="ij")
-        table = _detected_peak(ww.ravel(), tt.ravel(), det).reshape(ww.shape)
-    return RegularGridInterpolator((_W_GRID, _LOG_TAU), table)
+        return table
+    ww, tt = np.meshgrid(w_grid, tau, indexing="ij")
+    peak = _fitted_centre if estimator == "gaussian_fit" else _detected_peak
+    return peak(ww.ravel(), tt.ravel(), det).reshape(ww.shape)
 
 
 def peak_shift(

@@ -197,3 +197,37 @@ def test_posterior_correction_is_where_a_gaussian_fit_centres_the_echo():
         assert got == pytest.approx(np.mean(centres), rel=0.05, abs=0.01 * SIGMA_S)
         if tau > SIGMA_S:  # long tails: the fit is pulled later than the detector's peak
             assert got > 1.1 * detector
+
+
+def test_peak_shift_tables_from_the_disk_cache_are_the_computed_ones(tmp_path, monkeypatch):
+    """The peak-shift tables kept on disk (``pipeline.table_cache``) are the computation's,
+    bit for bit, for each estimator; a second process (the in-memory cache cleared) reads
+    them instead of computing; a changed source changes the key."""
+    import pipeline.process.scatter_bias as sb
+    from pipeline.table_cache import code_key
+
+    monkeypatch.setenv("BATHY_CACHE_DIR", str(tmp_path / "cache"))
+    det = sb.DetectorTiming(step=0.785398, gap=4, length=3)
+    cases = ((None, "detector"), (det, "detector"), (det, "gaussian_fit"))
+    direct = []
+    for d, est in cases:  # computed and kept
+        coarse = est == "gaussian_fit"
+        grids = (sb._W_GRID[::4], sb._LOG_TAU[::4]) if coarse else (sb._W_GRID, sb._LOG_TAU)
+        direct.append(sb._shift_values(d, est, *grids))
+        sb._shift_table.cache_clear()
+        np.testing.assert_array_equal(sb._shift_table(d, est).values, direct[-1])
+    assert len(list((tmp_path / "cache").iterdir())) == 3
+
+    def computed(*args):
+        raise AssertionError("computed again: not read from the cache")
+
+    monkeypatch.setattr(sb, "_shift_values", computed)
+    for (d, est), values in zip(cases, direct, strict=True):  # read
+        sb._shift_table.cache_clear()
+        np.testing.assert_array_equal(sb._shift_table(d, est).values, values)
+    sb._shift_table.cache_clear()
+    src = tmp_path / "src.py"
+    src.write_text("x = 1\n")
+    before = code_key([src])
+    src.write_text("x = 2\n")
+    assert code_key([src]) != before and code_key([tmp_path / "missing.py"]) is None
