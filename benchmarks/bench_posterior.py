@@ -249,12 +249,10 @@ def main() -> None:
         help="threads of the sampler's log-densities (default: every core, as `bathy run`)",
     )
     args = ap.parse_args()
-    if args.threads is not None:
-        import numba
-
-        numba.set_num_threads(args.threads)
     import numba
 
+    if args.threads is not None:
+        numba.set_num_threads(args.threads)
     print(f"sampler threads: {numba.get_num_threads()}")
     st = PosteriorSettings()
     for kv in args.set:

@@ -353,7 +353,7 @@ def run_survey(
     if plan.runs("posterior"):
         from pipeline.parallel import kernel_threads
 
-        threads = (executor or Executor(workers=1)).local_threads
+        threads = executor.local_threads if executor is not None else 1
         with clock.stage("posterior"), kernel_threads(threads):
             # imported here: a survey without posteriors never imports emcee
             from pipeline.uncertainty.survey_posterior import survey_posteriors
