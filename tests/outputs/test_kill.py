@@ -71,7 +71,11 @@ _STARTED = []
 
 def _start(scene, work):
     """`bathy run` into ``work/out``; its output lines go to ``work.log``."""
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
+    # a SIGKILL leaves the NetCDF writer's private staging folder behind (nothing can remove
+    # it): it goes to the test's own folder, not the machine's /tmp
+    scratch = work.with_name(work.name + "-tmp")
+    scratch.mkdir(parents=True, exist_ok=True)
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg", "TMPDIR": str(scratch)}
     log = open(work.with_suffix(".log"), "wb")  # closed by _finish
     cmd = [sys.executable, "-u", "-m", "pipeline.cli", "run", str(scene), "--out"]
     proc = subprocess.Popen(cmd + [str(work / "out")], stdout=log, stderr=log, env=env)
