@@ -183,18 +183,23 @@ def surface_pairs(
     i, j = time_pairs(t, g, np.inf if max_dt_s is None else float(max_dt_s))
     if i.size == 0:
         return None
-    p = surface.surface_point_m[idx]
-    anchor = idx[i]
-    x_i, y_i, x_j, y_j = p[i, 0], p[i, 1], p[j, 0], p[j, 1]
-    z_i = surface.surface_z_m(anchor, x_i, y_i)
-    s_i = p[i, 2] - z_i
-    plane_j = surface.surface_z_m(anchor, x_j, y_j)
-    s_j = p[j, 2] - plane_j
+    # what depends on one point alone (its own plane's height there, the global plane's) is
+    # computed once per point and gathered per pair: the same float64 operations on the same
+    # inputs, for a fraction of the count (a point is in up to 128 pairs: 64 offsets each way)
+    x, y, z = (np.ascontiguousarray(c) for c in surface.surface_point_m[idx].T)
+    z_own = surface.surface_z_m(idx, x, y)
+    s_own = z - z_own
+    gz = surface.global_z_m(x, y)
+    x_i, y_i, x_j, y_j = x[i], y[i], x[j], y[j]
+    z_i, g_j = z_own[i], gz[j]
+    s_i = s_own[i]
+    plane_j = surface.surface_z_m(idx[i], x_j, y_j)
+    s_j = z[j] - plane_j
     # the anchor's level carried to the partner (WaterSurface.level_z_m, with the anchor
     # plane's height at the anchor already in hand)
-    rise = plane_j - (z_i + surface.global_z_m(x_j, y_j) - surface.global_z_m(x_i, y_i))
+    rise = plane_j - (z_i + g_j - gz[i])
     lag = np.hypot(x_i - x_j, y_i - y_j)
-    return SurfacePairs(anchor, idx[j], s_i, s_j, lag, rise)
+    return SurfacePairs(idx[i], idx[j], s_i, s_j, lag, rise)
 
 
 def sea_correlation(

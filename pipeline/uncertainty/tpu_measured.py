@@ -157,6 +157,18 @@ def _nugget(h: np.ndarray, g: np.ndarray) -> float:
     return _nugget_and_rise(h, g)[0]
 
 
+class _Bins:
+    """The rows of each bin ``0 .. n - 1`` of ``bin_index``, ascending (others: in none)."""
+
+    def __init__(self, bin_index: np.ndarray, n: int):
+        self._order = np.argsort(bin_index, kind="stable")
+        self._start = np.searchsorted(bin_index[self._order], np.arange(n + 1), side="left")
+
+    def rows(self, b: int) -> np.ndarray:
+        """Rows in bin ``b``, in ascending order."""
+        return self._order[self._start[b] : self._start[b + 1]]
+
+
 def surface_variogram(
     returns: DetectedReturns,
     surface: WaterSurface,
@@ -192,19 +204,24 @@ def surface_variogram(
     d, lag = pairs.s_i_m - pairs.s_j_m, pairs.lag_m
     # the local plane's own rise put back: heights above the global plane
     d_raw = d if pairs.rise_m is None else d - pairs.rise_m
-    inc_i, _ = _incidence_deg(returns, surface, pairs.row_i)
-    inc_j, _ = _incidence_deg(returns, surface, pairs.row_j)
+    # each pulse's incidence once, gathered per pair (each point is in ~50 pairs)
+    inc, _ = _incidence_deg(returns, surface, np.arange(len(returns)))
+    inc_i, inc_j = inc[pairs.row_i], inc[pairs.row_j]
     # pairs of like incidence only: the ranging error then is the same at every lag and only
     # the sea makes the variogram rise (an oscillating scanner pairs nadir and edge otherwise)
     like = np.abs(inc_i - inc_j) <= _LIKE_INCIDENCE_DEG
     d, lag, inc_pair = d[like], lag[like], 0.5 * (inc_i + inc_j)[like]
     d_raw = d_raw[like]
     edges = np.asarray(LAG_EDGES_M)
+    n_lag = edges.size - 1
     lag_bin = np.digitize(lag, edges) - 1
+    # the pairs of each lag bin, in their own order (a stable sort: each bin's mean sums the
+    # same values in the same order as a mask would select them)
+    by_lag = _Bins(lag_bin, n_lag)
     lags, gammas, gammas_raw = [], [], []
-    for b in range(edges.size - 1):
-        m = lag_bin == b
-        if np.count_nonzero(m) >= min_pairs:
+    for b in range(n_lag):
+        m = by_lag.rows(b)
+        if m.size >= min_pairs:
             lags.append(float(np.mean(lag[m])))
             gammas.append(_robust_semivariance(d[m]))
             gammas_raw.append(_robust_semivariance(d_raw[m]))
@@ -215,13 +232,16 @@ def surface_variogram(
     raw_rise = _nugget_and_rise(h0, np.array(gammas_raw[:_NUGGET_BINS]))[1]
     bands = np.asarray(INCIDENCE_BANDS_DEG)
     inc_bin = np.digitize(inc_pair, bands) - 1
-    nugget = np.full(bands.size - 1, np.nan)
-    for b in range(bands.size - 1):
-        in_band = inc_bin == b
+    n_band = bands.size - 1
+    # one bin per (band, lag bin); pairs outside either get none
+    inside = (inc_bin >= 0) & (inc_bin < n_band) & (lag_bin >= 0) & (lag_bin < n_lag)
+    by_band_lag = _Bins(np.where(inside, inc_bin * n_lag + lag_bin, -1), n_band * n_lag)
+    nugget = np.full(n_band, np.nan)
+    for b in range(n_band):
         hs, gs = [], []
-        for lb in range(edges.size - 1):  # the shortest lags with enough pairs
-            m = in_band & (lag_bin == lb)
-            if np.count_nonzero(m) >= min_pairs:
+        for lb in range(n_lag):  # the shortest lags with enough pairs
+            m = by_band_lag.rows(b * n_lag + lb)
+            if m.size >= min_pairs:
                 hs.append(float(np.mean(lag[m])))
                 gs.append(_robust_semivariance(d[m]))
             if len(hs) == _NUGGET_BINS:
