@@ -109,11 +109,16 @@ class ProcessedPoints:
         (if asked) derived water-surface points.
     uncorrected : Points
         Classified bottom returns without refraction correction, for comparison.
+    sea_change_m : (n_pulses,) ndarray or None
+        The kriged sea change the bottom points' depths used (:func:`kriged_sea_change` of the
+        same returns, surface and settings, made once: the TPU holds it); None where the sea
+        is not kriged.
     """
 
     surface: WaterSurface
     points: Points
     uncorrected: Points
+    sea_change_m: np.ndarray | None = None
 
 
 def _returns_numbering(returns: DetectedReturns, idx: np.ndarray, bottom: bool):
@@ -412,12 +417,10 @@ def georeference(
             speed_m_s=st.radius_m / st.time_window_s,
         )
     surface = dataclasses.replace(surface, sea_correlation=corr, sea_field=field)
-    parts = [
-        water_surface_points(returns, surface, refraction_settings),
-        seabed_points(returns, surface, refraction_settings),
-    ]
+    bottom, sea_change = _seabed_points(returns, surface, refraction_settings, True)
+    parts = [water_surface_points(returns, surface, refraction_settings), bottom]
     if include_derived_surface:
         parts.append(water_surface_points(returns, surface, refraction_settings, derived=True))
     points = classify_points(Points.concatenate(parts), classify_settings)
     raw = seabed_points(returns, surface, refraction_settings, correct_refraction=False)
-    return ProcessedPoints(surface, points, classify_points(raw, classify_settings))
+    return ProcessedPoints(surface, points, classify_points(raw, classify_settings), sea_change)

@@ -127,9 +127,8 @@ def survey_uncertainty(
         The bathymetry grid the cells belong to.
     """
     st, refr, ins = ctx.tpu, ctx.refraction, ctx.instrument
-    processed = dataclasses.replace(
-        processed, surface=with_held_sea(returns, processed.surface, refr)
-    )
+    held = with_held_sea(returns, processed.surface, refr, held_m=processed.sea_change_m)
+    processed = dataclasses.replace(processed, surface=held)
     pts = processed.points
     is40 = (pts.classification == BATHYMETRIC_POINT) & (pts.kind == ReturnKind.BOTTOM)
     points40 = pts.select(is40)
@@ -261,7 +260,7 @@ def survey_uncertainty(
     )
 
 
-def with_held_sea(returns: DetectedReturns, surface, refraction_settings):
+def with_held_sea(returns: DetectedReturns, surface, refraction_settings, *, held_m=None):
     """``surface`` with its kriged sea change from entry to sounding held for the TPU.
 
     The TPU moves one input at a time and georeferences again
@@ -270,8 +269,13 @@ def with_held_sea(returns: DetectedReturns, surface, refraction_settings):
     (tens of centimetres of "pointing" or "surface tilt" sensitivity that no input has). Its
     own error is the TPU's sea terms' (``wave_entry``). A surface without a kriged sea is
     returned as it is.
+
+    ``held_m``: the change already kriged for these returns, surface and settings
+    (:attr:`~pipeline.process.refraction.ProcessedPoints.sea_change_m`); None: kriged here.
     """
-    held = kriged_sea_change(returns, surface, refraction_settings)
+    if surface.sea_field is None or returns.t_emit_s is None:
+        return surface  # nothing kriged (kriged_sea_change gives None)
+    held = kriged_sea_change(returns, surface, refraction_settings) if held_m is None else held_m
     return surface if held is None else dataclasses.replace(surface, sea_change_m=held)
 
 

@@ -159,3 +159,30 @@ def test_the_tpu_holds_the_kriged_sea_while_it_moves_its_inputs():
     held = point_tpu(ret, with_held_sea(ret, surface, REFR), REFR, TpuSettings()).terms
     for name, bound in (("pointing_a", 0.005), ("pointing_b", 0.005), ("surface_tilt_x", 0.02)):
         assert np.max(np.abs(held[name][:, DEPTH])) < bound, name
+
+
+def test_the_held_sea_is_the_one_the_points_were_made_with():
+    # georeference keeps the kriged sea change its bottom points used: the TPU holds that one
+    # rather than kriging the survey again, and it is the change kriged_sea_change gives
+    from pipeline.process.refraction import kriged_sea_change
+    from pipeline.uncertainty.survey_uncertainty import with_held_sea
+
+    amp, lam = 0.3, 20.0
+    x, y = (a.ravel() for a in np.meshgrid(np.arange(0.0, 60.0, 1.0), np.arange(0.0, 30.0, 1.0)))
+    t = np.random.default_rng(5).permutation(x.size) * (1.0 / x.size)
+    ret, _ = sine_sea_pulses(amp, lam, x, y, theta_deg=15.0, along_x=True, seabed_z_m=-10.0)
+    ret = dataclasses.replace(ret, t_emit_s=t)
+    processed = georeference(ret, surface_settings=FIT, refraction_settings=REFR)
+    assert processed.surface.sea_field is not None
+    kriged = kriged_sea_change(ret, processed.surface, REFR)
+    assert np.isfinite(kriged).any()
+    np.testing.assert_array_equal(processed.sea_change_m, kriged)
+    given = with_held_sea(ret, processed.surface, REFR, held_m=processed.sea_change_m)
+    np.testing.assert_array_equal(
+        given.sea_change_m, with_held_sea(ret, processed.surface, REFR).sea_change_m
+    )
+    # no kriged sea (no emission times): the surface as it is, nothing kriged
+    untimed = dataclasses.replace(ret, t_emit_s=None)
+    plane = georeference(untimed, surface_settings=FIT, refraction_settings=REFR)
+    assert plane.sea_change_m is None
+    assert with_held_sea(untimed, plane.surface, REFR) is plane.surface
