@@ -35,6 +35,7 @@ without emission times are not kriged (None): the depth then reads the local pla
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -91,6 +92,11 @@ class SeaField:
     window_s: float
     speed_m_s: float
 
+    @cached_property
+    def _tree(self) -> cKDTree:
+        """The echoes in ``(x, y, speed t)``, built once per field (every prediction's search)."""
+        return cKDTree(np.column_stack([self.xy_m, self.speed_m_s * self.t_s]))
+
     def covariance_m2(self, lag_m: np.ndarray) -> np.ndarray:
         """The fitted covariance ``s² exp(-h / L)`` at lags ``h``."""
         return self.sill_m2 * np.exp(-self.decay_per_m * np.asarray(lag_m, dtype=np.float64))
@@ -114,25 +120,38 @@ class SeaField:
         t = np.asarray(t_s, dtype=np.float64).ravel()
         n, k = len(t), min(self.neighbours, len(self.t_s))
         height, sigma, used = np.zeros(n), np.zeros(n), np.zeros(n, dtype=np.int64)
-        tree = cKDTree(np.column_stack([self.xy_m, self.speed_m_s * self.t_s]))
         c0 = self.sill_m2
+        ex, ey = (np.ascontiguousarray(c) for c in self.xy_m.T)
+        # each pair of neighbours once: the distance matrix is symmetric, exactly (a - b is
+        # -(b - a) in floating point), and its diagonal is set below
+        iu, ju = np.triu_indices(k, 1)
+        diag = np.arange(k)
         for lo in range(0, n, _CHUNK):
             s = slice(lo, lo + _CHUNK)
             q = np.column_stack([xy[s], self.speed_m_s * t[s]])
-            _, nn = tree.query(q, k=k, workers=-1)
+            _, nn = self._tree.query(q, k=k, workers=-1)
             nn = np.asarray(nn).reshape(len(q), k)
             ok = np.abs(self.t_s[nn] - t[s, None]) <= self.window_s
-            p = self.xy_m[nn]
-            gram = self.covariance_m2(np.linalg.norm(p[:, :, None] - p[:, None, :], axis=-1))
-            gram *= ok[:, :, None] & ok[:, None, :]
-            diag = np.arange(k)
+            x, y = ex[nn], ey[nn]
+            upper = self.covariance_m2(_distance(x[:, iu] - x[:, ju], y[:, iu] - y[:, ju]))
+            upper *= ok[:, iu] & ok[:, ju]
+            gram = np.empty((len(q), k, k))
+            gram[:, iu, ju] = gram[:, ju, iu] = upper
             gram[:, diag, diag] = c0 + self.nugget_m2  # out-of-window echoes: decoupled
-            kv = self.covariance_m2(np.linalg.norm(p - xy[s, None, :], axis=-1)) * ok
+            kv = self.covariance_m2(_distance(x - xy[s, 0, None], y - xy[s, 1, None])) * ok
             w = np.linalg.solve(gram, kv[..., None])[..., 0]
             height[s] = np.sum(w * self.height_m[nn] * ok, axis=1)
             sigma[s] = np.sqrt(np.maximum(c0 - np.sum(w * kv, axis=1), 0.0))
             used[s] = ok.sum(axis=1)
         return height, sigma, used
+
+
+def _distance(dx_m: np.ndarray, dy_m: np.ndarray) -> np.ndarray:
+    """``sqrt(dx² + dy²)``: what ``np.linalg.norm(..., axis=-1)`` of ``(dx, dy)`` computes.
+
+    Not ``np.hypot`` (it rounds differently), so the kriging weights stay as they were.
+    """
+    return np.sqrt(dx_m * dx_m + dy_m * dy_m)
 
 
 def sea_field(

@@ -18,7 +18,7 @@ import dataclasses
 import numpy as np
 
 from pipeline.process.refraction import georeference, seabed_points
-from pipeline.process.sea_kriging import sea_field
+from pipeline.process.sea_kriging import SeaField, sea_field
 from pipeline.process.surface_fit import fit_water_surface
 from tests.process.test_wave_entry import FIT, REFR, sine_sea_pulses
 
@@ -186,3 +186,40 @@ def test_the_held_sea_is_the_one_the_points_were_made_with():
     plane = georeference(untimed, surface_settings=FIT, refraction_settings=REFR)
     assert plane.sea_change_m is None
     assert with_held_sea(untimed, plane.surface, REFR) is plane.surface
+
+
+def test_kriging_predicts_what_the_dense_formula_gives_bit_for_bit():
+    # SeaField.predict fills each symmetric kriging matrix from its upper triangle, with the
+    # distances as sqrt(dx² + dy²): the values np.linalg.norm of every difference gives
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(11)
+    m, n, k = 3000, 500, 12
+    xy, t = rng.uniform(0.0, 60.0, (m, 2)), np.sort(rng.uniform(0.0, 3.0, m))
+    field = SeaField(
+        xy_m=xy,
+        t_s=t,
+        height_m=rng.normal(0.0, 0.2, m),
+        lag_m=np.zeros(0),
+        cov_m2=np.zeros(0),
+        sill_m2=0.04,
+        decay_per_m=0.3,
+        nugget_m2=1e-3,
+        neighbours=k,
+        window_s=0.3,
+        speed_m_s=5.0,
+    )
+    q, tq = rng.uniform(0.0, 60.0, (n, 2)), rng.uniform(0.0, 3.0, n)
+    height, sigma, used = field.predict(q, tq)
+    _, nn = cKDTree(np.column_stack([xy, 5.0 * t])).query(np.column_stack([q, 5.0 * tq]), k=k)
+    ok = np.abs(t[nn] - tq[:, None]) <= 0.3
+    p = xy[nn]
+    gram = field.covariance_m2(np.linalg.norm(p[:, :, None] - p[:, None, :], axis=-1))
+    gram *= ok[:, :, None] & ok[:, None, :]
+    gram[:, np.arange(k), np.arange(k)] = 0.04 + 1e-3
+    kv = field.covariance_m2(np.linalg.norm(p - q[:, None, :], axis=-1)) * ok
+    w = np.linalg.solve(gram, kv[..., None])[..., 0]
+    assert (used < k).any() and (used == k).any()  # some echoes out of the window
+    np.testing.assert_array_equal(height, np.sum(w * field.height_m[nn] * ok, axis=1))
+    np.testing.assert_array_equal(sigma, np.sqrt(np.maximum(0.04 - np.sum(w * kv, axis=1), 0.0)))
+    np.testing.assert_array_equal(used, ok.sum(axis=1))
