@@ -73,6 +73,7 @@ __all__ = [
     "RefractionSettings",
     "ProcessedPoints",
     "seabed_points",
+    "seabed_xyz_depth",
     "kriged_sea_change",
     "water_surface_points",
     "georeference",
@@ -169,6 +170,22 @@ def seabed_points(
     return _seabed_points(returns, surface, settings, correct_refraction)[0]
 
 
+def seabed_xyz_depth(
+    returns: DetectedReturns, surface: WaterSurface, settings: RefractionSettings | None = None
+) -> np.ndarray:
+    """The refraction-corrected points of :func:`seabed_points` and their depths, alone.
+
+    Returns
+    -------
+    (n_bottom, 4) ndarray
+        ``x, y, z, depth`` (metres) of each pulse with a bottom return, the values
+        :func:`seabed_points` gives: the TPU's repeated passes, which use nothing else (the
+        a-priori sigmas, flags and numbering are not made). Raises ValueError where one is not
+        finite, as :func:`seabed_points` does.
+    """
+    return _seabed_points(returns, surface, settings, True, xyz_depth_only=True)[0]
+
+
 def kriged_sea_change(
     returns: DetectedReturns, surface: WaterSurface, settings: RefractionSettings | None = None
 ) -> np.ndarray | None:
@@ -184,8 +201,12 @@ def kriged_sea_change(
     return _seabed_points(returns, unfrozen, settings, True)[1]
 
 
-def _seabed_points(returns, surface, settings, correct_refraction):
-    """:func:`seabed_points` and the sea change its depths used (:func:`kriged_sea_change`)."""
+def _seabed_points(returns, surface, settings, correct_refraction, *, xyz_depth_only=False):
+    """:func:`seabed_points` and the sea change its depths used (:func:`kriged_sea_change`).
+
+    ``xyz_depth_only``: the points and depths as ``(n, 4)`` (:func:`seabed_xyz_depth`) in
+    place of the :class:`Points`.
+    """
     st = settings or RefractionSettings()
     if len(surface) != len(returns):
         raise ValueError(f"`surface` has {len(surface)} pulses; `returns` has {len(returns)}")
@@ -200,8 +221,6 @@ def _seabed_points(returns, surface, settings, correct_refraction):
 
     entry, nrm, r_e = surface.entry_m[idx], surface.normal[idx], surface.range_to_entry_m[idx]
     own = returns.has_surface[idx] & ((flags & PointFlag.SURFACE_OUTLIER) == 0)
-    sig_tb = _timing_sigma(returns, idx, "bottom", st.timing_sigma_s)
-    sig_ts = _timing_sigma(returns, idx, "surface", st.timing_sigma_s)
     cos_i = np.abs(np.sum(d * nrm, axis=1))
     r_s = _C * ts / (2.0 * na)
     # where the pulse met the water: between the fitted plane and its own echo, by how much of
@@ -273,8 +292,15 @@ def _seabed_points(returns, surface, settings, correct_refraction):
         r, sea_change = r[used > 0], sea_change[used > 0]
         depth[r] = met[r, 2] + sea_change - xyz[r, 2]
         change[idx[r]] = sea_change
+    if xyz_depth_only:
+        xyzd = np.column_stack([xyz, depth])
+        if not np.all(np.isfinite(xyzd)):  # as Points would
+            raise ValueError("seabed points and depths must be finite (no NaN: use the masks)")
+        return xyzd, change
 
     # a-priori uncertainty, first order
+    sig_tb = _timing_sigma(returns, idx, "bottom", st.timing_sigma_s)
+    sig_ts = _timing_sigma(returns, idx, "surface", st.timing_sigma_s)
     point = np.radians(st.pointing_sigma_deg)
     sin_i = np.linalg.norm(np.cross(d, nrm), axis=1)
     sin_w = np.linalg.norm(np.cross(t_dir, nrm), axis=1)

@@ -35,7 +35,7 @@ from pipeline import iho
 from pipeline.process.classify import BATHYMETRIC_POINT
 from pipeline.process.context import ProcessingContext
 from pipeline.process.grid import Grid
-from pipeline.process.refraction import ProcessedPoints, kriged_sea_change, seabed_points
+from pipeline.process.refraction import ProcessedPoints, kriged_sea_change, seabed_xyz_depth
 from pipeline.process.returns import DetectedReturns, PointFlag, Points, ReturnKind
 from pipeline.uncertainty.cell_uncertainty import CellUncertainty, cell_uncertainty
 from pipeline.uncertainty.seabed_gradient import (
@@ -132,7 +132,7 @@ def survey_uncertainty(
     pts = processed.points
     is40 = (pts.classification == BATHYMETRIC_POINT) & (pts.kind == ReturnKind.BOTTOM)
     points40 = pts.select(is40)
-    bottom_xy = seabed_points(returns, processed.surface, refr).xyz_m[:, :2]
+    bottom_xy = seabed_xyz_depth(returns, processed.surface, refr)[:, :2]
     xy40, d40 = points40.xyz_m[:, :2], points40.depth_m
     group = points40.pulse_id // ins.shots_per_window if ins.photon_counting else None
     near = {

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.process.refraction import RefractionSettings, seabed_points
+from pipeline.process.refraction import RefractionSettings, seabed_xyz_depth
 from pipeline.process.returns import DetectedReturns
 from pipeline.process.surface_fit import WaterSurface
 from pipeline.uncertainty.tpu_screen import (
@@ -131,8 +131,7 @@ def _inputs(returns, surface, rst, st, seabed_gradient=None, surface_tilt_sigma_
 
 def _xyzd(inp: _Inputs, *, ret=None, surf=None, rst=None) -> np.ndarray:
     """Seabed points and their depths, ``(n, 4)``."""
-    p = seabed_points(ret or inp.ret, surf or inp.surf, rst or inp.rst)
-    return np.column_stack([p.xyz_m, p.depth_m])
+    return seabed_xyz_depth(ret or inp.ret, surf or inp.surf, rst or inp.rst)
 
 
 def _at_measured(t: np.ndarray, grad: np.ndarray) -> np.ndarray:

@@ -231,3 +231,16 @@ def test_peak_shift_tables_from_the_disk_cache_are_the_computed_ones(tmp_path, m
     before = code_key([src])
     src.write_text("x = 2\n")
     assert code_key([src]) != before and code_key([tmp_path / "missing.py"]) is None
+
+
+def test_the_tpus_points_are_seabed_points_own():
+    # the TPU's passes take the points and depths alone (seabed_xyz_depth): the same values
+    from pipeline.process.refraction import seabed_xyz_depth
+
+    ret, _ = _delayed_pulses()
+    surface = fit_water_surface(ret, SurfaceFitSettings(air_index=N_AIR))
+    plain = RefractionSettings(phase_index=N_PHASE, group_index=N_GROUP)
+    for rst in (plain, dataclasses.replace(plain, forward_scatter=_water_model())):
+        p = seabed_points(ret, surface, rst)
+        xyzd = seabed_xyz_depth(ret, surface, rst)
+        np.testing.assert_array_equal(xyzd, np.column_stack([p.xyz_m, p.depth_m]))
