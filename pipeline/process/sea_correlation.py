@@ -63,6 +63,8 @@ _MAX_PER_OFFSET = 50_000
 _MAX_OFFSET = 2000
 #: The shortest lag's regression must stand this many standard errors above 0.
 _MIN_T = 3.0
+#: Pairs per block of :func:`surface_pairs`' arithmetic (bounds its temporaries).
+_PAIR_BLOCK = 65_536
 
 
 @dataclass(frozen=True)
@@ -190,15 +192,21 @@ def surface_pairs(
     z_own = surface.surface_z_m(idx, x, y)
     s_own = z - z_own
     gz = surface.global_z_m(x, y)
-    x_i, y_i, x_j, y_j = x[i], y[i], x[j], y[j]
-    z_i, g_j = z_own[i], gz[j]
-    s_i = s_own[i]
-    plane_j = surface.surface_z_m(idx[i], x_j, y_j)
-    s_j = z[j] - plane_j
-    # the anchor's level carried to the partner (WaterSurface.level_z_m, with the anchor
-    # plane's height at the anchor already in hand)
-    rise = plane_j - (z_i + g_j - gz[i])
-    lag = np.hypot(x_i - x_j, y_i - y_j)
+    s_i, s_j, lag, rise = (np.empty(i.size) for _ in range(4))
+    # the pairs in blocks: elementwise, so the same figures, and the temporaries (the anchors'
+    # planes gathered per pair) stay small instead of hundreds of MB for a survey's pairs
+    for lo in range(0, i.size, _PAIR_BLOCK):
+        b = slice(lo, lo + _PAIR_BLOCK)
+        a, p = i[b], j[b]
+        x_i, y_i, x_j, y_j = x[a], y[a], x[p], y[p]
+        g_j = gz[p]
+        plane_j = surface.surface_z_m(idx[a], x_j, y_j)
+        s_i[b] = s_own[a]
+        s_j[b] = z[p] - plane_j
+        # the anchor's level carried to the partner (WaterSurface.level_z_m, with the anchor
+        # plane's height at the anchor already in hand)
+        rise[b] = plane_j - (z_own[a] + g_j - gz[a])
+        lag[b] = np.hypot(x_i - x_j, y_i - y_j)
     return SurfacePairs(idx[i], idx[j], s_i, s_j, lag, rise)
 
 

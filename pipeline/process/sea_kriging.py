@@ -191,14 +191,17 @@ def sea_field(
     p = surface.surface_point_m[idx]
     a = p[:, 2] - surface.global_z_m(p[:, 0], p[:, 1])
     i, j = time_pairs(t, None, float(window_s))
+    x, y = (np.ascontiguousarray(c) for c in p[:, :2].T)
     edges = np.asarray(LAG_EDGES_M)
-    b = np.digitize(np.hypot(*(p[i, :2] - p[j, :2]).T), edges) - 1
+    # each pair's separation once (binned, then summed per bin)
+    sep = np.hypot(x[i] - x[j], y[i] - y[j])
+    b = np.digitize(sep, edges) - 1
     inside = (b >= 0) & (b < edges.size - 1)
-    b, i, j = b[inside], i[inside], j[inside]
+    b, i, j, sep = b[inside], i[inside], j[inside], sep[inside]
     nb = edges.size - 1
     count = np.bincount(b, minlength=nb)
     prod = np.bincount(b, weights=a[i] * a[j], minlength=nb)
-    lag = np.bincount(b, weights=np.hypot(*(p[i, :2] - p[j, :2]).T), minlength=nb)
+    lag = np.bincount(b, weights=sep, minlength=nb)
     use = count >= MIN_PAIRS
     if not use.any():
         return None
