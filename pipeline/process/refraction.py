@@ -173,15 +173,10 @@ def seabed_points(
 def seabed_xyz_depth(
     returns: DetectedReturns, surface: WaterSurface, settings: RefractionSettings | None = None
 ) -> np.ndarray:
-    """The refraction-corrected points of :func:`seabed_points` and their depths, alone.
+    """:func:`seabed_points`' ``x, y, z, depth`` (m), ``(n_bottom, 4)``, and nothing else.
 
-    Returns
-    -------
-    (n_bottom, 4) ndarray
-        ``x, y, z, depth`` (metres) of each pulse with a bottom return, the values
-        :func:`seabed_points` gives: the TPU's repeated passes, which use nothing else (the
-        a-priori sigmas, flags and numbering are not made). Raises ValueError where one is not
-        finite, as :func:`seabed_points` does.
+    The TPU's repeated passes: no a-priori sigmas, flags or numbering are made. Raises
+    ValueError where one is not finite, as :func:`seabed_points` does.
     """
     return _seabed_points(returns, surface, settings, True, xyz_depth_only=True)[0]
 
@@ -202,11 +197,7 @@ def kriged_sea_change(
 
 
 def _seabed_points(returns, surface, settings, correct_refraction, *, xyz_depth_only=False):
-    """:func:`seabed_points` and the sea change its depths used (:func:`kriged_sea_change`).
-
-    ``xyz_depth_only``: the points and depths as ``(n, 4)`` (:func:`seabed_xyz_depth`) in
-    place of the :class:`Points`.
-    """
+    """:func:`seabed_points` (or :func:`seabed_xyz_depth`'s array) and its sea change."""
     st = settings or RefractionSettings()
     if len(surface) != len(returns):
         raise ValueError(f"`surface` has {len(surface)} pulses; `returns` has {len(returns)}")
