@@ -46,7 +46,11 @@ def main(path, shots, wind=None):
     print(f"surface error (all water pulses, navigation removed): {surf[ok].mean():+.4f} m")
     for name, v in (("surface", surf[rows]), ("seabed", seabed), ("depth", depth)):
         w = per_window(v)
-        print(f"{name:8s} error per window: mean {w.mean():+.4f} m, sd {w.std():.4f} m")
+        # the median too: a full-waveform survey's bottom returns include false bottoms
+        print(
+            f"{name:8s} error per window: mean {w.mean():+.4f} m, sd {w.std():.4f} m,"
+            f" median {np.median(w):+.4f} m"
+        )
     if wind is not None:
         from pipeline.lidar_equation import cox_munk_mean_square_slope
 
