@@ -34,6 +34,13 @@ water: ``a = a_raw = 0``, no term. A user's ``process.tpu.wave_slope_sigma_rad >
 
 Slopes shorter than the variogram's shortest lags (capillaries) are not in ``a``: they vary
 within the footprint, and their mean over it is small.
+
+Not held (a known bias, not a spread): every facet lengthens the in-water path read along the
+plane's refracted direction by ``L delta² / 2``, so the soundings lie deep on average by ``L (1 -
+1/n_w)² mss / 2`` at nadir, ``mss`` the sea's whole mean-square slope (short waves included,
+which ``a`` does not see): 2.0 cm at 12.7 m under a 9.9 m/s sea on suite tuning seed 205,
+against 2.2 cm predicted (``benchmarks/wave_refraction/RESULTS.md``, photon profilers). Its
+correction needs the whole ``mss`` from measured data.
 """
 
 from __future__ import annotations
