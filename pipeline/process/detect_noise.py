@@ -44,6 +44,34 @@ def _inside_variance_share(c: np.ndarray) -> np.ndarray:
     return 1.0 - 2.0 * c * phi / (2.0 * ndtr(c) - 1.0)
 
 
+def _row_median(x: np.ndarray) -> np.ndarray:
+    """``np.median(x, axis=1)``, bit for bit, from one partition at the middle rank(s).
+
+    ``np.median`` also partitions at the last rank to find NaNs (a second selection
+    over every row: ~70 % more than the middle rank alone); a NaN check is cheaper.
+    The middle pair is averaged as ``np.mean`` does it, ``(lo + hi) / 2``.
+
+    Parameters
+    ----------
+    x : (n, m) ndarray
+        Float rows, ``m >= 1``.
+
+    Returns
+    -------
+    (n,) ndarray
+        Each row's median (NaN for a row holding a NaN).
+    """
+    m = x.shape[1]
+    h = m // 2
+    if m % 2:
+        med = np.partition(x, h, axis=1)[:, h]
+    else:
+        part = np.partition(x, [h - 1, h], axis=1)
+        med = (part[:, h - 1] + part[:, h]) / 2.0
+    nan = np.isnan(x).any(axis=1)
+    return np.where(nan, np.nan, med) if nan.any() else med
+
+
 def difference_noise_sigma(y: np.ndarray) -> np.ndarray:
     """Per-row noise σ of the samples, from their first differences (clipped second moment).
 
@@ -60,18 +88,19 @@ def difference_noise_sigma(y: np.ndarray) -> np.ndarray:
         decay) cancel in the differences, and echoes are clipped out.
     """
     d = np.diff(np.asarray(y, dtype=np.float64), axis=1)
-    d -= np.median(d, axis=1)[:, None]
+    d -= _row_median(d)[:, None]
     a = np.abs(d)
     # the data's quantum: the smallest non-zero difference (integer codes: 1)
     quantum = np.min(np.where(a > 0, a, np.inf), axis=1)
     quantum = np.where(np.isfinite(quantum), quantum, 0.0)
-    s = np.maximum(MAD_TO_SIGMA * np.median(a, axis=1), quantum)
+    s = np.maximum(MAD_TO_SIGMA * _row_median(a), quantum)
+    d2 = d * d  # the same squares every pass: formed once
     for _ in range(N_ITER):
         # never clip a one-quantum step: at σ under a count it is most of the noise
         lim = np.maximum(CLIP_SIGMA * s, 1.5 * quantum)
         inside = a <= lim[:, None]
         n_in = np.maximum(inside.sum(axis=1), 1)
-        ms = np.where(inside, d * d, 0.0).sum(axis=1) / n_in
+        ms = np.where(inside, d2, 0.0).sum(axis=1) / n_in
         share = _inside_variance_share(lim / np.maximum(s, 1e-300))
         s = np.sqrt(ms / share)
     return s / np.sqrt(2.0)
@@ -95,7 +124,7 @@ def window_baseline(y: np.ndarray, k: int, sigma: np.ndarray) -> tuple[np.ndarra
         Clipped mean of the window, and σ / √(samples averaged).
     """
     w = np.asarray(y[:, :k], dtype=np.float64)
-    med = np.median(w, axis=1)
+    med = _row_median(w)
     inside = np.abs(w - med[:, None]) <= CLIP_SIGMA * sigma[:, None]
     n_in = inside.sum(axis=1)
     # an all-equal window (noise-free) keeps every sample: n_in >= 1 always (the median's own)

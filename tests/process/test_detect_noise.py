@@ -68,3 +68,18 @@ def test_noise_only_integer_waveforms_rarely_pass_five_sigma():
     y = np.floor(200.0 + 1.5 * rng.standard_normal((20000, 350)) + 0.5).astype(np.float32)
     det = detect_full_waveform(y, DT_S, 1.8e-9, noise_samples=16)
     assert det.has_surface.mean() < 1e-3
+
+
+@pytest.mark.parametrize("m", [1, 2, 7, 16, 349])
+def test_row_median_is_numpys_bit_for_bit(m):
+    """The partition median equals ``np.median(axis=1)`` exactly: odd and even rows, ties
+    (integer codes), NaN and inf (the detection stage's outputs must not move a bit)."""
+    from pipeline.process.detect_noise import _row_median
+
+    rng = np.random.default_rng(m)
+    x = np.vstack([rng.normal(size=(20, m)), np.round(rng.normal(0, 2, (20, m))), np.zeros((1, m))])
+    x[3, m // 2] = np.nan
+    x[4, 0] = np.inf
+    x[5, -1] = -np.inf
+    np.testing.assert_array_equal(_row_median(x), np.median(x, axis=1))
+    np.testing.assert_array_equal(_row_median(x[6:]), np.median(x[6:], axis=1))
