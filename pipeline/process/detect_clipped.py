@@ -145,22 +145,29 @@ def clipped_bottom(
     """
     n, m = y.shape
     rows = np.arange(n)
-    top = y >= top_code
     near = np.clip(i_b[:, None] + np.arange(-1, 2), 0, m - 1)
-    hit = top[rows[:, None], near]
+    hit = y[rows[:, None], near] >= top_code
     clipped = hit.any(axis=1)
-    j = near[rows, np.argmax(hit, axis=1)]
+    t_idx = np.full(n, np.nan)
+    # only the clipped pulses' plateaus are timed (the others are NaN whatever their runs):
+    # the run scans below cover the whole record, so they take those rows alone
+    sub = np.flatnonzero(clipped)
+    if sub.size == 0:
+        return clipped, t_idx
+    top, rs = y[sub] >= top_code, np.arange(sub.size)
+    j = near[sub, np.argmax(hit[sub], axis=1)]
     cols = np.arange(m)
     # the run of clipped samples through j: after the last unclipped sample before it, up to
     # the first unclipped one after it
     last_below = np.maximum.accumulate(np.where(top, -1, cols[None, :]), axis=1)
     next_below = np.minimum.accumulate(np.where(top, m, cols[None, :])[:, ::-1], axis=1)[:, ::-1]
-    first = last_below[rows, j] + 1
-    stop = next_below[rows, j]
+    first = last_below[rs, j] + 1
+    stop = next_below[rs, j]
     t_c, _, single = _plateau(
-        y, first, stop, level, noise, sigma_samples, settings.max_plateau_fwhm
+        y[sub], first, stop, level[sub], noise[sub], sigma_samples, settings.max_plateau_fwhm
     )
-    return clipped, np.where(clipped & single, t_c, np.nan)
+    t_idx[sub] = np.where(single, t_c, np.nan)
+    return clipped, t_idx
 
 
 def clipped_echoes(

@@ -269,7 +269,12 @@ def surface_step_fit(
     # clear: significant, and the echo's peak above the onset's (a weaker "echo" is also an
     # onset earlier by ~ a σ √(2π) / b samples: the fit cannot tell which)
     a_best, b_best = amp[rows, best, 0], amp[rows, best, 1]
-    clear = (snr[rows, best, 0] >= echo_sigma) & (a_best >= b_best * onset_peak(sg, k_dec))
+    clear = snr[rows, best, 0] >= echo_sigma
+    # the onset's peak is a 251-point exp and erfc per pulse (a tenth of detection): only
+    # where the SNR test passed (elsewhere the pulse is not clear whatever it is), once per
+    # distinct decay (a third of the pulses share 0, no column; each row is its own)
+    k_clear, k_inv = np.unique(k_dec[clear], return_inverse=True)
+    clear[clear] = a_best[clear] >= b_best[clear] * onset_peak(sg, k_clear)[k_inv]
     on_column = clear & (snr[rows, best, 1] >= echo_sigma)
     # an onset alone whose best candidate is the first lies earlier than the candidates: a weak
     # column under a slow decay rises for several samples and first crosses the peak threshold
