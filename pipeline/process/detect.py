@@ -314,14 +314,18 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     zone = math.ceil(sep + NEAR_SURFACE_FWHM * fwhm_samples)
     i_zone = np.minimum(i_s + zone, m - 1)
     near = cand & has_s[:, None] & (cols <= i_zone[:, None])
-    if near.any():
+    # (only the pulses with such a candidate: the column carried back costs a log and an exp
+    # per sample, and a pulse's test reads its own samples alone)
+    r_near = np.flatnonzero(near.any(axis=1))
+    if r_near.size:
         width = 4 * gap
-        excess, column, carried = column_excess(filt, 3.0 * noise_f, gap + math.ceil(sep), width)
+        f_near, nf_near = filt[r_near], noise_f[r_near]
+        excess, column, carried = column_excess(f_near, 3.0 * nf_near, gap + math.ceil(sep), width)
         # the carried-back level is a mean of ~width/2 independent filtered samples, scaled
         # up by the decay it is carried back over: its noise adds to the candidate's own
-        col_var = noise_f[:, None] ** 2 + shot_noise_counts * np.maximum(carried, 0.0) * kernel_sq
-        thr_near = s.threshold_sigma * np.sqrt(local_var + col_var * 2.0 / width)
-        cand &= ~(near & column & (excess <= thr_near))
+        col_var = nf_near[:, None] ** 2 + shot_noise_counts * np.maximum(carried, 0.0) * kernel_sq
+        thr_near = s.threshold_sigma * np.sqrt(local_var[r_near] + col_var * 2.0 / width)
+        cand[r_near] &= ~(near[r_near] & column & (excess <= thr_near))
     cand &= ~clip_merged[:, None]
     has_b = cand.any(axis=1)
     pick = cand
