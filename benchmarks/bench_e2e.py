@@ -9,10 +9,12 @@ process tree, ``os.wait4``); peak RSS of the largest process (``ru_maxrss``) and
 tree (sum over the parent and its workers, sampled every 0.1 s with psutil); machine facts.
 
 Run: .venv/bin/python benchmarks/bench_e2e.py [--pulses 150000] [--workers 1 2]
-     [--memory 100000 300000 1000000] [--out benchmarks/RESULTS_e2e.md]
+     [--memory 100000 300000 1000000] [--out FILE.md]
 The scene flies without run-in (so small surveys are possible). The throughput runs keep the
 scene's posteriors (their default budget); the memory series
-turns them off. Writes the markdown file (tables and the command) and prints it.
+turns them off. Prints the markdown (tables and the command); ``--out`` also writes it to a
+file. ``benchmarks/RESULTS_e2e.md`` is a hand-kept record: paste a run's tables into a section
+there rather than writing over it.
 """
 
 from __future__ import annotations
@@ -232,7 +234,7 @@ def main() -> None:
     ap.add_argument("--memory", type=int, nargs="*", default=[100_000, 300_000, 1_000_000])
     ap.add_argument("--memory-workers", type=int, default=2)
     ap.add_argument("--chunk", type=int, default=20_000, help="run.chunk_pulses")
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "RESULTS_e2e.md"))
+    ap.add_argument("--out", default=None, help="also write the markdown to this file")
     args = ap.parse_args()
     command = "python benchmarks/bench_e2e.py " + " ".join(sys.argv[1:])
     runs, mem_runs = [], []
@@ -246,7 +248,8 @@ def main() -> None:
             mem_runs.append(run_one(scene, args.memory_workers, Path(tmp), f"m{n}"))
             print(json.dumps({k: v for k, v in mem_runs[-1].items() if k != "stages"}), flush=True)
     text = report(runs, mem_runs, command)
-    Path(args.out).write_text(text)
+    if args.out is not None:
+        Path(args.out).write_text(text)
     print(text)
 
 
