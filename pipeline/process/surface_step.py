@@ -48,6 +48,7 @@ the batch's share of clear echoes (the survey's once :func:`mix_stored_echoes` h
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numba
@@ -250,16 +251,8 @@ def surface_step_fit(
     filt = np.ascontiguousarray(filt, dtype=np.float64)
     i_peak = np.asarray(i_peak, dtype=np.int64)
     n = filt.shape[0]
-    half_lo = int(math.ceil(3.0 * sg - STEP_GRID[0]))
-    half_hi = int(math.ceil(2.0 * sg + STEP_GRID[-1]))
-    offsets = np.arange(-half_lo, half_hi + 1, dtype=np.int64)
-    u = offsets[None, :] - STEP_GRID[:, None]  # (k, w): the same for every pulse
-    g = np.exp(-0.5 * (u / sg) ** 2)
-    h = np.stack([column_onset(u, sg, kd) for kd in DECAY_GRID])  # (decays, k, w)
     k_dec, k_row, k_w = decay_index(decay, n)
-    # noise of the filtered samples is correlated over ~2√π σ_raw samples (σ_raw = sg/√2)
-    infl = max(1.0, 2.0 * math.sqrt(math.pi) * sg / math.sqrt(2.0))
-    tabs = (offsets, STEP_GRID, float(sg), g, h, (g * g).sum(1), infl)
+    tabs = _step_tables(float(sg))
     sse2, sse1, snr, amp = _step_sse(filt, i_peak, k_row, k_w, k_dec, *tabs)
     t_echo = _refined(sse2, i_peak)
     if echo_sigma is None:
@@ -286,7 +279,7 @@ def surface_step_fit(
     # the onset alone only where it is whole in the waveform (a window cut by the record's
     # start repeats its first sample, which an onset fits as a step at the edge) and has a
     # minimum inside the candidates (at the first one it found no onset to time)
-    cut = _cut(i_fit, offsets, filt.shape[1])
+    cut = _cut(i_fit, tabs[0], filt.shape[1])
     inside = np.argmin(sse1, axis=1) > 0
     mixable = ~clear & ~cut & inside
     t_onset = np.where(mixable, _refined(sse1, i_fit), t_echo)
@@ -299,6 +292,30 @@ def surface_step_fit(
     if with_parts:
         return t_sel, parts
     return (t_sel, t_echo) if with_echo_time else t_sel
+
+
+@functools.lru_cache(maxsize=8)
+def _step_tables(sg: float) -> tuple:
+    """The candidates' tables of :func:`surface_step_fit` for a response σ ``sg`` (samples).
+
+    ``(offsets, STEP_GRID, sg, g, h, gg, infl)``: the window's sample offsets, the echo ``g``
+    (k, w) and the onsets ``h`` (decays, k, w) at every candidate, ``gg`` the echo's sums of
+    squares and ``infl`` the noise correlation's inflation. The same for every pulse of a
+    system (a posterior's start runs the detector on one pulse at a time: these were most of
+    its cost), so kept, read-only.
+    """
+    half_lo = int(math.ceil(3.0 * sg - STEP_GRID[0]))
+    half_hi = int(math.ceil(2.0 * sg + STEP_GRID[-1]))
+    offsets = np.arange(-half_lo, half_hi + 1, dtype=np.int64)
+    u = offsets[None, :] - STEP_GRID[:, None]  # (k, w): the same for every pulse
+    g = np.exp(-0.5 * (u / sg) ** 2)
+    h = np.stack([column_onset(u, sg, kd) for kd in DECAY_GRID])  # (decays, k, w)
+    # noise of the filtered samples is correlated over ~2√π σ_raw samples (σ_raw = sg/√2)
+    infl = max(1.0, 2.0 * math.sqrt(math.pi) * sg / math.sqrt(2.0))
+    gg = (g * g).sum(1)
+    for a in (offsets, g, h, gg):
+        a.setflags(write=False)
+    return offsets, STEP_GRID, sg, g, h, gg, infl
 
 
 def _onset_lookback(filt, i_peak, sse1, sse2, candidates, k_row, k_w, k_dec, tabs):
