@@ -21,6 +21,9 @@ that of the threshold).
 Every core: the pulses of a batch never share walkers, so :func:`_advance` runs each pulse's
 steps on its own, the pulses on numba's threads (:func:`pipeline.parallel.kernel_threads` sets
 how many; ``bathy run`` uses its ``--workers``): the same chains for any number of threads.
+The kernels compile with ``error_model="numpy"``, as the model's
+(:mod:`~pipeline.uncertainty.waveform_kernel`: the same values wherever the default model did not
+raise).
 """
 
 from __future__ import annotations
@@ -211,7 +214,7 @@ def term_bounds(data: PulseBatch, system) -> tuple[np.ndarray, np.ndarray]:
     return rest, np.abs(b).sum(axis=1)
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _log_g_one(x, centre, inv_chol, dof):
     """Log Student-t proposal density of one block ``x`` (9,) (as ``BlockIndependenceMove``)."""
     d = x.shape[0]
@@ -225,7 +228,7 @@ def _log_g_one(x, centre, inv_chol, dof):
     return -0.5 * (dof + d) * math.log1p(total / dof)
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy", parallel=True)
 def _advance(
     coords, lp, lg, lg_ok, kind, halves, j1s, j2s, jit, de_log_u, q_ind, lg_q, ind_log_u,
     centre, inv_chol, dof, chain, done, thin, counts, proposed,
@@ -259,7 +262,7 @@ def _advance(
     return -1
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _advance_pulse(
     p, coords, lp, lg, lg_ok, kind, halves, j1s, j2s, jit, de_log_u, q_ind, lg_q, ind_log_u,
     centre, inv_chol, dof, chain, done, thin, counts, rest, b_abs, samples, n_valid, cos_water,
@@ -337,7 +340,7 @@ def _advance_pulse(
     return -1
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _margin(thr, lp, scale):
     """Slack under a Metropolis threshold for the early rejection.
 
@@ -347,7 +350,7 @@ def _margin(thr, lp, scale):
     return 1e-6 * (1.0 + abs(thr) + abs(lp) + scale)
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _has_nan(x):
     """Whether the vector ``x`` holds a NaN."""
     for i in range(x.shape[0]):
