@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numba
 import numpy as np
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S
@@ -135,8 +136,9 @@ def _scan_start(y, system, cos_water, ts, bg, exposure=None):
     if exposure is not None and system.poisson:
         a = a * np.asarray(exposure, dtype=np.float64)[None, :, None]
     rhs = y - system.offset_counts
-    ata = np.einsum("kmi,kmj->kij", a, a) + 1e-9 * np.eye(4)
-    coef = np.linalg.solve(ata, np.einsum("kmi,m->ki", a, rhs)[:, :, None])[:, :, 0]
+    gram, proj = _normal_sums(a, rhs)
+    ata = gram + 1e-9 * np.eye(4)
+    coef = np.linalg.solve(ata, proj[:, :, None])[:, :, 0]
     resid = np.sum((np.einsum("kmi,ki->km", a, coef) - rhs) ** 2, axis=1)
     resid = np.where(coef[:, 3] > 0.0, resid, np.inf)
     if not np.isfinite(resid).any():
@@ -156,6 +158,30 @@ def _scan_start(y, system, cos_water, ts, bg, exposure=None):
             0.0,
         ]
     )
+
+
+@numba.njit(cache=True, nogil=True)
+def _normal_sums(a, rhs):
+    """``einsum("kmi,kmj->kij", a, a)`` and ``einsum("kmi,m->ki", a, rhs)`` of ``a`` (K, m, n).
+
+    The same sums as numpy's: each over the samples in order from 0 (einsum's strided loop on
+    this layout; ``tests/uncertainty/test_posterior_start.py`` checks it bit for bit), without
+    its per-element dispatch (the scan's einsums were most of a long waveform's start).
+    """
+    n_k, m, n = a.shape
+    gram = np.zeros((n_k, n, n))
+    proj = np.zeros((n_k, n))
+    for k in range(n_k):
+        for t in range(m):
+            for i in range(n):
+                ai = a[k, t, i]
+                proj[k, i] += ai * rhs[t]
+                for j in range(i, n):
+                    gram[k, i, j] += ai * a[k, t, j]
+        for i in range(n):
+            for j in range(i):
+                gram[k, i, j] = gram[k, j, i]  # a_i a_j = a_j a_i exactly
+    return gram, proj
 
 
 def _project(th: np.ndarray, data: PulseBatch, i: int, group_index: float) -> np.ndarray:
