@@ -308,6 +308,14 @@ def run_survey(
     ps, fr = scene.process, scene.frame
     with clock.stage("process"):
         processed = process_detections(sim.returns, ctx, ps.classify, water_column=False)
+    if processed.surface.facet_slope_var is not None:
+        log(
+            f"  wave facets: mean-square slope {ctx.refraction.facet_mss:.4f} (Cox-Munk at the "
+            f"logged wind, process.wind_speed_m_s: {ctx.sources['process.wind_speed_m_s']}); "
+            "soundings raised by their in-water paths' mean excess"
+        )
+    elif ctx.refraction.facet_mss > 0.0:
+        log("  wave facets: none (the surface echoes show no wave sea)")
     if plan.runs("water_column"):
         from pipeline.process.water_column import add_water_column_points
 

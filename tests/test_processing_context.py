@@ -120,3 +120,24 @@ def test_bathy_run_uses_and_records_the_users_values(tmp_path):
     truth = 2.0 + math.tan(math.radians(5.33)) * pts.xyz_m[b, 0]
     ratio = np.median(pts.depth_m[b] / truth)
     assert ratio == pytest.approx(factor, abs=0.004)
+
+
+def test_the_logged_wind_sets_the_facet_slope_and_a_users_value_wins():
+    scene = _small_survey()
+    ctx = processing_context(scene)
+    u = scene.water.wind_speed_m_s
+    # Cox & Munk (1954), clean sea: 0.003 + 5.12e-3 U12.5 (published)
+    assert ctx.refraction.facet_mss == pytest.approx(0.003 + 5.12e-3 * u)
+    assert ctx.refraction.facet_mss_sigma == pytest.approx(5.12e-3 * 2.0)
+    assert ctx.sources["process.wind_speed_m_s"].startswith("water.wind_speed_m_s")
+    mine = processing_context(_small_survey({"wind_speed_m_s": 7.5, "wind_sigma_m_s": 0.5}))
+    assert mine.refraction.facet_mss == pytest.approx(0.003 + 5.12e-3 * 7.5)
+    assert mine.refraction.facet_mss_sigma == pytest.approx(5.12e-3 * 0.5)
+    assert mine.sources["process.wind_speed_m_s"] == "user"
+    # recorded: the manifest's processing_context holds the values used
+    rec = mine.to_dict()
+    assert rec["values"]["refraction"]["facet_mss"] == pytest.approx(0.003 + 5.12e-3 * 7.5)
+    # the bottom echo's decay weights the facets' paths: the assumed water's K_d until the
+    # survey measures its column (Gordon's bridge K_d = 0.2 c + 0.04)
+    c = scene.process.forward_scatter.fallback_attenuation_per_m
+    assert ctx.refraction.facet_decay_per_m == pytest.approx(0.2 * c + 0.04)

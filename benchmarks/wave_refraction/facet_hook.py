@@ -49,6 +49,18 @@ def _keep(out_path):
             seabed_true_m=truth.seabed.height_m(xyz[:, 0], xyz[:, 1]),
             sea_at_bottom_m=_sea_m(truth.water, xyz[:, 0], xyz[:, 1], t[rows]),
             plane_at_bottom_m=surf.surface_z_m(rows, xyz[:, 0], xyz[:, 1]),
+            # what the facet excess needs (processing's own values, no truth)
+            normal=surf.normal,
+            normal_sigma_rad=surf.normal_sigma_rad,
+            surface_flags=surf.flags,
+            is_water=surf.is_water,
+            entry_m=surf.entry_m,
+            direction=ret.direction_meas,
+            origin_xy_m=ret.origin_meas_m[:, :2],
+            line_id=np.zeros(len(ret), np.int64) if ret.line_id is None else ret.line_id,
+            wind_m_s=float(scene.water.wind_speed_m_s),
+            own_weight=np.full(len(ret), np.nan) if surf.own_weight is None else surf.own_weight,
+            fit_sigma_m=surf.fit_sigma_m,
         )
         return _evaluate(scene, sim, processed, ctx, *args, **kwargs)
 

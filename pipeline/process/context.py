@@ -11,6 +11,12 @@ manifest's ``processing_context``).
 The water indices are an assumption, not a record: by default processing assumes sea water of
 ``process.tpu.salinity_psu`` and ``process.tpu.temperature_c`` at the system's wavelength
 (Quan & Fry 1995, :func:`pipeline.optics.water_phase_index`), never the scene's true water.
+
+The wind is a record too: the survey's wind log (``process.wind_speed_m_s``; None: the scene's
+``water.wind_speed_m_s`` stands for it, as cBLUE asks its user for the wind), uncertain by
+``process.wind_sigma_m_s``. It sets the sea's mean-square slope (Cox & Munk 1954) whose facet
+path excess refraction takes off the soundings (:mod:`pipeline.process.facet_excess`), only
+where the survey's own echoes show a wave sea.
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ from typing import Any
 
 from pipeline import optics
 from pipeline.errors import SceneError
+from pipeline.lidar_equation import COX_MUNK_SLOPE_PER_M_S, cox_munk_mean_square_slope
 from pipeline.process.refraction import RefractionSettings
 from pipeline.process.scatter_bias import attenuation_from_column, bias_model
 from pipeline.process.surface_fit import SurfaceFitSettings
@@ -227,7 +234,19 @@ def processing_context(scene) -> ProcessingContext:
     sources["process.forward_scatter.beam_attenuation_per_m"] = (
         "user" if att is not None else "process.forward_scatter.fallback_attenuation_per_m"
     )
+    wind = ps.wind_speed_m_s
+    sources["process.wind_speed_m_s"] = (
+        "user" if wind is not None else "water.wind_speed_m_s (the survey's wind log)"
+    )
+    wind = float(wind if wind is not None else scene.water.wind_speed_m_s)
+    c_assumed = att if att is not None else fs.fallback_attenuation_per_m
+    sources["process.facet_decay_per_m"] = (
+        f"K_d = 0.2 c + 0.04 at c = {c_assumed:g}/m (process.forward_scatter)"
+    )
     refr = RefractionSettings(
+        facet_mss=float(cox_munk_mean_square_slope(wind)),
+        facet_mss_sigma=COX_MUNK_SLOPE_PER_M_S * ps.wind_sigma_m_s,
+        facet_decay_per_m=0.2 * c_assumed + 0.04,
         phase_index=float(phase if phase is not None else optics.water_phase_index(*water)),
         group_index=float(group if group is not None else optics.water_group_index(*water)),
         position_sigma_h_m=tpu.position_sigma_h_m,
@@ -274,7 +293,11 @@ def with_measured_attenuation(
         f"measured column decay {column_decay_per_m:.4f}/m through Gordon's bridge "
         f"(K_d = 0.2 c + 0.04) at {r_air_m:.0f} m air range"
     )
+    # the facets' paths are weighted by the bottom echo's own decay: the measured one
+    sources["process.facet_decay_per_m"] = f"measured column decay {column_decay_per_m:.4f}/m"
     refr = dataclasses.replace(
-        ctx.refraction, forward_scatter=dataclasses.replace(fs, beam_attenuation_per_m=c)
+        ctx.refraction,
+        forward_scatter=dataclasses.replace(fs, beam_attenuation_per_m=c),
+        facet_decay_per_m=float(column_decay_per_m),
     )
     return dataclasses.replace(ctx, refraction=refr, sources=sources)

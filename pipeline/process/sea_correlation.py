@@ -50,6 +50,7 @@ __all__ = [
     "SurfacePairs",
     "sea_correlation",
     "surface_pairs",
+    "surface_point_pairs",
     "time_pairs",
 ]
 
@@ -162,19 +163,21 @@ class SurfacePairs:
     rise_m: np.ndarray | None = None
 
 
-def surface_pairs(
+def surface_point_pairs(
     returns: DetectedReturns, surface, *, max_dt_s: float | None, group=None
-) -> SurfacePairs | None:
-    """Pairs of the water pulses' own, non-outlier surface points; None without any.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The water pulses' own, non-outlier surface points in time order, and their pairs.
 
-    :func:`time_pairs` in emission-time order (pulse-id order, no time limit, without
-    ``t_emit_s``); ``group``: pulses sharing one detection (never paired together).
+    Returns ``(idx, i, j)``: the points' pulse rows in emission-time order (pulse-id order,
+    and no time limit, without ``t_emit_s``) and :func:`time_pairs` of them (positions in
+    ``idx``); empty pairs with fewer than two points.
     """
     ok = surface.is_water & returns.has_surface
     ok &= (surface.flags & np.uint16(PointFlag.SURFACE_OUTLIER)) == 0
     idx = np.flatnonzero(ok)
+    none = np.zeros(0, np.int64)
     if idx.size < 2:
-        return None
+        return idx, none, none
     if returns.t_emit_s is not None:
         t = np.asarray(returns.t_emit_s, dtype=np.float64)[idx]
     else:
@@ -183,6 +186,18 @@ def surface_pairs(
     idx, t = idx[order], t[order]
     g = None if group is None else np.asarray(group).ravel()[idx]
     i, j = time_pairs(t, g, np.inf if max_dt_s is None else float(max_dt_s))
+    return idx, i, j
+
+
+def surface_pairs(
+    returns: DetectedReturns, surface, *, max_dt_s: float | None, group=None
+) -> SurfacePairs | None:
+    """Pairs of the water pulses' own, non-outlier surface points; None without any.
+
+    :func:`time_pairs` in emission-time order (pulse-id order, no time limit, without
+    ``t_emit_s``); ``group``: pulses sharing one detection (never paired together).
+    """
+    idx, i, j = surface_point_pairs(returns, surface, max_dt_s=max_dt_s, group=group)
     if i.size == 0:
         return None
     # what depends on one point alone (its own plane's height there, the global plane's) is

@@ -49,6 +49,18 @@ class ProcessSettings:
         le=2.0,
         doc="water group index processing assumes (None: Quan & Fry sea water)",
     )
+    # the survey's wind log (a met station or the crew's record), as cBLUE asks its user: it
+    # sets the sea's mean-square slope (Cox & Munk 1954) whose facet path excess refraction
+    # takes off the soundings (pipeline.process.facet_excess)
+    wind_speed_m_s: float | None = setting(
+        None,
+        ge=0.0,
+        le=40.0,
+        doc="logged wind at 12.5 m over the survey (None: water.wind_speed_m_s)",
+    )
+    wind_sigma_m_s: float = setting(
+        2.0, ge=0.0, le=20.0, doc="uncertainty of the logged wind against the sea's own (1 sigma)"
+    )
     water_column_points: str = setting(
         "auto",
         choices=("auto", "on", "off"),

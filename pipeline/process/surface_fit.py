@@ -129,6 +129,11 @@ class WaterSurface:
         The kriged change of the sea from each pulse's entry to above its sounding, held
         (:func:`~pipeline.process.refraction.kriged_sea_change`; NaN: the plane's reading);
         None: kriged where the points are made (the TPU holds it while it moves its inputs).
+    facet_slope_var : (n, 2) or None
+        Slope variance (rad²) of the wave facets about each pulse's plane, along and across
+        its flight line ``track_xy`` (:mod:`pipeline.process.facet_excess`); None: none.
+    track_xy : (n, 2) or None
+        Unit horizontal direction of each pulse's flight line (with ``facet_slope_var``).
     """
 
     entry_m: np.ndarray
@@ -151,6 +156,8 @@ class WaterSurface:
     sea_correlation: object | None = None
     sea_field: object | None = None
     sea_change_m: np.ndarray | None = None
+    facet_slope_var: np.ndarray | None = None
+    track_xy: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.entry_m.shape[0])

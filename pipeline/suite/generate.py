@@ -139,6 +139,7 @@ class Draw:
     reflectance: float
     window_s: float
     cubes: tuple[tuple[float, float, float], ...] = field(default_factory=tuple)
+    logged_wind_m_s: float | None = None
 
     @property
     def half(self) -> str:
@@ -244,7 +245,24 @@ def draw(seed: int, size: str = "suite", force: dict[str, str] | None = None) ->
         reflectance=round(reflectance, 3),
         window_s=float(f"{window:.3e}"),
         cubes=tuple(cubes),
+        logged_wind_m_s=_logged_wind(seed, wind),
     )
+
+
+#: Sigma of the survey's logged wind against the wind the sea was raised by (m/s): a met
+#: station's or a forecast's hourly mean against the local sea's, as ``process.wind_sigma_m_s``
+#: assumes by default.
+LOGGED_WIND_SIGMA_M_S = 2.0
+
+
+def _logged_wind(seed: int, wind_m_s: float) -> float:
+    """The wind the survey logged: the sea's wind plus a met record's error, to 0.5 m/s.
+
+    Its own random stream (``[seed, 1954]``), so every other condition of the seed's draw is as
+    before the log was drawn. Processing reads this, never the sea's wind.
+    """
+    err = float(np.random.default_rng([int(seed), 1954]).normal(0.0, LOGGED_WIND_SIGMA_M_S))
+    return round(max(wind_m_s + err, 0.0) * 2.0) / 2.0
 
 
 #: cube bases between these depths where the plane allows (m; and a fraction of 4.5 / c)
@@ -352,6 +370,8 @@ def _tables(d: Draw) -> dict[str, dict[str, Any]]:
             "posterior_min_pulses": n_post,
         },
     }
+    if d.logged_wind_m_s is not None:  # the survey's wind log (process/context.py)
+        t["process"]["wind_speed_m_s"] = d.logged_wind_m_s
     if d.scanner == "oscillating":
         t["scanner"]["scan_rate_hz"] = 20.0
     if fw:

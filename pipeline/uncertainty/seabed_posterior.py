@@ -78,6 +78,8 @@ _SURFACE_ROWS = (
     "n_used",
     "flags",
     "own_weight",
+    "facet_slope_var",
+    "track_xy",
 )
 
 

@@ -55,6 +55,7 @@ from pipeline.uncertainty.tpu import (
 from pipeline.uncertainty.tpu_facet import (
     track_directions,
     unresolved_slope_cov,
+    with_facet_excess,
     with_wave_facet,
 )
 from pipeline.uncertainty.tpu_measured import (
@@ -236,6 +237,8 @@ def survey_uncertainty(
             tilt_sigma_rad=plane_tilt,
             track_xy=tracks,
         )
+    # what the facet excess taken off by refraction is uncertain by (the logged wind's sigma)
+    tpu40 = with_facet_excess(tpu40, returns.direction_meas, surf, refr)
     # what the sounding's horizontal uncertainty makes of the gradient's own (unmeasured
     # across a profiler's line: the slope prior)
     tpu40 = with_random_term(

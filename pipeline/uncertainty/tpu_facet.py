@@ -35,12 +35,14 @@ water: ``a = a_raw = 0``, no term. A user's ``process.tpu.wave_slope_sigma_rad >
 Slopes shorter than the variogram's shortest lags (capillaries) are not in ``a``: they vary
 within the footprint, and their mean over it is small.
 
-Not held (a known bias, not a spread): every facet lengthens the in-water path read along the
-plane's refracted direction by ``L delta² / 2``, so the soundings lie deep on average by ``L (1 -
-1/n_w)² mss / 2`` at nadir, ``mss`` the sea's whole mean-square slope (short waves included,
-which ``a`` does not see): 2.0 cm at 12.7 m under a 9.9 m/s sea on suite tuning seed 205,
-against 2.2 cm predicted (``benchmarks/wave_refraction/RESULTS.md``, photon profilers). Its
-correction needs the whole ``mss`` from measured data.
+The second-order part is a bias, not a spread: every facet lengthens the in-water path read
+along the plane's refracted direction by ``L delta² / 2``, so the soundings lie deep on average
+by ``L (1 - 1/n_w)² mss / 2`` at nadir, ``mss`` the sea's whole mean-square slope (short waves
+included, which ``a`` does not see): 2.0 cm at 12.7 m under a 9.9 m/s sea on suite tuning seed
+205, against 2.2 cm predicted (``benchmarks/wave_refraction/RESULTS.md``, photon profilers).
+Refraction takes it off (:mod:`pipeline.process.facet_excess`, ``mss`` from the logged wind);
+:func:`with_facet_excess` adds what that correction is uncertain by (the wind's sigma through
+Cox-Munk's slope: a correlated term, the same wind for the whole survey).
 """
 
 from __future__ import annotations
@@ -51,10 +53,13 @@ import warnings
 import numpy as np
 
 from pipeline.optics import refract_direction
+from pipeline.process.facet_excess import expected_depth_excess_m, normal_with_slope, track_axes
+from pipeline.process.facet_excess import track_directions as _track_directions
 from pipeline.process.returns import DetectedReturns, PointFlag
 from pipeline.process.surface_fit import WaterSurface
 from pipeline.uncertainty.tpu_measured import SurfaceVariogram
 from pipeline.uncertainty.tpu_settings import DEPTH, PointTpu, X, Y, Z
+from pipeline.uncertainty.tpu_window import with_random_term
 
 __all__ = [
     "FACET_TERMS",
@@ -63,7 +68,12 @@ __all__ = [
     "unresolved_slope_cov",
     "facet_jacobian",
     "with_wave_facet",
+    "with_facet_excess",
+    "EXCESS_TERM",
 ]
+
+#: The term of the facet excess's own uncertainty (the logged wind's, through Cox-Munk).
+EXCESS_TERM = "wave_facet_excess"
 
 #: Names of the two terms (facet slope along and across the pulse's flight line).
 FACET_TERMS = ("wave_facet_along", "wave_facet_across")
@@ -72,26 +82,9 @@ FACET_TERMS = ("wave_facet_along", "wave_facet_across")
 def track_directions(returns: DetectedReturns) -> np.ndarray:
     """Unit horizontal direction of each pulse's flight line, ``(n, 2)``.
 
-    The principal axis of the measured origins of the pulses of each line (``line_id``; all
-    pulses as one line without it: a multi-line survey without line ids gets one axis); x
-    where a line's origins do not spread (one pulse). The sign is arbitrary (the facet terms
-    enter squared).
+    :func:`pipeline.process.facet_excess.track_directions` of the measured origins.
     """
-    n = len(returns)
-    line = np.zeros(n, np.int64) if returns.line_id is None else np.asarray(returns.line_id)
-    _, inv = np.unique(line, return_inverse=True)
-    inv = inv.ravel()
-    xy = np.asarray(returns.origin_meas_m, dtype=np.float64)[:, :2]
-    cnt = np.bincount(inv).astype(np.float64)
-    mean = np.column_stack([np.bincount(inv, weights=xy[:, k]) / cnt for k in range(2)])
-    d = xy - mean[inv]
-    sxx = np.bincount(inv, weights=d[:, 0] ** 2)
-    syy = np.bincount(inv, weights=d[:, 1] ** 2)
-    sxy = np.bincount(inv, weights=d[:, 0] * d[:, 1])
-    # the major axis of each line's 2x2 scatter, at angle atan2(2 sxy, sxx - syy) / 2
-    ang = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
-    axis = np.column_stack([np.cos(ang), np.sin(ang)])
-    return axis[inv]
+    return _track_directions(returns.origin_meas_m[:, :2], returns.line_id)
 
 
 def unresolved_slope_sigma_rad(
@@ -128,18 +121,6 @@ def unresolved_slope_sigma_rad(
     return np.where(surface.is_water[rows, None], np.sqrt(var), 0.0)
 
 
-def _track_axes(track_xy, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Unit along-track and across-track (90° to its left) axes, each ``(n, 2)``.
-
-    Without a track: x and y.
-    """
-    if track_xy is None:
-        return np.tile([1.0, 0.0], (n, 1)), np.tile([0.0, 1.0], (n, 1))
-    u = np.asarray(track_xy, dtype=np.float64).reshape(-1, 2)
-    u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-12)
-    return u, np.column_stack([-u[:, 1], u[:, 0]])
-
-
 def unresolved_slope_cov(
     vg: SurfaceVariogram, surface: WaterSurface, track_xy, tilt_sigma_rad=None, rows=None
 ) -> np.ndarray:
@@ -148,19 +129,10 @@ def unresolved_slope_cov(
     ``track_xy`` (``(k, 2)``): each row's flight-line direction (:func:`track_directions`).
     """
     sig = unresolved_slope_sigma_rad(vg, surface, tilt_sigma_rad, rows)
-    u, v = _track_axes(track_xy, len(sig))
+    u, v = track_axes(track_xy, len(sig))
     return (sig[:, 0, None, None] ** 2) * u[:, :, None] * u[:, None, :] + (
         sig[:, 1, None, None] ** 2
     ) * v[:, :, None] * v[:, None, :]
-
-
-def _normal_with_slope(normal: np.ndarray, axis: np.ndarray, step: float) -> np.ndarray:
-    """Upward unit normals whose slope along the unit ``axis`` ``(n, 2)`` moves by ``step``."""
-    nz = np.where(np.abs(normal[:, 2]) > 1e-12, normal[:, 2], 1e-12)
-    grad = -normal[:, :2] / nz[:, None]
-    grad = grad + step * axis
-    out = np.column_stack([-grad, np.ones(len(normal))])
-    return out / np.linalg.norm(out, axis=1, keepdims=True)
 
 
 def facet_jacobian(
@@ -197,7 +169,7 @@ def facet_jacobian(
         Unit horizontal direction of the first axis (the second is 90° to its left).
     """
     n = len(direction)
-    axes = _track_axes(track_xy, n)
+    axes = track_axes(track_xy, n)
     length = np.linalg.norm(point_m - entry_m, axis=1)
     nz = np.where(np.abs(normal[:, 2]) > 1e-12, normal[:, 2], 1e-12)
     plane_grad = -normal[:, :2] / nz[:, None]
@@ -205,8 +177,8 @@ def facet_jacobian(
     h = 1e-4
     for axis in (0, 1):
         v = axes[axis]
-        t_p, _ = refract_direction(direction, _normal_with_slope(normal, v, h), n_air, n_water)
-        t_m, _ = refract_direction(direction, _normal_with_slope(normal, v, -h), n_air, n_water)
+        t_p, _ = refract_direction(direction, normal_with_slope(normal, v, h), n_air, n_water)
+        t_m, _ = refract_direction(direction, normal_with_slope(normal, v, -h), n_air, n_water)
         db = length[:, None] * (t_p - t_m) / (2.0 * h)
         out[:, axis, :3] = db
         out[:, axis, DEPTH] = np.sum((plane_grad - seabed_gradient) * db[:, :2], axis=1) - db[:, 2]
@@ -294,3 +266,41 @@ def with_wave_facet(
         )
     rows = {k: np.where(ok[:, None], v, 0.0) for k, v in rows.items()}
     return _with_random_rows(tpu, rows)
+
+
+def with_facet_excess(tpu: PointTpu, returns_direction, surface: WaterSurface, refr) -> PointTpu:
+    """``tpu`` with the correlated :data:`EXCESS_TERM`: the facet correction's uncertainty.
+
+    Refraction raised each sounding by the facets' expected excess at the sea's assumed
+    mean-square slope (``refr.facet_mss``, :mod:`pipeline.process.facet_excess`). The excess
+    is linear in the slope variance, and ``mss`` is uncertain by ``refr.facet_mss_sigma``
+    (the logged wind's sigma through Cox-Munk): the depth and elevation by
+    ``|excess| * facet_mss_sigma / facet_mss``. No term without facets.
+
+    Parameters
+    ----------
+    tpu : PointTpu
+        Rows ``tpu.row`` are pulses (rows of ``surface``).
+    returns_direction : (n_pulses, 3)
+        Measured beam directions.
+    surface : WaterSurface
+        The fitted surface with its ``facet_slope_var`` (None: no facets, ``tpu`` unchanged).
+    refr : RefractionSettings
+        The processing's refraction settings.
+    """
+    if surface.facet_slope_var is None or refr.facet_mss <= 0.0:
+        return tpu
+    r = np.asarray(tpu.row, dtype=np.int64)
+    length = np.linalg.norm(tpu.xyz_m - surface.entry_m[r], axis=1)
+    excess = expected_depth_excess_m(
+        returns_direction[r],
+        surface.normal[r],
+        length,
+        surface.air_index,
+        refr.phase_index,
+        np.where(surface.is_water[r, None], surface.facet_slope_var[r], 0.0),
+        None if surface.track_xy is None else surface.track_xy[r],
+        refr.facet_decay_per_m,
+    )
+    sigma = np.abs(excess) * (refr.facet_mss_sigma / refr.facet_mss)
+    return with_random_term(tpu, EXCESS_TERM, sigma, sigma, correlated=True)

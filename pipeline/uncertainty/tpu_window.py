@@ -82,10 +82,13 @@ def window_footprint_sigma_m(xy_m, group, gradient, slope_cov=None) -> np.ndarra
     return np.sqrt(np.bincount(inv, weights=var)[inv] / cnt[inv])
 
 
-def with_random_term(tpu: PointTpu, name: str, sigma_z_m, sigma_depth_m) -> PointTpu:
+def with_random_term(
+    tpu: PointTpu, name: str, sigma_z_m, sigma_depth_m, correlated: bool = False
+) -> PointTpu:
     """``tpu`` with one more random term of the elevation and the depth (not horizontal).
 
-    The totals and their random parts take it in quadrature; ``terms[name]`` holds it.
+    The totals and their random parts (their correlated parts with ``correlated``: one error
+    shared by the survey's soundings) take it in quadrature; ``terms[name]`` holds it.
     """
     sz = np.asarray(sigma_z_m, dtype=np.float64).ravel()
     sd = np.asarray(sigma_depth_m, dtype=np.float64).ravel()
@@ -101,7 +104,16 @@ def with_random_term(tpu: PointTpu, name: str, sigma_z_m, sigma_depth_m) -> Poin
         tpu,
         terms={**tpu.terms, name: term},
         sigma_v_m=add(tpu.sigma_v_m, sz),
-        sigma_v_random_m=add(tpu.sigma_v_random_m, sz),
         sigma_depth_m=add(tpu.sigma_depth_m, sd),
-        sigma_depth_random_m=add(tpu.sigma_depth_random_m, sd),
+        **(
+            {
+                "sigma_v_correlated_m": add(tpu.sigma_v_correlated_m, sz),
+                "sigma_depth_correlated_m": add(tpu.sigma_depth_correlated_m, sd),
+            }
+            if correlated
+            else {
+                "sigma_v_random_m": add(tpu.sigma_v_random_m, sz),
+                "sigma_depth_random_m": add(tpu.sigma_depth_random_m, sd),
+            }
+        ),
     )

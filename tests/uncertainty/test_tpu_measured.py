@@ -315,3 +315,29 @@ def test_no_wave_facet_on_a_flat_sea():
     tpu = with_wave_facet(tpu, ret.direction_meas, surf, vg, grad[tpu.row], 1.34)
     facet = np.sqrt(sum(tpu.terms[t][:, DEPTH] ** 2 for t in FACET_TERMS))
     assert np.median(facet) < 0.1 * 0.02
+
+
+def test_facet_excess_term_is_the_wind_sigma_share_of_the_correction():
+    """Refraction raised each nadir sounding by ``L (1 - n_a/n_w)² mss / 2``; the logged wind's
+    sigma ``sw`` makes ``mss`` uncertain by ``5.12e-3 sw`` (Cox-Munk): the term is that share of
+    the excess, in the elevation and the depth, and correlated (one wind for the survey)."""
+    from pipeline.process.refraction import RefractionSettings
+    from pipeline.uncertainty.tpu_facet import EXCESS_TERM, with_facet_excess
+
+    ret, surf = track(lambda x: 0.0 * x, 0.005, n=200)
+    mss, mss_sigma = 0.054, 5.12e-3 * 2.0
+    rst = RefractionSettings(
+        phase_index=1.34, group_index=N_G, facet_mss=mss, facet_mss_sigma=mss_sigma
+    )
+    tpu = point_tpu(ret, surf, rst)
+    assert with_facet_excess(tpu, ret.direction_meas, surf, rst) is tpu  # no facets, no term
+    faceted = dataclasses.replace(surf, facet_slope_var=np.full((len(ret), 2), mss / 2))
+    out = with_facet_excess(tpu, ret.direction_meas, faceted, rst)
+    length = np.linalg.norm(tpu.xyz_m - faceted.entry_m[tpu.row], axis=1)
+    want = length * (1.0 - N_AIR / 1.34) ** 2 * mss / 2.0 * mss_sigma / mss
+    np.testing.assert_allclose(out.terms[EXCESS_TERM][:, DEPTH], want, rtol=3e-3)
+    np.testing.assert_allclose(out.terms[EXCESS_TERM][:, 2], want, rtol=3e-3)
+    np.testing.assert_allclose(
+        out.sigma_depth_correlated_m, np.hypot(tpu.sigma_depth_correlated_m, want), rtol=3e-3
+    )
+    np.testing.assert_array_equal(out.sigma_depth_random_m, tpu.sigma_depth_random_m)
