@@ -123,14 +123,18 @@ def test_bathy_run_uses_and_records_the_users_values(tmp_path):
 
 
 def test_the_logged_wind_sets_the_facet_slope_and_a_users_value_wins():
-    scene = _small_survey()
+    # off by default (it failed the held-out check): no facet slope, no correction
+    assert processing_context(_small_survey()).refraction.facet_mss == 0.0
+    scene = _small_survey({"wave_facet_correction": True})
     ctx = processing_context(scene)
     u = scene.water.wind_speed_m_s
     # Cox & Munk (1954), clean sea: 0.003 + 5.12e-3 U12.5 (published)
     assert ctx.refraction.facet_mss == pytest.approx(0.003 + 5.12e-3 * u)
     assert ctx.refraction.facet_mss_sigma == pytest.approx(5.12e-3 * 2.0)
     assert ctx.sources["process.wind_speed_m_s"].startswith("water.wind_speed_m_s")
-    mine = processing_context(_small_survey({"wind_speed_m_s": 7.5, "wind_sigma_m_s": 0.5}))
+    mine = processing_context(
+        _small_survey({"wind_speed_m_s": 7.5, "wind_sigma_m_s": 0.5, "wave_facet_correction": True})
+    )
     assert mine.refraction.facet_mss == pytest.approx(0.003 + 5.12e-3 * 7.5)
     assert mine.refraction.facet_mss_sigma == pytest.approx(5.12e-3 * 0.5)
     assert mine.sources["process.wind_speed_m_s"] == "user"

@@ -14,9 +14,10 @@ The water indices are an assumption, not a record: by default processing assumes
 
 The wind is a record too: the survey's wind log (``process.wind_speed_m_s``; None: the scene's
 ``water.wind_speed_m_s`` stands for it, as cBLUE asks its user for the wind), uncertain by
-``process.wind_sigma_m_s``. It sets the sea's mean-square slope (Cox & Munk 1954) whose facet
-path excess refraction takes off the soundings (:mod:`pipeline.process.facet_excess`), only
-where the survey's own echoes show a wave sea.
+``process.wind_sigma_m_s``. With ``process.wave_facet_correction`` (off by default: it failed
+the held-out check) it sets the sea's mean-square slope (Cox & Munk 1954) whose facet path
+excess refraction takes off the soundings (:mod:`pipeline.process.facet_excess`), only where
+the survey's own echoes show a wave sea; off, ``RefractionSettings.facet_mss`` is 0.
 """
 
 from __future__ import annotations
@@ -244,7 +245,7 @@ def processing_context(scene) -> ProcessingContext:
         f"K_d = 0.2 c + 0.04 at c = {c_assumed:g}/m (process.forward_scatter)"
     )
     refr = RefractionSettings(
-        facet_mss=float(cox_munk_mean_square_slope(wind)),
+        facet_mss=float(cox_munk_mean_square_slope(wind)) if ps.wave_facet_correction else 0.0,
         facet_mss_sigma=COX_MUNK_SLOPE_PER_M_S * ps.wind_sigma_m_s,
         facet_decay_per_m=0.2 * c_assumed + 0.04,
         phase_index=float(phase if phase is not None else optics.water_phase_index(*water)),

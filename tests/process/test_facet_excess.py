@@ -201,6 +201,9 @@ def _profile(sea, noise_m, n=4000, spacing_m=0.05, seed=5):
         ("flat", lambda x, t: 0.0 * x, 0.01, False),
         # a rising tide (0.5 m/h, ten times M2's fastest) under noise: flat, no waves
         ("tide", lambda x, t: 0.5 / 3600.0 * t, 0.005, False),
+        # a flat sea whose echoes' bias drifts 0.2 m over the track's shoal (suite held-out
+        # seeds 1, 8: the rise between the longest and shortest lags took it for waves)
+        ("drift", lambda x, t: 0.1 * np.tanh((x - 100.0) / 20.0), 0.005, False),
     ],
 )
 def test_wave_sea_is_the_heights_rise_with_lag(name, sea, noise_m, want):
