@@ -40,9 +40,10 @@ along the plane's refracted direction by ``L delta² / 2``, so the soundings lie
 by ``L (1 - 1/n_w)² mss / 2`` at nadir, ``mss`` the sea's whole mean-square slope (short waves
 included, which ``a`` does not see): 2.0 cm at 12.7 m under a 9.9 m/s sea on suite tuning seed
 205, against 2.2 cm predicted (``benchmarks/wave_refraction/RESULTS.md``, photon profilers).
-Refraction takes it off (:mod:`pipeline.process.facet_excess`, ``mss`` from the logged wind);
-:func:`with_facet_excess` adds what that correction is uncertain by (the wind's sigma through
-Cox-Munk's slope: a correlated term, the same wind for the whole survey).
+With ``process.wave_facet_correction`` (off by default: over sloping seabeds it worsened the
+held-out bias, :mod:`pipeline.process.facet_excess`) refraction takes it off (``mss`` from the
+logged wind) and :func:`with_facet_excess` adds what that correction is uncertain by (the
+wind's sigma through Cox-Munk's slope: a correlated term, the same wind for the whole survey).
 """
 
 from __future__ import annotations
