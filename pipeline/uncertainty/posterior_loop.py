@@ -208,6 +208,9 @@ def term_bounds(data: PulseBatch, system) -> tuple[np.ndarray, np.ndarray]:
             b = np.maximum(b, -0.5 * ((c - v / s) ** 2 / v + np.log(v)))
         else:
             b = np.full(y.shape, -0.5 * math.log(f))
+        if system.surface_misfit > 0.0:
+            # any extra variance: v >= F keeps every term below -log(F) / 2
+            b = np.maximum(b, -0.5 * math.log(f))
     b = np.where(data.valid, b + 1e-9 * (1.0 + np.abs(b)), 0.0)
     rest = np.zeros((y.shape[0], y.shape[1] + 1))
     rest[:, :-1] = np.cumsum(b[:, ::-1], axis=1)[:, ::-1]

@@ -26,12 +26,14 @@ from pipeline.uncertainty.posterior_target import (
     log_prob,
     log_prob_blocks,
 )
+from pipeline.uncertainty.waveform_information import (
+    score,
+)
 from pipeline.uncertainty.waveform_model import (
     N_PARAMS,
     WaveformSystem,
     covariance,
     expected_waveform,
-    score,
 )
 
 __all__ = ["start_theta", "posterior_modes"]

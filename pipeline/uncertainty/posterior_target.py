@@ -219,6 +219,7 @@ def kernel_system(system) -> tuple:
         system.poisson,
         system.floor_variance,
         system.excess_noise_factor * system.counts_per_photoelectron,
+        0.0 if system.poisson else system.surface_misfit,
     )
 
 

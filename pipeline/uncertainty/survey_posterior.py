@@ -94,6 +94,7 @@ def waveform_system(scene, ctx: ProcessingContext) -> WaveformSystem:
         counts_per_photoelectron=det.counts_per_photoelectron,
         excess_noise_factor=det.excess_noise_factor,
         electronic_noise_counts=det.electronic_noise_counts,
+        surface_misfit=scene.process.posterior.surface_misfit,
     )
 
 

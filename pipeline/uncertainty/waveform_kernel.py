@@ -239,7 +239,7 @@ def log_post_one(th, p, thr, rest, samples, n_valid, cos_water, box, ln_k_prior,
     ``thr`` is the row's threshold; a pure function of its inputs (rows may run in any order,
     on any thread).
     """
-    dt, s, group_index, offset, poisson, floor, shot = system
+    dt, s, group_index, offset, poisson, floor, shot, misfit = system
     inside = True
     for j in range(9):
         if not (box[p, j] <= th[j] <= box[p, 9 + j]):
@@ -251,7 +251,7 @@ def log_post_one(th, p, thr, rest, samples, n_valid, cos_water, box, ln_k_prior,
     z = (th[5] - ln_k_prior[p, 0]) / sig if np.isfinite(sig) else 0.0
     ll = _log_lik_row(
         th, cos_water[p], samples[p], exposure[p], n_valid[p], dt, s, group_index, offset,
-        poisson, floor, shot, rest[p], thr + 0.5 * z * z,
+        poisson, floor, shot, misfit, rest[p], thr + 0.5 * z * z,
     )  # fmt: skip
     return ll - 0.5 * z * z
 
@@ -259,7 +259,7 @@ def log_post_one(th, p, thr, rest, samples, n_valid, cos_water, box, ln_k_prior,
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def log_lik_rows(
     theta, pulse, samples, n_valid, cos_water, dt, s, group_index, offset, poisson, floor, shot,
-    exposure,
+    misfit, exposure,
 ):  # fmt: skip
     """Log-likelihood of rows ``theta`` (N, 9), row ``k`` against ``samples[pulse[k]]``.
 
@@ -278,14 +278,14 @@ def log_lik_rows(
         p = pulse[k]
         out[k] = _log_lik_row(
             theta[k], cos_water[p], samples[p], exposure[p], n_valid[p], dt, s, group_index,
-            offset, poisson, floor, shot, none, -np.inf,
+            offset, poisson, floor, shot, misfit, none, -np.inf,
         )  # fmt: skip
     return out
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _log_lik_row(
-    th, cos_water, y, e, m, dt, s, group_index, offset, poisson, floor, shot, rest, thr
+    th, cos_water, y, e, m, dt, s, group_index, offset, poisson, floor, shot, misfit, rest, thr
 ):  # fmt: skip
     """One row's log-likelihood (:func:`log_lik_rows`), the model formed sample by sample.
 
@@ -318,9 +318,11 @@ def _log_lik_row(
             nxt = _c_part(u, r, s, band) - fall * _c_part(u - tau, r, s, band)
         mu = base + (nxt - prev) * scale
         prev = nxt
+        surf = 0.0
         if j0s <= i < j1s:
             q = _phi(((i + 0.5) * dt - t_s) / sig_s)
-            mu += a_s * (q - ps)
+            surf = a_s * (q - ps)
+            mu += surf
             ps = q
         if j0b <= i < j1b:
             q = _phi(((i + 0.5) * dt - t_b) / sig_b)
@@ -339,6 +341,8 @@ def _log_lik_row(
                 return -np.inf
         else:
             v = floor + shot * max(mu - offset, 0.0)
+            if misfit > 0.0:
+                v += (misfit * surf) ** 2
             d = y[i] - mu
             if v != arg:
                 arg, log_arg = v, math.log(v)

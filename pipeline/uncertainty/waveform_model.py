@@ -65,12 +65,28 @@ Noise laws (:class:`WaveformSystem` ``receiver``)
 ``"full_waveform"``: Gaussian with variance
 ``sigma_e^2 + q^2/12 + F G (mu - offset)`` (electronic noise, quantisation step ``q``, shot
 noise of the photoelectrons with gain ``G`` counts per photoelectron and excess-noise factor
-``F``). ``"photon_counting"``: Poisson counts of mean ``mu`` (``offset``, ``G``, ``F`` unused).
+``F``), plus ``(e s)^2`` with ``s`` the surface echo's share of ``mu`` and ``e``
+``surface_misfit`` (0 by default). ``"photon_counting"``: Poisson counts of mean ``mu``
+(``offset``, ``G``, ``F``, ``e`` unused).
+
+The surface echo's shape misfit
+-------------------------------
+The model's surface echo is the system response widened by one factor; a real one is not
+(the specular glint of the facets under the footprint, the volume backscatter's onset behind
+it, and a bright echo clipped flat at the digitiser's top code). Read with only the noise
+law's variance, its few samples weigh hundreds of times more than the bottom's, and the
+posterior bends the other components to fit the shape: behind a clipped surface the column
+turns into a second surface echo (``k`` at its 2 /m bound, the surface at its narrowest,
+depths 2-6 cm shallow; ``benchmarks/RESULTS_posterior.md``, "Clipped surface echoes"). A
+model-discrepancy variance proportional to the echo (Kennedy & O'Hagan 2001, *J. R. Stat.
+Soc. B* 63(3), 425-464) says what the model cannot say: the surface's samples are known to
+``e`` of their size. Its derivatives enter the Fisher information and the score
+(``J^T diag(1/v) J + J_v^T diag(1/(2 v^2)) J_v``), so the start's Laplace covariance is the
+posterior's.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -78,7 +94,7 @@ import numpy as np
 
 from pipeline.config import setting
 from pipeline.constants import FWHM_TO_SIGMA
-from pipeline.errors import NumericalError, SceneError
+from pipeline.errors import SceneError
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.uncertainty.waveform_kernel import expected_rows
 
@@ -91,10 +107,8 @@ __all__ = [
     "noise_variance",
     "log_likelihood",
     "draw_waveform",
-    "jacobian",
-    "fisher_information",
-    "score",
-    "depth_crb_m",
+    "surface_echo",
+    "has_misfit",
     "covariance",
 ]
 
@@ -111,9 +125,6 @@ PARAM_NAMES = (
 )
 N_PARAMS = len(PARAM_NAMES)
 _C = SPEED_OF_LIGHT_M_S
-#: Finite-difference step per parameter, in the parameter's own unit (central differences:
-#: error ~ h^2 f''' / 6, far below the noise for these smooth functions).
-_FD_STEP = np.array([1e-5, 1e-5, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6])
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -136,6 +147,12 @@ class WaveformSystem:
     electronic_noise_counts: float = setting(0.0, ge=0.0, doc="rms electronic noise per sample")
     quantisation_step_counts: float = setting(
         1.0, ge=0.0, doc="digitiser step; adds step^2/12 to the variance"
+    )
+    surface_misfit: float = setting(
+        0.0,
+        ge=0.0,
+        le=1.0,
+        doc="full waveform: sd of the surface echo's shape misfit, a share of its mean",
     )
 
     def __post_init__(self) -> None:
@@ -210,24 +227,55 @@ def expected_waveform(
     return mu[0] if single else mu
 
 
-def noise_variance(mu: Any, system: WaveformSystem) -> np.ndarray:
-    """Variance per sample of the noise law at mean ``mu`` (Poisson: ``mu`` itself)."""
+def noise_variance(mu: Any, system: WaveformSystem, surface: Any = None) -> np.ndarray:
+    """Variance per sample of the noise law at mean ``mu`` (Poisson: ``mu`` itself).
+
+    Full waveform: with ``surface`` (the surface echo's share of ``mu``, counts, like ``mu``)
+    and ``system.surface_misfit`` > 0, the shape misfit's variance ``(misfit surface)^2`` is
+    added.
+    """
     mu = np.asarray(mu, dtype=np.float64)
     if system.poisson:
         return mu
     shot = system.excess_noise_factor * system.counts_per_photoelectron
-    return system.floor_variance + shot * np.maximum(mu - system.offset_counts, 0.0)
+    v = system.floor_variance + shot * np.maximum(mu - system.offset_counts, 0.0)
+    if surface is not None and system.surface_misfit > 0.0:
+        v = v + (system.surface_misfit * np.asarray(surface, dtype=np.float64)) ** 2
+    return v
+
+
+def surface_echo(
+    theta: Any, n_samples: int, system: WaveformSystem, cos_water: Any = 1.0
+) -> np.ndarray:
+    """The surface echo's share of the mean samples (counts above the baseline).
+
+    The model with the column and bottom areas and the background at zero, less the offset:
+    ``(n_samples,)`` or ``(P, n_samples)``, as :func:`expected_waveform`.
+    """
+    th, single = _as_2d(theta)
+    th = th.copy()
+    # exp(-745) underflows to 0: no column, no bottom
+    th[:, 3] = th[:, 4] = -745.0
+    th[:, 6] = 0.0
+    s = expected_waveform(th, n_samples, system, cos_water) - system.offset_counts
+    return s[0] if single else s
 
 
 def log_likelihood(
-    samples: Any, mu: Any, system: WaveformSystem, valid: Any = None, exposure: Any = None
+    samples: Any,
+    mu: Any,
+    system: WaveformSystem,
+    valid: Any = None,
+    exposure: Any = None,
+    surface: Any = None,
 ) -> np.ndarray:
     """Log-likelihood of ``samples`` given means ``mu``, summed over the last axis.
 
     ``samples`` and ``mu`` broadcast together; only samples where ``valid`` (if given) count;
     ``exposure`` (Poisson law only) scales the mean by each sample's live share (see
-    :func:`score`). Constants that depend on the data only (``log y!``, ``log 2 pi``) are
-    dropped.
+    :func:`score`); ``surface`` (full waveform) the surface echo's share of ``mu``, for the
+    shape misfit's variance (:func:`noise_variance`). Constants that depend on the data only
+    (``log y!``, ``log 2 pi``) are dropped.
     """
     y = np.asarray(samples, dtype=np.float64)
     mu = np.asarray(mu, dtype=np.float64)
@@ -237,7 +285,7 @@ def log_likelihood(
         pos = mu > 0.0
         term = np.where(pos, y * np.log(np.where(pos, mu, 1.0)) - mu, np.where(y > 0, -np.inf, 0))
     else:
-        v = noise_variance(mu, system)
+        v = noise_variance(mu, system, surface)
         term = -0.5 * ((y - mu) ** 2 / v + np.log(v))
     if valid is not None:
         term = np.where(valid, term, 0.0)
@@ -253,129 +301,25 @@ def draw_waveform(
 ) -> np.ndarray:
     """Noisy samples drawn from the model and its noise law (for tests and calibration).
 
-    Gaussian draws are not rounded: the quantisation step enters as its variance only.
+    Gaussian draws are not rounded: the quantisation step enters as its variance only; the
+    surface echo's misfit (``system.surface_misfit``) as independent Gaussian noise per sample.
     """
     mu = expected_waveform(theta, n_samples, system, cos_water)
     if system.poisson:
         return rng.poisson(mu).astype(np.float64)
-    return mu + np.sqrt(noise_variance(mu, system)) * rng.standard_normal(mu.shape)
+    surf = surface_echo(theta, n_samples, system, cos_water) if has_misfit(system) else None
+    return mu + np.sqrt(noise_variance(mu, system, surf)) * rng.standard_normal(mu.shape)
 
 
-def jacobian(
-    theta: Any, n_samples: int, system: WaveformSystem, cos_water: Any = 1.0
-) -> tuple[np.ndarray, np.ndarray]:
-    """Mean waveform and its derivatives by central differences (one batched evaluation).
-
-    Parameters
-    ----------
-    theta : (9,) or (P, 9) array_like
-    n_samples : int
-    system : WaveformSystem
-    cos_water : float or (P,) array_like
-
-    Returns
-    -------
-    mu : (n_samples,) or (P, n_samples) ndarray
-    jac : (n_samples, 9) or (P, n_samples, 9) ndarray
-        ``d mu / d theta_j``.
-    """
-    th, single = _as_2d(theta)
-    p = th.shape[0]
-    h = _FD_STEP * np.maximum(1.0, np.abs(th) * np.array([1, 0.01, 0, 0, 0, 0, 1, 0, 0]))
-    eye = np.eye(N_PARAMS)
-    pert = np.concatenate(
-        [
-            th[:, None, :],
-            th[:, None, :] + h[:, :, None] * eye,
-            th[:, None, :] - h[:, :, None] * eye,
-        ],
-        axis=1,
-    )  # (P, 19, 9)
-    cw = np.repeat(np.broadcast_to(np.asarray(cos_water, dtype=np.float64), (p,)), 2 * N_PARAMS + 1)
-    mu = expected_waveform(pert.reshape(-1, N_PARAMS), n_samples, system, cw)
-    mu = mu.reshape(p, 2 * N_PARAMS + 1, n_samples)
-    jac = (mu[:, 1 : 1 + N_PARAMS] - mu[:, 1 + N_PARAMS :]) / (2.0 * h[:, :, None])
-    jac = jac.transpose(0, 2, 1)
-    return (mu[0, 0], jac[0]) if single else (mu[:, 0], jac)
-
-
-def _weights(mu, system):
-    """Per-sample Fisher weights and the variance slope ``v'`` (Gaussian) of the noise law."""
-    if system.poisson:
-        return 1.0 / np.maximum(mu, 1e-300), None
-    v = noise_variance(mu, system)
-    dv = np.where(
-        mu > system.offset_counts, system.excess_noise_factor * system.counts_per_photoelectron, 0.0
-    )
-    return 1.0 / v + 0.5 * (dv / v) ** 2, (v, dv)
-
-
-def fisher_information(
-    theta: Any, n_samples: int, system: WaveformSystem, cos_water: Any = 1.0, valid: Any = None
-) -> np.ndarray:
-    """Expected Fisher information (9, 9) (or (P, 9, 9)) of waveform(s) at ``theta``.
-
-    Poisson: ``J^T diag(1/mu) J``. Gaussian with a mean-dependent variance ``v(mu)``:
-    ``J^T diag(1/v + v'^2 / (2 v^2)) J`` with ``v' = F G`` above the offset. ``valid``
-    (n_samples,) or (P, n_samples) masks padded samples.
-    """
-    mu, jac = jacobian(theta, n_samples, system, cos_water)
-    w, _ = _weights(mu, system)
-    if valid is not None:
-        w = np.where(valid, w, 0.0)
-    info = np.einsum("...mi,...m,...mj->...ij", jac, w, jac)
-    if not np.all(np.isfinite(info)):
-        raise NumericalError(f"Fisher information is not finite at {th_str(np.ravel(theta))}")
-    return info
-
-
-def score(
-    samples: Any,
-    theta: Any,
-    system: WaveformSystem,
-    cos_water: Any = 1.0,
-    valid: Any = None,
-    exposure: Any = None,
-) -> tuple[Any, np.ndarray, np.ndarray]:
-    """Log-likelihood, its gradient and the Fisher information at ``theta``.
-
-    ``samples`` (m,) with ``theta`` (9,), or (P, m) with (P, 9); ``valid`` masks padding;
-    ``exposure`` (like ``samples``, Poisson law only) the live share of each sample: the
-    recorded counts are Poisson of ``exposure * mu`` (photon counting's dead time).
-    Returns ``(ll, grad, info)``: a float, (9,), (9, 9), or (P,), (P, 9), (P, 9, 9).
-    """
-    y = np.asarray(samples, dtype=np.float64)
-    mu, jac = jacobian(theta, y.shape[-1], system, cos_water)
-    if exposure is not None and system.poisson:
-        e = np.asarray(exposure, dtype=np.float64)
-        mu, jac = mu * e, jac * e[..., None]
-    w, gauss = _weights(mu, system)
-    if gauss is None:
-        dl = y / np.maximum(mu, 1e-300) - 1.0
-    else:
-        v, dv = gauss
-        res = y - mu
-        dl = res / v + 0.5 * (res * res / (v * v) - 1.0 / v) * dv
-    if valid is not None:
-        w, dl = np.where(valid, w, 0.0), np.where(valid, dl, 0.0)
-    grad = np.einsum("...mi,...m->...i", jac, dl)
-    info = np.einsum("...mi,...m,...mj->...ij", jac, w, jac)
-    ll = log_likelihood(y, mu, system, valid)
-    return (float(ll) if np.ndim(ll) == 0 else ll), grad, info
+def has_misfit(system: WaveformSystem) -> bool:
+    """True when the full-waveform law carries the surface echo's misfit."""
+    return (not system.poisson) and system.surface_misfit > 0.0
 
 
 def th_str(theta: Any) -> str:
     """Parameters as ``name=value`` pairs, for error messages."""
     th = np.ravel(np.asarray(theta, dtype=np.float64))
     return ", ".join(f"{n}={v:.6g}" for n, v in zip(PARAM_NAMES, th, strict=False))
-
-
-def depth_crb_m(
-    theta: Any, n_samples: int, system: WaveformSystem, cos_water: float = 1.0
-) -> float:
-    """Cramér–Rao bound on the depth's standard deviation, ``sqrt((I^-1)_00)``, metres."""
-    info = fisher_information(theta, n_samples, system, cos_water)
-    return float(math.sqrt(max(covariance(info)[0, 0], 0.0)))
 
 
 def covariance(info: np.ndarray) -> np.ndarray:

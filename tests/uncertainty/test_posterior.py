@@ -10,6 +10,7 @@ posterior known in closed form (a Gaussian target): the chains it calls converge
 its mean and covariance.
 """
 
+import dataclasses
 import hashlib
 import math
 import pickle
@@ -40,16 +41,18 @@ from pipeline.uncertainty.seabed_posterior import (
     seabed_posteriors,
     water_cosine,
 )
+from pipeline.uncertainty.waveform_information import (
+    depth_crb_m,
+    fisher_information,
+    score,
+)
 from pipeline.uncertainty.waveform_model import (
     N_PARAMS,
     WaveformSystem,
-    depth_crb_m,
     draw_waveform,
     expected_waveform,
-    fisher_information,
     in_water_delay_s,
     noise_variance,
-    score,
 )
 
 C = constants.c
@@ -194,7 +197,11 @@ def test_poisson_noise_law_moments():
     np.testing.assert_allclose(draws.var(axis=0), mu, rtol=0.06, atol=0.01)
 
 
-@pytest.mark.parametrize("system", [FW, PC], ids=["gaussian", "poisson"])
+@pytest.mark.parametrize(
+    "system",
+    [FW, PC, dataclasses.replace(FW, surface_misfit=0.15)],
+    ids=["gaussian", "poisson", "gaussian-surface-misfit"],
+)
 def test_fisher_information_is_the_covariance_of_the_score(system):
     th = theta(a_s=800.0, a_c=300.0, a_b=300.0, bg=0.5)
     m = window(th)

@@ -116,7 +116,7 @@ def test_log_likelihood_shortcuts_are_the_plain_sum(system):
     sysv = (
         system.sample_interval_s, system.pulse_sigma_s, system.group_index,
         system.offset_counts, system.poisson, system.floor_variance,
-        system.excess_noise_factor * system.counts_per_photoelectron,
+        system.excess_noise_factor * system.counts_per_photoelectron, 0.0,
     )  # fmt: skip
     got = log_lik_rows(rows, pulse, data.samples, data.n_valid, data.cos_water, *sysv, ex)
     mu = expected_rows(rows, data.cos_water[pulse], data.n_samples, *sysv[:4])

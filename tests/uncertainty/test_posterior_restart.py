@@ -14,11 +14,13 @@ import numpy as np
 import pytest
 
 from pipeline.uncertainty.posterior import PosteriorSettings, sample_batch
+from pipeline.uncertainty.waveform_information import (
+    fisher_information,
+)
 from pipeline.uncertainty.waveform_model import (
     N_PARAMS,
     covariance,
     draw_waveform,
-    fisher_information,
 )
 from tests.uncertainty.test_posterior import FW, gaussian_target, theta, window
 

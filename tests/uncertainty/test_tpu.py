@@ -29,10 +29,12 @@ from pipeline.uncertainty.tpu import (
     timing_from_scatter,
     timing_sigma_s,
 )
+from pipeline.uncertainty.waveform_information import (
+    fisher_information,
+)
 from pipeline.uncertainty.waveform_model import (
     WaveformSystem,
     expected_waveform,
-    fisher_information,
 )
 
 C = constants.c
