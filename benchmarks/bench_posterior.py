@@ -41,9 +41,11 @@ from pipeline.uncertainty.posterior import (  # noqa: E402
 )
 from pipeline.uncertainty.survey_uncertainty import take_tpu  # noqa: E402
 from pipeline.uncertainty.tpu import TpuSettings, monte_carlo_points, point_tpu  # noqa: E402
+from pipeline.uncertainty.waveform_information import (  # noqa: E402
+    depth_crb_m,
+)
 from pipeline.uncertainty.waveform_model import (  # noqa: E402
     WaveformSystem,
-    depth_crb_m,
     draw_waveform,
     in_water_delay_s,
 )

@@ -9,7 +9,8 @@ the run's output folder ``oS`` (its ``evaluation_points.npz`` has the evaluation
 of the same posteriors, in order: truth is read here, never by processing). ``key=value``
 overrides :class:`~pipeline.uncertainty.posterior_settings.PosteriorSettings` fields (Python
 literals), ``system.key=value`` the :class:`~pipeline.uncertainty.waveform_model.
-WaveformSystem`'s. Prints per scene and pooled: the posteriors' median depth error, the
+WaveformSystem`'s, ``nuisance=(names,)`` the TPU terms left out of the nuisance (``hook.py``'s
+``pS_terms.pkl``). Prints per scene and pooled: the posteriors' median depth error, the
 coverage of their 68 / 95 % intervals (with the TPU's other terms, as ``bathy run``), the
 share converged and the sampler's CPU time. ``-v`` lists every pulse.
 """
@@ -34,7 +35,15 @@ def replay(pkl: str, run_dir: str, over: dict, verbose: bool = False) -> dict:
         args, kwargs = pickle.load(f)
     ev = np.load(f"{run_dir}/evaluation_points.npz")
     sys_over = {k[7:]: v for k, v in over.items() if k.startswith("system.")}
-    set_over = {k: v for k, v in over.items() if not k.startswith("system.")}
+    set_over = {k: v for k, v in over.items() if not k.startswith("system.") and k != "nuisance"}
+    if "nuisance" in over:
+        # the nuisance made of the TPU terms but those named (``nuisance=("timing_surface",)``)
+        with open(pkl.replace(".pkl", "_terms.pkl"), "rb") as f:
+            terms = pickle.load(f)
+        kwargs = dict(kwargs)
+        kwargs["nuisance_depth_sigma_m"] = np.sqrt(
+            sum(v**2 for k, v in terms.items() if k not in over["nuisance"])
+        )
     args = list(args)
     args[4] = dataclasses.replace(args[4], **sys_over)
     if set_over:

@@ -245,9 +245,12 @@ def nuisance_depth_sigma_m(terms: dict[str, np.ndarray], index: np.ndarray) -> n
     """One-sigma depth change of the TPU terms a waveform posterior does not hold.
 
     Every term of :attr:`PointTpu.terms <pipeline.uncertainty.tpu.PointTpu>` but the two
-    timing terms (:data:`~pipeline.uncertainty.tpu_settings.TIMING_TERMS`, the waveform's own
-    ranging, which the posterior replaces), in quadrature, in the depth column (the depth
-    compared at the measured position: slope coupling included).
+    timing terms (:data:`~pipeline.uncertainty.tpu_settings.TIMING_TERMS`: the detector's own
+    share of the waveform's ranging, which the posterior replaces), in quadrature, in the
+    depth column (the depth compared at the measured position: slope coupling included). The
+    timing the survey measured beyond the detector's (the scatter of successive soundings,
+    the surface variogram's nugget: :mod:`pipeline.uncertainty.tpu_timing`) is among them: the
+    waveform's likelihood does not see it either.
 
     Parameters
     ----------

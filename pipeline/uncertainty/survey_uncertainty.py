@@ -63,6 +63,7 @@ from pipeline.uncertainty.tpu_measured import (
     with_surface_ranging,
     with_wave_entry,
 )
+from pipeline.uncertainty.tpu_timing import split_timing_excess
 from pipeline.uncertainty.tpu_window import (
     WINDOW_TERM,
     window_footprint_sigma_m,
@@ -173,6 +174,7 @@ def survey_uncertainty(
         max_separation_m=st.pair_max_separation_m,
         neighbours=st.scatter_neighbours,
     )
+    detector = returns  # the detector's own timing sigmas, before the scatter raises them
     returns = timing_from_scatter(
         returns,
         processed.surface,
@@ -198,6 +200,9 @@ def survey_uncertainty(
     tpu = point_tpu(
         returns, processed.surface, refr, st, seabed_gradient=grad, surface_tilt_sigma_rad=tilt
     )
+    # what the scatter and the variogram added to the detector's sigmas is not the
+    # waveform's: a posterior of the waveform replaces only the detector's share
+    tpu = split_timing_excess(tpu, detector, returns)
     # pulses the TPU could not propagate: their points keep the a-priori uncertainty and are
     # left out of the cell uncertainty and the TPU check
     no_tpu = is40 & np.isin(pts.pulse_id, tpu.left_out.pulse_id)
