@@ -246,6 +246,10 @@ def processing_context(scene) -> ProcessingContext:
     )
     refr = RefractionSettings(
         facet_mss=float(cox_munk_mean_square_slope(wind)) if ps.wave_facet_correction else 0.0,
+        # left uncorrected, the excess is still known to be there: the TPU carries its size
+        facet_mss_uncorrected=(
+            0.0 if ps.wave_facet_correction else float(cox_munk_mean_square_slope(wind))
+        ),
         facet_mss_sigma=COX_MUNK_SLOPE_PER_M_S * ps.wind_sigma_m_s,
         facet_decay_per_m=0.2 * c_assumed + 0.04,
         phase_index=float(phase if phase is not None else optics.water_phase_index(*water)),

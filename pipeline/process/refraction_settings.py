@@ -32,6 +32,12 @@ class RefractionSettings:
     facet_mss_sigma: float = setting(
         0.0, ge=0.0, le=1.0, doc="uncertainty of facet_mss (the logged wind's, via Cox-Munk)"
     )
+    facet_mss_uncorrected: float = setting(
+        0.0,
+        ge=0.0,
+        le=1.0,
+        doc="the sea's mean-square slope whose facet excess is left on (the TPU budgets it)",
+    )
     facet_decay_per_m: float = setting(
         0.0, ge=0.0, le=100.0, doc="lidar attenuation weighting the facets' paths (per m)"
     )

@@ -56,6 +56,7 @@ from pipeline.uncertainty.tpu_facet import (
     track_directions,
     unresolved_slope_cov,
     with_facet_excess,
+    with_uncorrected_facet_excess,
     with_wave_facet,
 )
 from pipeline.uncertainty.tpu_measured import (
@@ -244,6 +245,10 @@ def survey_uncertainty(
         )
     # what the facet excess taken off by refraction is uncertain by (the logged wind's sigma)
     tpu40 = with_facet_excess(tpu40, returns.direction_meas, surf, refr)
+    # or, with the correction off, the excess left on the soundings at its predicted size
+    tpu40 = with_uncorrected_facet_excess(
+        tpu40, returns, surf, refr, None if shots is None else returns.pulse_id // shots
+    )
     # what the sounding's horizontal uncertainty makes of the gradient's own (unmeasured
     # across a profiler's line: the slope prior)
     tpu40 = with_random_term(

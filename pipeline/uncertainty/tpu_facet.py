@@ -44,6 +44,9 @@ With ``process.wave_facet_correction`` (off by default: over sloping seabeds it 
 held-out bias, :mod:`pipeline.process.facet_excess`) refraction takes it off (``mss`` from the
 logged wind) and :func:`with_facet_excess` adds what that correction is uncertain by (the
 wind's sigma through Cox-Munk's slope: a correlated term, the same wind for the whole survey).
+Without it the excess is left on the soundings, and :func:`with_uncorrected_facet_excess`
+budgets its whole predicted size as a correlated term (:data:`UNCORRECTED_TERM`): a known
+effect left uncorrected enlarges the uncertainty by its size (JCGM 100:2008, the GUM, F.2.4.5).
 """
 
 from __future__ import annotations
@@ -54,7 +57,12 @@ import warnings
 import numpy as np
 
 from pipeline.optics import refract_direction
-from pipeline.process.facet_excess import expected_depth_excess_m, normal_with_slope, track_axes
+from pipeline.process.facet_excess import (
+    expected_depth_excess_m,
+    normal_with_slope,
+    track_axes,
+    with_facets,
+)
 from pipeline.process.facet_excess import track_directions as _track_directions
 from pipeline.process.returns import DetectedReturns, PointFlag
 from pipeline.process.surface_fit import WaterSurface
@@ -70,11 +78,16 @@ __all__ = [
     "facet_jacobian",
     "with_wave_facet",
     "with_facet_excess",
+    "with_uncorrected_facet_excess",
     "EXCESS_TERM",
+    "UNCORRECTED_TERM",
 ]
 
 #: The term of the facet excess's own uncertainty (the logged wind's, through Cox-Munk).
 EXCESS_TERM = "wave_facet_excess"
+
+#: The term of the facet excess left on the soundings (its whole predicted size).
+UNCORRECTED_TERM = "wave_facet_excess_uncorrected"
 
 #: Names of the two terms (facet slope along and across the pulse's flight line).
 FACET_TERMS = ("wave_facet_along", "wave_facet_across")
@@ -305,3 +318,49 @@ def with_facet_excess(tpu: PointTpu, returns_direction, surface: WaterSurface, r
     )
     sigma = np.abs(excess) * (refr.facet_mss_sigma / refr.facet_mss)
     return with_random_term(tpu, EXCESS_TERM, sigma, sigma, correlated=True)
+
+
+def with_uncorrected_facet_excess(
+    tpu: PointTpu, returns: DetectedReturns, surface: WaterSurface, refr, group=None
+) -> PointTpu:
+    """``tpu`` with the correlated :data:`UNCORRECTED_TERM`: the facet excess left on.
+
+    With the facet correction off (``refr.facet_mss`` 0) the soundings keep the in-water
+    paths' second-order excess through the facets the fitted planes do not follow, deep by
+    about ``L (1 - 1/n_w)^2 mss / 2`` at nadir. Where the echoes show a wave sea
+    (:func:`~pipeline.process.facet_excess.wave_sea`), its predicted size at the logged
+    wind's mean-square slope (``refr.facet_mss_uncorrected``), computed as the correction
+    would (:func:`~pipeline.process.facet_excess.expected_depth_excess_m`), is the term's
+    sigma in depth and elevation: one sign for the whole survey, so correlated.
+
+    Parameters
+    ----------
+    tpu : PointTpu
+        Rows ``tpu.row`` are pulses (rows of ``returns`` and ``surface``).
+    returns : DetectedReturns
+    surface : WaterSurface
+        The fitted surface (without facets: the correction is off).
+    refr : RefractionSettings
+    group : (n_pulses,) int, optional
+        Pulses sharing one detection (a photon window's shots).
+    """
+    mss = refr.facet_mss_uncorrected
+    if refr.facet_mss > 0.0 or mss <= 0.0:
+        return tpu
+    faceted = with_facets(returns, surface, mss, group)
+    if faceted.facet_slope_var is None:
+        return tpu
+    r = np.asarray(tpu.row, dtype=np.int64)
+    length = np.linalg.norm(tpu.xyz_m - surface.entry_m[r], axis=1)
+    excess = expected_depth_excess_m(
+        returns.direction_meas[r],
+        surface.normal[r],
+        length,
+        surface.air_index,
+        refr.phase_index,
+        np.where(surface.is_water[r, None], faceted.facet_slope_var[r], 0.0),
+        None if faceted.track_xy is None else faceted.track_xy[r],
+        refr.facet_decay_per_m,
+    )
+    sigma = np.abs(excess)
+    return with_random_term(tpu, UNCORRECTED_TERM, sigma, sigma, correlated=True)

@@ -211,3 +211,42 @@ def test_wave_sea_is_the_heights_rise_with_lag(name, sea, noise_m, want):
     assert wave_sea(ret, surface) is want, name
     # photon windows of 20 shots share one detection: never paired within, same verdict
     assert wave_sea(ret, surface, group=ret.pulse_id // 20) is want, name
+
+
+@pytest.mark.parametrize("sea_kind", ["waves", "flat"])
+def test_tpu_budgets_the_uncorrected_excess_as_the_correction_would_take_it(sea_kind):
+    """With the correction off, the TPU's term is the rise the correction would have given
+    each sounding (refraction's own path: depth off less depth on), and nothing over a sea
+    whose echoes show no waves; with it on, no such term."""
+    from pipeline.uncertainty.tpu import point_tpu
+    from pipeline.uncertainty.tpu_facet import UNCORRECTED_TERM, with_uncorrected_facet_excess
+    from pipeline.uncertainty.tpu_settings import DEPTH
+
+    sea = {
+        "waves": lambda x, t: 0.7 * np.cos(2 * np.pi * (x - 11.0 * t) / 80.0),
+        "flat": lambda x, t: 0.0 * x,
+    }[sea_kind]
+    ret, _ = _profile(sea, 0.01, n=1500)
+    off = RefractionSettings(phase_index=N_PHASE, group_index=N_GROUP, facet_mss_uncorrected=MSS)
+    on = RefractionSettings(phase_index=N_PHASE, group_index=N_GROUP, facet_mss=MSS)
+    p_off = georeference(ret, surface_settings=FIT, refraction_settings=off)
+    p_on = georeference(ret, surface_settings=FIT, refraction_settings=on)
+    tpu = point_tpu(ret, p_off.surface, off)
+    got = with_uncorrected_facet_excess(tpu, ret, p_off.surface, off)
+    if sea_kind == "flat":
+        assert UNCORRECTED_TERM not in got.terms
+        np.testing.assert_array_equal(got.sigma_depth_m, tpu.sigma_depth_m)
+        return
+    b_off = p_off.points.select(p_off.points.kind == ReturnKind.BOTTOM)
+    b_on = p_on.points.select(p_on.points.kind == ReturnKind.BOTTOM)
+    rise = b_off.depth_m - b_on.depth_m
+    pos = np.searchsorted(b_off.pulse_id, ret.pulse_id[tpu.row])
+    term = got.terms[UNCORRECTED_TERM][:, DEPTH]
+    assert np.all(rise[pos] > 0.0)
+    np.testing.assert_allclose(term, rise[pos], rtol=0.02)
+    # correlated: the totals grow by it in quadrature, the random part does not
+    np.testing.assert_allclose(got.sigma_depth_m, np.hypot(tpu.sigma_depth_m, term), rtol=1e-12)
+    np.testing.assert_array_equal(got.sigma_depth_random_m, tpu.sigma_depth_random_m)
+    # with the correction on, its own (wind-sigma) term stands and this one is not added
+    tpu_on = point_tpu(ret, p_on.surface, on)
+    assert with_uncorrected_facet_excess(tpu_on, ret, p_on.surface, on) is tpu_on
