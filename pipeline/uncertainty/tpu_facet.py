@@ -282,6 +282,22 @@ def with_wave_facet(
     return _with_random_rows(tpu, rows)
 
 
+def _points_excess_m(tpu: PointTpu, returns_direction, surface: WaterSurface, refr):
+    """(n,) the facet excess of each point's in-water path (``surface`` with its facets)."""
+    r = np.asarray(tpu.row, dtype=np.int64)
+    length = np.linalg.norm(tpu.xyz_m - surface.entry_m[r], axis=1)
+    return expected_depth_excess_m(
+        returns_direction[r],
+        surface.normal[r],
+        length,
+        surface.air_index,
+        refr.phase_index,
+        np.where(surface.is_water[r, None], surface.facet_slope_var[r], 0.0),
+        None if surface.track_xy is None else surface.track_xy[r],
+        refr.facet_decay_per_m,
+    )
+
+
 def with_facet_excess(tpu: PointTpu, returns_direction, surface: WaterSurface, refr) -> PointTpu:
     """``tpu`` with the correlated :data:`EXCESS_TERM`: the facet correction's uncertainty.
 
@@ -304,18 +320,7 @@ def with_facet_excess(tpu: PointTpu, returns_direction, surface: WaterSurface, r
     """
     if surface.facet_slope_var is None or refr.facet_mss <= 0.0:
         return tpu
-    r = np.asarray(tpu.row, dtype=np.int64)
-    length = np.linalg.norm(tpu.xyz_m - surface.entry_m[r], axis=1)
-    excess = expected_depth_excess_m(
-        returns_direction[r],
-        surface.normal[r],
-        length,
-        surface.air_index,
-        refr.phase_index,
-        np.where(surface.is_water[r, None], surface.facet_slope_var[r], 0.0),
-        None if surface.track_xy is None else surface.track_xy[r],
-        refr.facet_decay_per_m,
-    )
+    excess = _points_excess_m(tpu, returns_direction, surface, refr)
     sigma = np.abs(excess) * (refr.facet_mss_sigma / refr.facet_mss)
     return with_random_term(tpu, EXCESS_TERM, sigma, sigma, correlated=True)
 
@@ -350,17 +355,5 @@ def with_uncorrected_facet_excess(
     faceted = with_facets(returns, surface, mss, group)
     if faceted.facet_slope_var is None:
         return tpu
-    r = np.asarray(tpu.row, dtype=np.int64)
-    length = np.linalg.norm(tpu.xyz_m - surface.entry_m[r], axis=1)
-    excess = expected_depth_excess_m(
-        returns.direction_meas[r],
-        surface.normal[r],
-        length,
-        surface.air_index,
-        refr.phase_index,
-        np.where(surface.is_water[r, None], faceted.facet_slope_var[r], 0.0),
-        None if faceted.track_xy is None else faceted.track_xy[r],
-        refr.facet_decay_per_m,
-    )
-    sigma = np.abs(excess)
+    sigma = np.abs(_points_excess_m(tpu, returns.direction_meas, faceted, refr))
     return with_random_term(tpu, UNCORRECTED_TERM, sigma, sigma, correlated=True)
