@@ -349,6 +349,12 @@ def run_survey(
     with clock.stage("tpu"):
         unc = survey_uncertainty(sim.returns, processed, ctx, grid)
         processed = dataclasses.replace(processed, points=with_tpu(processed.points, unc))
+    left_on = unc.tpu40.terms.get("wave_facet_excess_uncorrected")
+    if left_on is not None and left_on.size:
+        log(
+            "  wave facets (correction off): the excess left on the soundings is in the TPU, "
+            f"median {np.median(left_on[:, -1]):.3f} m (process.wave_facet_correction)"
+        )
     with clock.stage("process"):
         from pipeline.survey_cleanup import objects_and_rejections
 
