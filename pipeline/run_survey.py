@@ -349,7 +349,9 @@ def run_survey(
     with clock.stage("tpu"):
         unc = survey_uncertainty(sim.returns, processed, ctx, grid)
         processed = dataclasses.replace(processed, points=with_tpu(processed.points, unc))
-    left_on = unc.tpu40.terms.get("wave_facet_excess_uncorrected")
+    from pipeline.uncertainty.tpu_facet import UNCORRECTED_TERM
+
+    left_on = unc.tpu40.terms.get(UNCORRECTED_TERM)
     if left_on is not None and left_on.size:
         log(
             "  wave facets (correction off): the excess left on the soundings is in the TPU, "

@@ -25,6 +25,7 @@ from pipeline.uncertainty.waveform_model import (
     has_misfit,
     log_likelihood,
     noise_variance,
+    surface_only,
     th_str,
 )
 
@@ -70,10 +71,9 @@ def jacobian(
         axis=1,
     )  # (P, 19, 9)
     if _surface_only:
-        # the surface echo alone (:func:`surface_echo`): its derivatives in the zeroed
-        # parameters vanish, as they should
-        pert[:, :, 3] = pert[:, :, 4] = -745.0
-        pert[:, :, 6] = 0.0
+        # the surface echo alone: its derivatives in the zeroed parameters vanish, as they
+        # should
+        pert = surface_only(pert)
     cw = np.repeat(np.broadcast_to(np.asarray(cos_water, dtype=np.float64), (p,)), 2 * N_PARAMS + 1)
     mu = expected_waveform(pert.reshape(-1, N_PARAMS), n_samples, system, cw)
     mu = mu.reshape(p, 2 * N_PARAMS + 1, n_samples)

@@ -108,6 +108,7 @@ __all__ = [
     "log_likelihood",
     "draw_waveform",
     "surface_echo",
+    "surface_only",
     "has_misfit",
     "covariance",
 ]
@@ -244,6 +245,18 @@ def noise_variance(mu: Any, system: WaveformSystem, surface: Any = None) -> np.n
     return v
 
 
+def surface_only(theta: np.ndarray) -> np.ndarray:
+    """A copy of parameter rows ``(..., 9)`` with no column, no bottom and no background.
+
+    Log areas of -745 underflow to 0 in ``exp``: the model of such a row is the surface echo
+    on the offset alone (:func:`surface_echo`).
+    """
+    th = np.array(theta, dtype=np.float64, copy=True)
+    th[..., 3] = th[..., 4] = -745.0
+    th[..., 6] = 0.0
+    return th
+
+
 def surface_echo(
     theta: Any, n_samples: int, system: WaveformSystem, cos_water: Any = 1.0
 ) -> np.ndarray:
@@ -253,11 +266,7 @@ def surface_echo(
     ``(n_samples,)`` or ``(P, n_samples)``, as :func:`expected_waveform`.
     """
     th, single = _as_2d(theta)
-    th = th.copy()
-    # exp(-745) underflows to 0: no column, no bottom
-    th[:, 3] = th[:, 4] = -745.0
-    th[:, 6] = 0.0
-    s = expected_waveform(th, n_samples, system, cos_water) - system.offset_counts
+    s = expected_waveform(surface_only(th), n_samples, system, cos_water) - system.offset_counts
     return s[0] if single else s
 
 

@@ -28,7 +28,6 @@ from pipeline.uncertainty.waveform_information import (
 from pipeline.uncertainty.waveform_model import (
     N_PARAMS,
     draw_waveform,
-    noise_variance,
     surface_echo,
 )
 from pipeline.uncertainty.waveform_reference import expected_waveform_numpy
@@ -64,14 +63,6 @@ def test_surface_echo_is_the_area_at_the_surface():
     np.testing.assert_allclose(s, _surface_reference(th, m, FWM), rtol=0, atol=1e-9)
     assert s.sum() == pytest.approx(2000.0, rel=1e-9)  # the echo's whole area, nothing else
     assert np.argmax(s) == round(th[1])  # at the surface time (ns samples)
-
-
-def test_misfit_zero_is_the_plain_noise_law():
-    th = theta()
-    m = window(th)
-    mu = expected_waveform_numpy(np.atleast_2d(th), m, FW)[0]
-    s = _surface_reference(th, m, FW)
-    np.testing.assert_array_equal(noise_variance(mu, FW, s), noise_variance(mu, FW))
 
 
 def test_compiled_log_posterior_is_the_reference_with_misfit():
