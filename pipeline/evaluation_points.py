@@ -10,7 +10,10 @@ Arrays (``n`` rows per group; a group is empty when the run has none):
 
 * ``pt_*`` - every seabed point (class 40 and 43): ``pt_x_m``, ``pt_y_m``, measured
   ``pt_depth_m`` (below the fitted local surface), ``pt_true_depth_m`` and
-  ``pt_error_m = measured - true`` (positive: too deep), as ``evaluation.json``'s ``error.points``.
+  ``pt_error_m = measured - true`` (positive: too deep), as ``evaluation.json``'s ``error.points``;
+  ``pt_error_thu_m``: where ``|pt_error_m| > 1 m``, the error against the true depth nearest the
+  measured one within the point's THU95 (:mod:`pipeline.evaluate_thu`: a sounding beside a wall
+  whose depth is the wall top's); elsewhere ``pt_error_m``.
 * ``tpu_*`` - the class-40 points the TPU propagated: ``tpu_true_depth_m``, ``tpu_error_m``,
   ``tpu_sigma_depth_m`` (1 σ of the depth), ``tpu_group`` (photon window, else the row),
   ``tpu_x_m``, ``tpu_y_m``, and ``tpu_term_<name>``: each term's one-sigma change of the depth
@@ -39,16 +42,32 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.evaluate import grid_errors_m, point_errors_m, truth_at
+from pipeline.evaluate_thu import error_within_thu_m
 from pipeline.outputs.atomic import atomic_path
 from pipeline.process.classify import NO_BOTTOM_FOUND_AT, SEABED_CLASSES
 from pipeline.process.returns import PointFlag
 from pipeline.process.seabed_outliers import REJECTED
 from pipeline.uncertainty.tpu_settings import DEPTH
 
-__all__ = ["point_arrays", "write_evaluation_points", "rejected_arrays", "rejected_report"]
+__all__ = [
+    "point_arrays",
+    "write_evaluation_points",
+    "gross_report",
+    "rejected_arrays",
+    "rejected_report",
+]
 
 
-def point_arrays(processed, grid, unc, post, truth_depth_m, grid_truth_depth_m, group=None):
+def point_arrays(
+    processed,
+    grid,
+    unc,
+    post,
+    truth_depth_m,
+    grid_truth_depth_m,
+    group=None,
+    seabed_height_m=None,
+):
     """The arrays of ``evaluation_points.npz`` (see the module docstring).
 
     Parameters
@@ -62,6 +81,10 @@ def point_arrays(processed, grid, unc, post, truth_depth_m, grid_truth_depth_m, 
         ``(x, y)``.
     group : (n_tpu,) array_like, optional
         Shared-measurement label of the TPU points (photon windows).
+    seabed_height_m : callable, optional
+        True seabed height at local ``(x, y)``: ``pt_error_thu_m`` searches each gross point's
+        THU95 disc on it (:func:`~pipeline.evaluate_thu.error_within_thu_m`); None: no search
+        (``pt_error_thu_m`` is ``pt_error_m``).
 
     Returns
     -------
@@ -76,6 +99,11 @@ def point_arrays(processed, grid, unc, post, truth_depth_m, grid_truth_depth_m, 
         "pt_depth_m": p40.depth_m,
         "pt_true_depth_m": true_d,
         "pt_error_m": err,
+        "pt_error_thu_m": err
+        if seabed_height_m is None
+        else error_within_thu_m(
+            p40.xyz_m[:, 0], p40.xyz_m[:, 1], err, p40.uncertainty_h_m, seabed_height_m
+        ),
     }
     terr, ttrue = point_errors_m(unc.points40, truth_depth_m=truth_depth_m)
     n_tpu = terr.size
@@ -104,6 +132,18 @@ def point_arrays(processed, grid, unc, post, truth_depth_m, grid_truth_depth_m, 
     out["nb_depth_m"] = pts.depth_m[pts.classification == NO_BOTTOM_FOUND_AT]
     out.update(rejected_arrays(pts, truth_depth_m))
     return out
+
+
+def gross_report(error_m: np.ndarray, error_thu_m: np.ndarray) -> dict[str, int]:
+    """``evaluation.json``'s ``gross_errors``: seabed points more than 1 m off.
+
+    ``over_1m`` at their own position (``pt_error_m``); ``over_1m_beyond_thu95`` against every
+    seabed within their THU95 (``pt_error_thu_m``, :mod:`pipeline.evaluate_thu`).
+    """
+    return {
+        "over_1m": int(np.sum(np.abs(error_m) > 1.0)),
+        "over_1m_beyond_thu95": int(np.sum(np.abs(error_thu_m) > 1.0)),
+    }
 
 
 def rejected_arrays(points, truth_depth_m) -> dict[str, np.ndarray]:

@@ -87,21 +87,25 @@ def evaluate_survey(
     coverage = tpu_coverage(
         unc.points40, unc.tpu40.sigma_depth_m, truth_depth_m=truth.depth_at_pulses_m, group=group
     )
-    from pipeline.evaluation_points import point_arrays, rejected_report, write_evaluation_points
+    from pipeline.evaluation_points import (
+        gross_report,
+        point_arrays,
+        rejected_report,
+        write_evaluation_points,
+    )
 
     # per-point residuals and sigmas, so a scene suite can pool strata across runs
-    write_evaluation_points(
-        path.with_name("evaluation_points.npz"),
-        point_arrays(
-            processed,
-            grid,
-            unc,
-            post,
-            truth.depth_at_pulses_m,  # as evaluation.json: the sea each pulse saw
-            grid_truth,
-            group=group,
-        ),
+    arrays = point_arrays(
+        processed,
+        grid,
+        unc,
+        post,
+        truth.depth_at_pulses_m,  # as evaluation.json: the sea each pulse saw
+        grid_truth,
+        group=group,
+        seabed_height_m=truth.seabed.height_m,
     )
+    write_evaluation_points(path.with_name("evaluation_points.npz"), arrays)
     post_eval = None
     if post is not None:
         from pipeline.evaluate_coverage import posterior_coverage
@@ -129,6 +133,9 @@ def evaluate_survey(
         "subray_flags": sim.subray_flags,
         "receiver_pulse_flags": sim.pulse_flags,
         "error": report,
+        # soundings more than 1 m off: at their own position, and against every seabed within
+        # their own THU95 (a sounding beside a wall, reading its top: pipeline.evaluate_thu)
+        "gross_errors": gross_report(arrays["pt_error_m"], arrays["pt_error_thu_m"]),
         # the soundings processing rejected as gross errors (class 7, withheld), per rule
         "seabed_rejected": rejected_report(processed.points, truth.depth_at_pulses_m),
         # per IHO cube: detected by soundings on its top / a grid cell / class 43; the grid
@@ -146,6 +153,13 @@ def evaluate_survey(
     }
     write_json(path, evaluation)
     _log_report(report, log)
+    gross = evaluation["gross_errors"]
+    if gross["over_1m"]:
+        log(
+            f"  {gross['over_1m']} soundings more than 1 m off at their position; "
+            f"{gross['over_1m_beyond_thu95']} of them with no seabed at their depth within their "
+            f"THU95 (the others sit within it of a wall whose other side they read)"
+        )
     ge = evaluation["grid_elevation"]
     if ge["n"]:
         log(

@@ -170,6 +170,8 @@ def pool_rows(rows: list[dict[str, Any]]) -> Pool:
     for i, row in enumerate(rows):
         d = row["draw"]
         a = {**{k: np.zeros(0, t) for k, t in _REJ_EMPTY.items()}, **row["arrays"]}
+        # runs from before the THU search (pipeline.evaluate_thu): the strict error
+        a.setdefault("pt_error_thu_m", a["pt_error_m"])
         d_ext, src = extinction_depth_m(a["nb_depth_m"], d.attenuation_per_m, d.receiver)
         meta.append({**d.to_dict(), "d_ext_m": d_ext, "d_ext_source": src})
         for name, v in a.items():
@@ -219,7 +221,9 @@ def stratum_figures(pool: Pool, runs: np.ndarray, depth: tuple[float, float, flo
     -------
     dict
         ``points`` and ``cells`` (:func:`_stats`: ``n``, ``bias_m``, ``rmse_m``, ``p95_m``,
-        ``max_m``), ``n_over_1m``, ``tpu`` (``n``, ``cov68``, ``cov95``), ``posterior``
+        ``max_m``), ``n_over_1m`` (at the points' positions) and ``n_over_1m_thu`` (no seabed
+        at their depth within their THU95: :mod:`pipeline.evaluate_thu`), ``tpu`` (``n``,
+        ``cov68``, ``cov95``), ``posterior``
         (``n``, ``cov68``, ``cov95``, ``converged``), ``cubes`` (per size: ``n``,
         ``detected``, ``n_dense``, ``detected_dense``: cubes at density >= 1 per m²),
         ``rejected`` (``n``, ``over_1m``, ``good``: soundings processing rejected, by their
@@ -230,6 +234,7 @@ def stratum_figures(pool: Pool, runs: np.ndarray, depth: tuple[float, float, flo
     pts = a["pt_error_m"][sel["pt"]]
     out: dict[str, Any] = {"scenes": int(runs.sum()), "points": _stats(pts)}
     out["n_over_1m"] = int(np.sum(np.abs(pts) > 1.0))
+    out["n_over_1m_thu"] = int(np.sum(np.abs(a["pt_error_thu_m"][sel["pt"]]) > 1.0))
     out["cells"] = _stats(a["cell_error_m"][sel["cell"]])
     z = np.abs(a["tpu_error_m"][sel["tpu"]]) / a["tpu_sigma_depth_m"][sel["tpu"]]
     z = z[np.isfinite(z)]
@@ -349,6 +354,7 @@ def _past_only(pool: Pool, row: dict) -> None:
             "scenes": int(runs.sum()),
             "points": _stats(e),
             "n_over_1m": int(np.sum(np.abs(e) > 1.0)),
+            "n_over_1m_thu": int(np.sum(np.abs(pool.arrays["pt_error_thu_m"][sel]) > 1.0)),
         }
 
 
