@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.suite.chance import expected_failures
 from pipeline.suite.strata import DEPTH_BANDS_M, Pool, shallowest_unbiased_m
 
 __all__ = [
@@ -344,6 +345,15 @@ def write_markdown(
         + ", ".join(f"{k} {v}" for k, v in fails.items())
         + ". n/a: too few points, posteriors or dense cubes in the stratum (see"
         " `pipeline/suite/report.py`).",
+        "",
+        "Read against chance (`pipeline/suite/chance.py`): an uncertainty exactly right, its"
+        " draws independent, would still fail on average "
+        + ", ".join(f"{k} {v:.1f}" for k, v in expected_failures(strata, "heldout").items())
+        + " of these held-out strata (tuning: "
+        + ", ".join(f"{k} {v:.1f}" for k, v in expected_failures(strata, "tuning").items())
+        + "): the bands are as narrow as a coverage's binomial scatter at the strata's n."
+        " Errors shared by many points (a survey's attitude, its water) make the real chance"
+        " larger.",
         "",
         *floor_lines,
         "",
