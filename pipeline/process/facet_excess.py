@@ -56,6 +56,7 @@ __all__ = [
     "normal_with_slope",
     "expected_depth_excess_m",
     "unresolved_slope_var",
+    "plane_slope_var",
     "wave_sea",
     "MIN_SLOPE_VAR",
     "with_facets",
@@ -193,6 +194,7 @@ def unresolved_slope_var(
     is_water: np.ndarray,
     flags: np.ndarray,
     track_xy: np.ndarray,
+    plane_var: tuple[float, float] | None = None,
 ) -> np.ndarray:
     """Facet slope variance about each pulse's plane, ``(n, 2)`` along and across its track.
 
@@ -214,27 +216,47 @@ def unresolved_slope_var(
         Which pulses entered water; the surface fit's flags.
     track_xy : (n, 2)
         Each pulse's flight-line direction (:func:`track_directions`).
+    plane_var : (float, float), optional
+        ``Var(p_u)`` along and across, as measured over a whole survey these pulses are part
+        of (:func:`plane_slope_var`; None where no plane follows); default: of these pulses.
     """
     n = len(normal)
     out = np.zeros((n, 2))
     water = np.asarray(is_water, dtype=bool)
     if mss <= 0.0 or not water.any():
         return out
-    nz = np.where(np.abs(normal[:, 2]) > 1e-12, normal[:, 2], 1e-12)
-    grad = -normal[:, :2] / nz[:, None]
-    along, across = track_axes(track_xy, n)
+    if plane_var is None:
+        plane_var = plane_slope_var(normal, is_water, flags, track_xy)
     blind = (np.asarray(flags) & np.uint16(PointFlag.SURFACE_ILL_CONDITIONED)) != 0
     e2 = np.nan_to_num(np.asarray(normal_sigma_rad, dtype=np.float64)) ** 2 / 2.0
-    for k, axis in enumerate((along, across)):
-        p = np.sum(grad * axis, axis=1)
-        follow = water & ~blind if k == 1 else water
-        if follow.any():
-            var_p = float(np.var(p[follow]))
-            out[:, k] = np.maximum(mss / 2.0 - var_p + 2.0 * e2, 0.0)
+    for k in range(2):
+        if plane_var[k] is not None:
+            out[:, k] = np.maximum(mss / 2.0 - plane_var[k] + 2.0 * e2, 0.0)
         if k == 1:
             out[blind, k] = mss / 2.0
     out[~water] = 0.0
     return out
+
+
+def plane_slope_var(normal, is_water, flags, track_xy) -> tuple[float | None, float | None]:
+    """``Var(p_u)`` of :func:`unresolved_slope_var`: the water planes' slope variance.
+
+    Along each pulse's track over the water pulses, across it over those whose plane follows
+    the sea across (not ``SURFACE_ILL_CONDITIONED``); None where no pulse counts. A survey's
+    figure (one sea): a tile of the survey is given it.
+    """
+    n = len(normal)
+    water = np.asarray(is_water, dtype=bool)
+    nz = np.where(np.abs(normal[:, 2]) > 1e-12, normal[:, 2], 1e-12)
+    grad = -normal[:, :2] / nz[:, None]
+    along, across = track_axes(track_xy, n)
+    blind = (np.asarray(flags) & np.uint16(PointFlag.SURFACE_ILL_CONDITIONED)) != 0
+    out: list[float | None] = []
+    for k, axis in enumerate((along, across)):
+        p = np.sum(grad * axis, axis=1)
+        follow = water & ~blind if k == 1 else water
+        out.append(float(np.var(p[follow])) if follow.any() else None)
+    return out[0], out[1]
 
 
 #: Along-track slope variance (rad²) the echoes must show at their shortest lags for a wave

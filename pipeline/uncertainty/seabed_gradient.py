@@ -217,6 +217,7 @@ def seabed_gradient(
     prior_slope_deg: float = 10.0,
     local_sigma: float | None = None,
     return_cov: bool = False,
+    return_local_sigma: bool = False,
     chunk: int = 200_000,
 ):
     """Depth gradient of the seabed from measured soundings, ``(m, 2)`` (m/m) (module notes).
@@ -245,12 +246,17 @@ def seabed_gradient(
         sigma where nothing measures it.
     return_cov : bool
         Also return the posterior covariance ``(m, 2, 2)``.
+    return_local_sigma : bool
+        Also return the ``local_sigma`` used (measured or given; None without a regional
+        step): a survey-wide figure a tile of the survey is given back.
 
     Returns
     -------
     gradient : (m, 2) float64
     cov : (m, 2, 2) float64
         Only with ``return_cov``.
+    local_sigma : float or None
+        Only with ``return_local_sigma``.
     """
     xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
     dep = np.asarray(depth_m, dtype=np.float64).ravel()
@@ -260,6 +266,7 @@ def seabed_gradient(
     s0 = math.tan(math.radians(prior_slope_deg))
     out = np.zeros((len(q), 2))
     cov = np.tile(np.eye(2) * s0**2, (len(q), 1, 1))
+    reg = None
     if len(xy) >= 3 and len(q):
         cells = _cells(xy, dep, regional_cell_m) if regional_radius_m > 0 else None
         if cells is not None and len(cells[1]) < 3:
@@ -295,7 +302,10 @@ def seabed_gradient(
                 prec0 = np.linalg.inv(cov0 + np.eye(2) * local_sigma**2)
             g, c = _robust_bayes(xy, dep, qq, neighbours, radius_m, mean0, prec0)
             out[lo : lo + chunk], cov[lo : lo + chunk] = g, c
-    return (out, cov) if return_cov else out
+    res = (out, cov) if return_cov else (out,)
+    if return_local_sigma:
+        res = (*res, None if reg is None else float(local_sigma))
+    return res if len(res) > 1 else out
 
 
 def gradient_sigma_depth_m(gradient_cov, horizontal_cov) -> np.ndarray:

@@ -53,7 +53,6 @@ from pipeline.uncertainty.tpu import (
     timing_from_scatter,
 )
 from pipeline.uncertainty.tpu_facet import (
-    track_directions,
     unresolved_slope_cov,
     with_facet_excess,
     with_uncorrected_facet_excess,
@@ -64,6 +63,8 @@ from pipeline.uncertainty.tpu_measured import (
     with_surface_ranging,
     with_wave_entry,
 )
+from pipeline.uncertainty.tpu_neighbours import amplitude_fill
+from pipeline.uncertainty.tpu_survey_wide import TpuSurveyWide, facet_sea, survey_tracks
 from pipeline.uncertainty.tpu_timing import split_timing_excess
 from pipeline.uncertainty.tpu_window import (
     WINDOW_TERM,
@@ -102,6 +103,8 @@ class SurveyUncertainty:
         Per grid cell: TVU, THU and the strictest IHO S-44 order met.
     summary : dict
         The order summary (:func:`pipeline.iho.order_summary`), JSON-ready.
+    wide : TpuSurveyWide or None
+        The survey-wide figures the TPU used (:mod:`pipeline.uncertainty.tpu_survey_wide`).
     """
 
     tpu40: PointTpu
@@ -111,10 +114,15 @@ class SurveyUncertainty:
     left_out: dict[str, Any]
     cells: CellUncertainty
     summary: dict[str, Any]
+    wide: TpuSurveyWide | None = None
 
 
 def survey_uncertainty(
-    returns: DetectedReturns, processed: ProcessedPoints, ctx: ProcessingContext, grid: Grid
+    returns: DetectedReturns,
+    processed: ProcessedPoints,
+    ctx: ProcessingContext,
+    grid: Grid,
+    wide: TpuSurveyWide | None = None,
 ) -> SurveyUncertainty:
     """TPU of the bathymetric points, cell uncertainty and the IHO order met per cell.
 
@@ -128,6 +136,10 @@ def survey_uncertainty(
         Navigation quality, beam, wavelength and water the processing assumes.
     grid : Grid
         The bathymetry grid the cells belong to.
+    wide : TpuSurveyWide, optional
+        The survey-wide figures, as measured over the whole survey these pulses are part of
+        (:mod:`pipeline.uncertainty.tpu_survey_wide`; a tile's pulses within their halo);
+        default: measured from these pulses. What was used is ``SurveyUncertainty.wide``.
     """
     st, refr, ins = ctx.tpu, ctx.refraction, ctx.instrument
     held = with_held_sea(returns, processed.surface, refr, held_m=processed.sea_change_m)
@@ -143,13 +155,22 @@ def survey_uncertainty(
         "radius_m": st.gradient_radius_m,
         "regional_radius_m": st.gradient_regional_radius_m,
         "prior_slope_deg": st.gradient_prior_slope_deg,
-        "local_sigma": st.gradient_local_sigma,
+        # a user's relief slope sigma wins; else the survey's (survey-wide: measured over it)
+        "local_sigma": st.gradient_local_sigma
+        if st.gradient_local_sigma is not None or wide is None
+        else wide.relief_slope_sigma,
     }
     # the seabed's own gradient: of its height below a level datum (depths below the sea
     # at each pulse's time carry the waves' slope, which the surface terms hold; on suite
     # tuning seed 109, 9 m/s over a plane, the depths' cells read 0.057 of relief slope)
-    grad, grad_cov = seabed_gradient(
-        xy40, -points40.xyz_m[:, 2], bottom_xy, group=group, return_cov=True, **near
+    grad, grad_cov, relief_sigma = seabed_gradient(
+        xy40,
+        -points40.xyz_m[:, 2],
+        bottom_xy,
+        group=group,
+        return_cov=True,
+        return_local_sigma=True,
+        **near,
     )
     # the terms compare each sounding, moved, with the true depth below the sea at the moved
     # position, read below the pulse's plane there: their gradient is the depth's below the
@@ -161,12 +182,24 @@ def survey_uncertainty(
     bottom_ids = returns.pulse_id[returns.has_bottom]
     by_id = np.argsort(bottom_ids)
     rows40 = by_id[np.searchsorted(bottom_ids[by_id], points40.pulse_id)]
-    tilt = surface_tilt_sigma(returns, processed.surface, bottom_xy, pool=rows40)
+    # survey-wide: E[T²] against the offset, pooled over the survey's bathymetric points
+    if wide is not None and wide.turn_table is None:
+        tilt, turn_table = np.zeros(bottom_rows.size), None  # the survey measured no turn
+    else:
+        tilt, turn_table = surface_tilt_sigma(
+            returns,
+            processed.surface,
+            bottom_xy,
+            pool=rows40,
+            turn_table=None if wide is None else wide.turn_table,
+            return_table=True,
+        )
     # the measured random scatter of successive soundings: what the timing achieved. With the
     # detector's own sigmas (a Cramér–Rao bound from each waveform, which no estimator beats
     # and a merged, wave-spread or step-timed echo does not reach) it can only raise them;
     # without, it sets them
-    scatter = pair_scatter(
+    # survey-wide: the true depth's rise between paired soundings
+    scatter, scatter_figures = pair_scatter(
         xy40,
         d40,
         order=points40.pulse_id,
@@ -174,7 +207,12 @@ def survey_uncertainty(
         query_xy_m=bottom_xy,
         max_separation_m=st.pair_max_separation_m,
         neighbours=st.scatter_neighbours,
+        rise_per_m2=None if wide is None else wide.scatter_rise_per_m2,
+        relief_slope_sigma=None if wide is None else wide.scatter_relief_slope_sigma,
+        return_figures=True,
     )
+    # survey-wide: the amplitude a return without one is weighted as
+    fill = amplitude_fill(returns) if wide is None else wide.amplitude_fill
     detector = returns  # the detector's own timing sigmas, before the scatter raises them
     returns = timing_from_scatter(
         returns,
@@ -186,16 +224,22 @@ def survey_uncertainty(
         # a return lies in the recorded window: its timing sigma is at most a uniform one's
         max_sigma_s=ins.window_s / math.sqrt(12.0),
         raise_only=returns.t_bottom_sigma_s is not None,
+        amplitude_fill=fill,
     )
     # the surface as its returns measure it: their height variogram's nugget (the ranging
     # error of a surface point, e.g. a calm-water onset) raises each surface timing sigma
     shots = ins.shots_per_window if ins.photon_counting else None
-    vg = surface_variogram(
-        returns,
-        processed.surface,
-        max_dt_s=st.surface_pair_max_dt_s,
-        min_pairs=st.surface_min_pairs,
-        group=None if shots is None else returns.pulse_id // shots,
+    # survey-wide: one sea, its variogram
+    vg = (
+        wide.variogram
+        if wide is not None
+        else surface_variogram(
+            returns,
+            processed.surface,
+            max_dt_s=st.surface_pair_max_dt_s,
+            min_pairs=st.surface_min_pairs,
+            group=None if shots is None else returns.pulse_id // shots,
+        )
     )
     returns = with_surface_ranging(returns, processed.surface, vg)
     tpu = point_tpu(
@@ -216,7 +260,8 @@ def survey_uncertainty(
     # each bathymetric point's row among the bottom pulses (of grad, grad_cov), and the
     # flight-line direction of its pulse
     at40 = np.searchsorted(bottom_rows, tpu40.row)
-    tracks = track_directions(returns)
+    # survey-wide: each line's direction, from all its pulses
+    tracks, line_ids, line_axes = survey_tracks(returns, wide)
     if group is not None:
         # one detection per photon window: the seabed's spread under the window's shots
         win = points40.pulse_id // ins.shots_per_window
@@ -246,8 +291,18 @@ def survey_uncertainty(
     # what the facet excess taken off by refraction is uncertain by (the logged wind's sigma)
     tpu40 = with_facet_excess(tpu40, returns.direction_meas, surf, refr)
     # or, with the correction off, the excess left on the soundings at its predicted size
+    # survey-wide: whether the echoes show a wave sea (only where the term applies)
+    pulse_group = None if shots is None else returns.pulse_id // shots
+    seen, plane_var = facet_sea(returns, surf, refr, pulse_group, tracks, wide)
     tpu40 = with_uncorrected_facet_excess(
-        tpu40, returns, surf, refr, None if shots is None else returns.pulse_id // shots
+        tpu40,
+        returns,
+        surf,
+        refr,
+        pulse_group,
+        wave_sea_seen=seen,
+        track_xy=tracks,
+        plane_var=plane_var,
     )
     # what the sounding's horizontal uncertainty makes of the gradient's own (unmeasured
     # across a profiler's line: the slope prior)
@@ -270,6 +325,18 @@ def survey_uncertainty(
         },
         cells=cells,
         summary=iho.order_summary(cells.order).to_dict(),
+        wide=TpuSurveyWide(
+            relief_slope_sigma=relief_sigma,
+            scatter_rise_per_m2=scatter_figures["rise_per_m2"],
+            scatter_relief_slope_sigma=scatter_figures["relief_slope_sigma"],
+            turn_table=turn_table,
+            amplitude_fill=fill,
+            variogram=vg,
+            line_ids=line_ids,
+            line_axes=line_axes,
+            wave_sea=seen,
+            facet_plane_slope_var=plane_var,
+        ),
     )
 
 

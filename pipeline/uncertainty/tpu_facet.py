@@ -61,6 +61,7 @@ from pipeline.process.facet_excess import (
     expected_depth_excess_m,
     normal_with_slope,
     track_axes,
+    unresolved_slope_var,
     with_facets,
 )
 from pipeline.process.facet_excess import track_directions as _track_directions
@@ -326,7 +327,15 @@ def with_facet_excess(tpu: PointTpu, returns_direction, surface: WaterSurface, r
 
 
 def with_uncorrected_facet_excess(
-    tpu: PointTpu, returns: DetectedReturns, surface: WaterSurface, refr, group=None
+    tpu: PointTpu,
+    returns: DetectedReturns,
+    surface: WaterSurface,
+    refr,
+    group=None,
+    *,
+    wave_sea_seen: bool | None = None,
+    track_xy=None,
+    plane_var=None,
 ) -> PointTpu:
     """``tpu`` with the correlated :data:`UNCORRECTED_TERM`: the facet excess left on.
 
@@ -348,11 +357,30 @@ def with_uncorrected_facet_excess(
     refr : RefractionSettings
     group : (n_pulses,) int, optional
         Pulses sharing one detection (a photon window's shots).
+    wave_sea_seen, track_xy, plane_var : bool, (n_pulses, 2) and (float, float), optional
+        Whether the survey's echoes show a wave sea, each pulse's flight-line direction and
+        the planes' slope variance (:func:`~pipeline.process.facet_excess.plane_slope_var`),
+        as measured over the whole survey (a tile of it is given them,
+        :mod:`pipeline.uncertainty.tpu_survey_wide`); default: measured from ``returns``.
     """
     mss = refr.facet_mss_uncorrected
     if refr.facet_mss > 0.0 or mss <= 0.0:
         return tpu
-    faceted = with_facets(returns, surface, mss, group)
+    if wave_sea_seen is None or track_xy is None:
+        faceted = with_facets(returns, surface, mss, group)
+    elif wave_sea_seen:  # with_facets' surface, from the survey's figures
+        var = unresolved_slope_var(
+            mss,
+            surface.normal,
+            surface.normal_sigma_rad,
+            surface.is_water,
+            surface.flags,
+            track_xy,
+            plane_var,
+        )
+        faceted = dataclasses.replace(surface, facet_slope_var=var, track_xy=track_xy)
+    else:
+        return tpu
     if faceted.facet_slope_var is None:
         return tpu
     sigma = np.abs(_points_excess_m(tpu, returns.direction_meas, faceted, refr))

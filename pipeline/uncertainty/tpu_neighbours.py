@@ -39,7 +39,10 @@ def pair_scatter(
     query_xy_m: Any = None,
     max_separation_m: float = 2.0,
     neighbours: int = 64,
-) -> np.ndarray:
+    rise_per_m2: float | None = None,
+    relief_slope_sigma: float | None = None,
+    return_figures: bool = False,
+):
     """Local one-sigma random depth error of the soundings, measured from pairs of them.
 
     Each sounding (or each ``group`` of soundings sharing one detection, e.g. the shots of a
@@ -70,11 +73,31 @@ def pair_scatter(
     height differences into the timing (``benchmarks/RESULTS_tpu_calibration.md``, per-stratum
     calibration).
 
+    ``rise_per_m2`` and ``relief_slope_sigma`` (the ``local_sigma`` of the soundings' own
+    gradient, :func:`seabed_gradient`, where ``gradient`` is not given): as given, measured
+    over a whole survey whose part these soundings are (a tile's soundings then get the
+    survey's figures), not measured here.
+
     Returns
     -------
     (m,) float64
         NaN where no pair exists at all.
+    figures : dict
+        ``rise_per_m2`` (``a``, given or measured; 0 where it cannot be told) and
+        ``relief_slope_sigma`` (used by the soundings' own gradient; None: none made or no
+        regional step). Only with ``return_figures``.
     """
+    figures = {"rise_per_m2": rise_per_m2, "relief_slope_sigma": relief_slope_sigma}
+    out = _pair_scatter(
+        xy_m, depth_m, gradient, order, group, query_xy_m, max_separation_m, neighbours, figures
+    )
+    return (out, figures) if return_figures else out
+
+
+def _pair_scatter(xy_m, depth_m, gradient, order, group, query_xy_m, max_sep, neighbours, fig):
+    """:func:`pair_scatter`; ``fig`` is filled with the figures it used."""
+    max_separation_m = max_sep
+    given, relief = fig["rise_per_m2"], fig["relief_slope_sigma"]
     xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
     dep = np.asarray(depth_m, dtype=np.float64).ravel()
     g = None if gradient is None else np.asarray(gradient, dtype=np.float64).reshape(-1, 2)
@@ -91,10 +114,13 @@ def pair_scatter(
             np.minimum.at(first, inv, key)
             key = first
     out = np.full(len(q), np.nan)
-    if len(xy) < 2 or len(q) == 0:
+    rise = fig["rise_per_m2"] = 0.0 if given is None else float(given)
+    if len(xy) < 2 or (len(q) == 0 and given is not None):
         return out
     if g is None:
-        g = seabed_gradient(xy, dep)
+        g, fig["relief_slope_sigma"] = seabed_gradient(
+            xy, dep, local_sigma=relief, return_local_sigma=True
+        )
     if key is None:
         _, idx = cKDTree(xy).query(xy, k=2, workers=-1)
         i, j, j2 = np.arange(len(xy)), idx[:, 1], None  # no second lag along a scan
@@ -106,13 +132,16 @@ def pair_scatter(
         return out
     # the true depth's own rise between the pairs (relief, the sea above the soundings): its
     # curvature a from the same soundings' pairs at two lags (their noise cancels)
-    rise = 0.0
-    if j2 is not None:
+    if j2 is not None and given is None:
         half_sq2, sep_sq2, ok2 = _pair_half_squares(xy, dep, g, i, j2, 2.0 * max_separation_m)
         both = ok & ok2 & (j2 != j)
         den = float(np.sum(sep_sq2[both] - sep_sq[both]))
         if den > float(np.sum(sep_sq[both])):  # lags apart enough to tell a rise
-            rise = max(float(np.sum(half_sq2[both] - half_sq[both])) / den, 0.0)
+            rise = fig["rise_per_m2"] = max(
+                float(np.sum(half_sq2[both] - half_sq[both])) / den, 0.0
+            )
+    if len(q) == 0:
+        return out
     i, j = i[ok], j[ok]
     half_sq = half_sq[ok] - rise * sep_sq[ok]
     k = min(neighbours, half_sq.size)
@@ -196,19 +225,26 @@ def surface_over_sounding(
     return np.where(surface.is_water[rows], turn, np.nan), delta
 
 
-def _binned_mean(x, v, query, *, per_bin=100, max_bins=40):
-    """Mean of ``v`` in equal-count bins of ``x``, interpolated at ``query`` (clamped)."""
+def _binned_table(x, v, *, per_bin=100, max_bins=40):
+    """Median ``x`` and mean ``v`` of equal-count bins of ``x``; None without a finite pair."""
     ok = np.isfinite(x) & np.isfinite(v)
     x, v = x[ok], v[ok]
     if x.size == 0:
-        return np.full(np.shape(query), np.nan)
+        return None
     order = np.argsort(x)
     x, v = x[order], v[order]
     nb = int(min(max(x.size // per_bin, 1), max_bins))
     edges = np.linspace(0, x.size, nb + 1).astype(np.int64)
     cx = np.array([np.median(x[a:b]) for a, b in zip(edges[:-1], edges[1:], strict=True)])
     cv = np.array([np.mean(v[a:b]) for a, b in zip(edges[:-1], edges[1:], strict=True)])
-    return np.interp(query, cx, cv)
+    return cx, cv
+
+
+def _interp_table(table, query):
+    """A :func:`_binned_table` interpolated at ``query`` (clamped; NaN without a table)."""
+    if table is None:
+        return np.full(np.shape(query), np.nan)
+    return np.interp(query, *table)
 
 
 def surface_tilt_sigma(
@@ -218,7 +254,9 @@ def surface_tilt_sigma(
     *,
     pool: Any = None,
     min_offset_m: float = 0.25,
-) -> np.ndarray:
+    turn_table: Any = None,
+    return_table: bool = False,
+):
     """Tilt uncertainty of each bottom pulse's water plane, measured over its sounding (rad).
 
     The fit's own standard error (``WaterSurface.normal_sigma_rad``) assumes independent
@@ -238,14 +276,32 @@ def surface_tilt_sigma(
         The soundings (rows of :func:`~pipeline.process.refraction.seabed_points`).
     pool : array_like of int or bool, optional
         The rows averaged (e.g. the bathymetric points').
+    turn_table : tuple of two (k,) arrays, or None, optional
+        ``E[T²]`` against ``Delta`` as measured over a whole survey whose part these pulses
+        are (the ``table`` this function returns; None: nothing measured it): used as given,
+        so a tile's pulses get the survey's figures and only their offsets are computed here.
+    return_table : bool
+        Also return the table used.
+
+    Returns
+    -------
+    tilt : (n_bottom,) float64
+    table : tuple of two (k,) arrays, or None
+        The binned ``(Delta, E[T²])`` (only with ``return_table``).
     """
     rows = np.flatnonzero(returns.has_bottom)
-    turn, delta = surface_over_sounding(returns, surface, xy_m)
-    sel = np.arange(rows.size) if pool is None else np.asarray(pool)
-    mst = np.maximum(np.nan_to_num(_binned_mean(delta[sel], (turn**2)[sel], delta)), 0.0)
+    if turn_table is None:
+        turn, delta = surface_over_sounding(returns, surface, xy_m)
+        sel = np.arange(rows.size) if pool is None else np.asarray(pool)
+        turn_table = _binned_table(delta[sel], (turn**2)[sel])
+    else:  # the offsets alone: the turns are the survey's, in the table
+        xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+        delta = np.hypot(*(xy - surface.entry_m[rows, :2]).T)
+    mst = np.maximum(np.nan_to_num(_interp_table(turn_table, delta)), 0.0)
     tilt = np.sqrt(mst) / np.maximum(delta, min_offset_m)
     ok = surface.is_water[rows] & (delta >= min_offset_m)
-    return np.where(ok, tilt, 0.0)
+    tilt = np.where(ok, tilt, 0.0)
+    return (tilt, turn_table) if return_table else tilt
 
 
 def timing_from_scatter(
@@ -258,6 +314,7 @@ def timing_from_scatter(
     seabed_gradient: Any = None,
     max_sigma_s: float = math.inf,
     raise_only: bool = False,
+    amplitude_fill: tuple[float, float] | None = None,
 ) -> DetectedReturns:
     """``returns`` with the per-return timing sigmas that the measured depth scatter implies.
 
@@ -292,6 +349,9 @@ def timing_from_scatter(
         Cramér–Rao bound, which the timing achieved can only exceed). The scatter's excess is
         then that over every random term, the detector's timing included, split between the
         two returns as below and added in quadrature. Default: the scatter sets them.
+    amplitude_fill : (float, float), optional
+        The surface and bottom amplitude a return without one is weighted as
+        (:func:`amplitude_fill`: the survey's median; default: that of ``returns``).
     """
     st = settings or TpuSettings()
     rst = refraction_settings or RefractionSettings()
@@ -316,16 +376,16 @@ def timing_from_scatter(
     ret = inp.ret
     hs = ret.has_surface
 
-    def inv_amp(a):
+    fill_s, fill_b = amplitude_fill or _amplitude_fill(ret)
+
+    def inv_amp(a, fill):
         if a is None:
             return np.ones(n)
         a = np.asarray(a, dtype=np.float64)
-        pos = a > 0
-        fill = np.median(a[pos]) if pos.any() else 1.0
-        return 1.0 / np.where(pos, a, fill)
+        return 1.0 / np.where(a > 0, a, fill)
 
-    ws = np.where(hs, inv_amp(ret.surface_amplitude), 0.0)
-    wb = inv_amp(ret.bottom_amplitude)
+    ws = np.where(hs, inv_amp(ret.surface_amplitude, fill_s), 0.0)
+    wb = inv_amp(ret.bottom_amplitude, fill_b)
     den = ws * js**2 + wb * jb**2
     c = np.where(den > 0, excess / np.where(den > 0, den, 1.0), 0.0)
     floor = 1e-15  # sigmas must be > 0 where a return exists
@@ -351,3 +411,23 @@ def timing_from_scatter(
     sig_s = np.where(returns.has_surface, np.maximum(sig_s, floor), 0.0)
     sig_b = np.where(returns.has_bottom, np.maximum(sig_b, floor), 0.0)
     return dataclasses.replace(returns, t_surface_sigma_s=sig_s, t_bottom_sigma_s=sig_b)
+
+
+def amplitude_fill(returns: DetectedReturns) -> tuple[float, float]:
+    """The surface and bottom amplitude :func:`timing_from_scatter` gives returns without one.
+
+    The median positive amplitude of the bottom pulses' returns (1 without any), as
+    :func:`timing_from_scatter` weighs them: a survey-wide figure a tile is given.
+    """
+    return _amplitude_fill(returns.select(returns.has_bottom))
+
+
+def _amplitude_fill(ret) -> tuple[float, float]:
+    def fill(a):
+        if a is None:
+            return 1.0
+        a = np.asarray(a, dtype=np.float64)
+        pos = a > 0
+        return float(np.median(a[pos])) if pos.any() else 1.0
+
+    return fill(ret.surface_amplitude), fill(ret.bottom_amplitude)

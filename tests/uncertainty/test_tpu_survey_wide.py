@@ -1,0 +1,96 @@
+"""A tile of a survey, given the survey's own survey-wide figures, gets the survey's TPU.
+
+The reference is the TPU of the whole survey, computed the usual way (every figure measured
+over all its pulses). A tile is the pulses whose water entry lies within a box grown by a halo;
+its TPU, given the whole survey's :class:`TpuSurveyWide`, must give the soundings inside the box
+the very terms the whole survey gave them: every search the TPU makes is local, and what is
+not (the variogram, the pair-scatter rise, the tilt table, ...) comes from the whole survey.
+The halo is what the searches reach: the regional seabed plane's radius and cell, the local
+plane's radius, and a margin for the pair scatter's nearest pairs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from pipeline.detection_store import DetectionStore
+from pipeline.process.context import processing_context
+from pipeline.process.grid import grid_seabed, snap_bounds_m
+from pipeline.process.survey_points import process_detections
+from pipeline.run_survey import simulate_detections
+from pipeline.scene import load_scene
+from pipeline.stages import StageClock, plan
+from pipeline.suite.generate import ci_draws, write_scene
+from pipeline.uncertainty.survey_uncertainty import survey_uncertainty
+from pipeline.uncertainty.tpu_terms import _take_surface
+
+
+@pytest.fixture(scope="module")
+def survey(tmp_path_factory):
+    # the CI subset's oscillating full-waveform scan over a 5.3 m/s wave sea (258 m swath)
+    tmp = tmp_path_factory.mktemp("tpu_wide")
+    d = next(d for d in ci_draws() if d.seed == 9002)
+    scene = load_scene(write_scene(d, tmp))
+    ctx = processing_context(scene)
+    with DetectionStore(tmp, ctx.instrument.air_index) as store:
+        sim = simulate_detections(scene, plan(scene), ctx, StageClock(), store, log=lambda *a: 0)
+    processed = process_detections(sim.returns, ctx, scene.process.classify, water_column=False)
+    xmin, xmax, ymin, ymax = sim.extent_m
+    bounds = snap_bounds_m(np.array([xmin, xmax]), np.array([ymin, ymax]), 2.0, (0.0, 0.0, 0.0))
+    grid = grid_seabed(processed.points, 2.0, bounds_m=bounds)
+    return sim.returns, processed, ctx, grid
+
+
+def _tile(returns, processed, keep):
+    """The pulses ``keep`` (bool per pulse) with their surface rows and points."""
+    rows = np.flatnonzero(keep)
+    pts = processed.points.select(np.isin(processed.points.pulse_id, returns.pulse_id[rows]))
+    sea = None if processed.sea_change_m is None else processed.sea_change_m[rows]
+    return returns.select(rows), dataclasses.replace(
+        processed, surface=_take_surface(processed.surface, rows), points=pts, sea_change_m=sea
+    )
+
+
+def test_the_survey_given_its_own_figures_is_unchanged(survey):
+    returns, processed, ctx, grid = survey
+    whole = survey_uncertainty(returns, processed, ctx, grid)
+    again = survey_uncertainty(returns, processed, ctx, grid, wide=whole.wide)
+    np.testing.assert_array_equal(again.tpu40.sigma_depth_m, whole.tpu40.sigma_depth_m)
+    for name, term in whole.tpu40.terms.items():
+        np.testing.assert_array_equal(again.tpu40.terms[name], term, err_msg=name)
+
+
+def test_a_tile_given_the_survey_figures_gets_the_survey_tpu(survey):
+    returns, processed, ctx, grid = survey
+    whole = survey_uncertainty(returns, processed, ctx, grid)
+    st = ctx.tpu
+    # the regional plane (its radius and a cell's diagonal), the local plane's radius, and a
+    # margin for the pair scatter's nearest pairs (successive soundings, < 2 m apart)
+    halo = st.gradient_regional_radius_m + 7.1 + st.gradient_radius_m + 10.0
+    x = processed.surface.entry_m[:, 0]
+    # the swath's western part, and its halo eastwards (the survey ends to the west)
+    core = x <= -60.0
+    near = x <= -60.0 + halo
+    assert core.sum() > 300 and near.sum() < 0.7 * len(returns), (core.sum(), near.sum())
+    sub_ret, sub = _tile(returns, processed, near)
+    tile = survey_uncertainty(sub_ret, sub, ctx, grid, wide=whole.wide)
+    # the box's soundings, matched by pulse
+    in_core = np.isin(whole.points40.pulse_id, returns.pulse_id[core])
+    ids = whole.points40.pulse_id[in_core]
+    at = np.searchsorted(tile.points40.pulse_id, ids)
+    assert np.array_equal(tile.points40.pulse_id[at], ids)
+    np.testing.assert_allclose(
+        tile.tpu40.sigma_depth_m[at], whole.tpu40.sigma_depth_m[in_core], rtol=1e-12, atol=0
+    )
+    for name, term in whole.tpu40.terms.items():
+        np.testing.assert_allclose(
+            tile.tpu40.terms[name][at], term[in_core], rtol=1e-12, atol=1e-15, err_msg=name
+        )
+    # and what the tile would have measured alone differs: the figures matter
+    alone = survey_uncertainty(sub_ret, sub, ctx, grid)
+    assert alone.wide.scatter_rise_per_m2 != whole.wide.scatter_rise_per_m2 or not np.array_equal(
+        alone.wide.turn_table[1], whole.wide.turn_table[1]
+    )
