@@ -250,3 +250,47 @@ def test_tpu_budgets_the_uncorrected_excess_as_the_correction_would_take_it(sea_
     # with the correction on, its own (wind-sigma) term stands and this one is not added
     tpu_on = point_tpu(ret, p_on.surface, on)
     assert with_uncorrected_facet_excess(tpu_on, ret, p_on.surface, on) is tpu_on
+
+
+def _sparse_short_lags(sea, noise_m, seed=5):
+    """Nadir pulses 2.5 m apart along x (a scan's own spacing) and 300 close second looks.
+
+    Pairs under 2 m are ~300, spread over the five shortest lag bins (each under
+    MIN_PAIRS alone): suite tuning seed 502's Palmer geometry.
+    """
+    rng = np.random.default_rng(seed)
+    base = np.arange(1200) * 2.5
+    x = np.sort(np.concatenate([base, rng.choice(base, 300) + rng.uniform(0.1, 1.9, 300)]))
+    n = x.size
+    t = x / 60.0
+    r_air = 400.0 - (sea(x, t) + rng.normal(0.0, noise_m, n))
+    ret = DetectedReturns(
+        pulse_id=np.arange(n),
+        origin_meas_m=np.column_stack([x, np.zeros(n), np.full(n, 400.0)]),
+        direction_meas=np.tile([0.0, 0.0, -1.0], (n, 1)),
+        has_surface=np.ones(n, bool),
+        t_surface_s=2.0 * r_air * N_AIR / C,
+        has_bottom=np.ones(n, bool),
+        t_bottom_s=2.0 * (r_air * N_AIR + 8.0 * N_GROUP) / C,
+        surface_confidence=np.ones(n),
+        bottom_confidence=np.ones(n),
+        flags=np.zeros(n, np.uint16),
+        t_emit_s=t,
+    )
+    return ret, fit_water_surface(ret, FIT)
+
+
+def test_wave_sea_pools_sparse_short_lags():
+    # short waves (4-6 m, sd 5 cm) whose heights' D(h) has levelled off by 2.5 m and falls
+    # again by 5 m: the two bins that hold enough pairs alone (2-3 m, 4-6 m) show no rise,
+    # and the sparse pairs under 2 m, pooled, show it (before: no wave sea told here)
+    rng = np.random.default_rng(1)
+    lam, phase = rng.uniform(4.0, 6.0, 12), rng.uniform(0.0, 2.0 * np.pi, 12)
+
+    def sea(x, t):
+        waves = zip(lam, phase, strict=True)
+        return sum(0.02 * np.cos(2 * np.pi * (x - 2.5 * t) / w + p) for w, p in waves)
+
+    assert wave_sea(*_sparse_short_lags(sea, 0.005))
+    # the same scan over a flat sea: still none
+    assert not wave_sea(*_sparse_short_lags(lambda x, t: 0.0 * x, 0.005))
