@@ -171,13 +171,17 @@ def _profile(sea, noise_m, n=4000, spacing_m=0.05, seed=5):
     """Nadir pulses along x at 60 m/s ranging the sea ``sea(x, t)`` with noise; exact bottoms."""
     rng = np.random.default_rng(seed)
     x = np.arange(n) * spacing_m
+    return _nadir_pulses(x, sea, noise_m, rng)
+
+
+def _nadir_pulses(x, sea, noise_m, rng):
+    """Nadir pulses at ``x`` (60 m/s) ranging ``sea(x, t)`` with noise, bottoms 8 m under."""
+    n = x.size
     t = x / 60.0
-    z = sea(x, t) + rng.normal(0.0, noise_m, n)
-    o = np.column_stack([x, np.zeros(n), np.full(n, 400.0)])
-    r_air = 400.0 - z
+    r_air = 400.0 - (sea(x, t) + rng.normal(0.0, noise_m, n))
     ret = DetectedReturns(
         pulse_id=np.arange(n),
-        origin_meas_m=o,
+        origin_meas_m=np.column_stack([x, np.zeros(n), np.full(n, 400.0)]),
         direction_meas=np.tile([0.0, 0.0, -1.0], (n, 1)),
         has_surface=np.ones(n, bool),
         t_surface_s=2.0 * r_air * N_AIR / C,
@@ -261,23 +265,7 @@ def _sparse_short_lags(sea, noise_m, seed=5):
     rng = np.random.default_rng(seed)
     base = np.arange(1200) * 2.5
     x = np.sort(np.concatenate([base, rng.choice(base, 300) + rng.uniform(0.1, 1.9, 300)]))
-    n = x.size
-    t = x / 60.0
-    r_air = 400.0 - (sea(x, t) + rng.normal(0.0, noise_m, n))
-    ret = DetectedReturns(
-        pulse_id=np.arange(n),
-        origin_meas_m=np.column_stack([x, np.zeros(n), np.full(n, 400.0)]),
-        direction_meas=np.tile([0.0, 0.0, -1.0], (n, 1)),
-        has_surface=np.ones(n, bool),
-        t_surface_s=2.0 * r_air * N_AIR / C,
-        has_bottom=np.ones(n, bool),
-        t_bottom_s=2.0 * (r_air * N_AIR + 8.0 * N_GROUP) / C,
-        surface_confidence=np.ones(n),
-        bottom_confidence=np.ones(n),
-        flags=np.zeros(n, np.uint16),
-        t_emit_s=t,
-    )
-    return ret, fit_water_surface(ret, FIT)
+    return _nadir_pulses(x, sea, noise_m, rng)
 
 
 def test_wave_sea_pools_sparse_short_lags():
