@@ -25,16 +25,16 @@ from pipeline.detection_store import DetectionStore
 from pipeline.process.context import processing_context
 from pipeline.process.grid import snap_bounds_m
 from pipeline.process.returns import Points
+from pipeline.process.surface_fit import fit_water_surface
+from pipeline.process.surface_wide import surface_wide
 from pipeline.process.survey_points import process_detections
 from pipeline.process.survey_wide import survey_wide
-from pipeline.process_tiles import beam_reach_m, process_by_tiles, processing_halo_m
+from pipeline.process_tiles import beam_reach_m, process_by_tiles, processing_halo_m, tile_rows
 from pipeline.scene import parse_scene
 from pipeline.stages import StageClock, plan
 from pipeline.survey_tiles import TileLayout, returns_position_m, snap_tile_m
 from tests.conftest import ROOT
-
-#: the simulated survey takes ~15 s
-pytestmark = pytest.mark.slow
+from tests.process.test_surface_fit import FIT, wide_berm
 
 
 def _scene():
@@ -54,6 +54,7 @@ def _scene():
 
 @pytest.fixture(scope="module")
 def survey():
+    """The simulated survey (~15 s), its context and its whole-survey processing."""
     from pipeline.run_survey import simulate_detections
 
     scene = _scene()
@@ -78,6 +79,7 @@ def _assert_same_points(got: Points, want: Points):
             np.testing.assert_array_equal(a, b, err_msg=f.name)
 
 
+@pytest.mark.slow
 def test_the_survey_is_what_the_test_needs(survey):
     _, _, returns, whole = survey
     s = whole.surface
@@ -88,6 +90,7 @@ def test_the_survey_is_what_the_test_needs(survey):
     assert np.any(whole.points.classification == 45)
 
 
+@pytest.mark.slow
 def test_survey_wide_figures_handed_in_change_nothing(survey):
     # the whole survey with its own figures handed in: the figures are all it measures
     scene, ctx, returns, whole = survey
@@ -114,14 +117,39 @@ def _tiled(survey, tile_m, halo=None):
     return process_by_tiles(returns, ctx, scene.process.classify, layout, halo, wide)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("tile_m", [25.0, 1000.0])
 def test_tiles_give_the_whole_survey_points(survey, tile_m):
     _assert_same_points(_tiled(survey, tile_m), _by_pulse(survey[3].points))
 
 
+@pytest.mark.slow
 def test_without_a_halo_tiles_differ(survey):
     # the comparison above can fail: tiles that see no neighbours past their edges fit other
     # planes and krige from other echoes near those edges
     got, want = _tiled(survey, 25.0, halo=0.0), _by_pulse(survey[3].points)
     assert np.array_equal(got.pulse_id, want.pulse_id)
     assert np.mean(got.depth_m != want.depth_m) > 0.1
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="land regions are not local: a berm below the wave height is land by its width "
+    "(land_extent_sigmas), which a tile and its halo do not see whole",
+)
+def test_a_wide_berm_is_land_in_every_tile():
+    # the berm of tests/process/test_surface_fit.py (160 m by 240 m, 1.6 m up, under a sea of
+    # sigma 0.5 m: land because it is wider than 400 sigma = 200 m), one 25 m tile in its
+    # middle with a 30 m halo: 85 m of berm seen, a crest region's width
+    ret, _, land, ground = wide_berm()
+    wide = surface_wide(ret, FIT)
+    whole = fit_water_surface(ret, FIT, wide)
+    pos = ret.origin_meas_m[:, :2] + ret.direction_meas[:, :2] * 300.0  # the hits (300 m range)
+    layout = TileLayout(snap_bounds_m(pos[:, 0], pos[:, 1], 5.0), 5.0, 25.0)
+    tile = layout.tile_of_xy(pos[:, 0], pos[:, 1])
+    t = int(layout.tile_of_xy(np.array([80.0]), np.array([0.0]))[0])
+    rows, own = tile_rows(pos, tile, layout, t, 30.0)
+    berm = land[rows] & (ground[rows] > FIT.land_margin_m + 0.1)
+    assert berm[own].sum() > 100 and whole.is_land[rows][berm].all()
+    part = fit_water_surface(ret.select(rows), FIT, wide)
+    np.testing.assert_array_equal(part.is_land[own], whole.is_land[rows][own])
