@@ -15,8 +15,11 @@ What runs by tile
 The grid (:func:`grid_by_tiles`, a cell's points by their own position) and ``points.laz``
 (:func:`write_points_by_tiles`, a pulse's points by the pulse's position, so each pulse is
 numbered whole). Processing (surface fit, refraction, classes, TPU, class 43) still runs on the
-whole survey: its survey-wide parts (the water level and global plane, the sea's sigma, the
-land regions, the TPU's mean tilt sigma, the datum) must first become streamed aggregates;
+whole survey in ``bathy run``. The points can be made by tile
+(:func:`pipeline.process_tiles.process_by_tiles`, the survey-wide figures of
+:mod:`pipeline.process.survey_wide` handed in, the halo of
+:func:`~pipeline.process_tiles.processing_halo_m`), the same to the bit; those figures are
+still measured over the whole survey, and the TPU's mean tilt sigma and the datum are too.
 :func:`halo_m` and :func:`chunks_meeting` are what its tiles will load by.
 
 Halo
@@ -54,6 +57,7 @@ __all__ = [
     "tile_layout",
     "grid_by_tiles",
     "points_tile_order",
+    "returns_position_m",
     "write_points_by_tiles",
 ]
 
@@ -235,22 +239,9 @@ def grid_by_tiles(points, layout: TileLayout, origin_m, crs, datum_m, ps) -> Gri
     return grid if datum_m is None else dataclasses.replace(grid, datum_m=float(datum_m))
 
 
-def points_tile_order(
-    points, returns, layout: TileLayout, air_index: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """The order :func:`write_points_by_tiles` writes ``points`` in, and where tiles start.
-
-    A pulse's points go with the tile of its position (:func:`~pipeline.detection_store.
-    pulse_position_m`), so every pulse is numbered whole; tile by tile, each tile's points in
-    their own order (a stable sort by tile).
-
-    Returns
-    -------
-    order : (n_points,) int64
-    starts : (n_tiles_used + 1,) int64
-        ``order[starts[i]:starts[i + 1]]`` are the points of the ``i``-th tile written.
-    """
-    pos = pulse_position_m(
+def returns_position_m(returns, air_index: float) -> np.ndarray:
+    """:func:`~pipeline.detection_store.pulse_position_m` of ``DetectedReturns``, ``(n, 2)``."""
+    return pulse_position_m(
         {
             "origin_meas_m": returns.origin_meas_m,
             "direction_meas": returns.direction_meas,
@@ -266,6 +257,24 @@ def points_tile_order(
         },
         air_index,
     )
+
+
+def points_tile_order(
+    points, returns, layout: TileLayout, air_index: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The order :func:`write_points_by_tiles` writes ``points`` in, and where tiles start.
+
+    A pulse's points go with the tile of its position (:func:`~pipeline.detection_store.
+    pulse_position_m`), so every pulse is numbered whole; tile by tile, each tile's points in
+    their own order (a stable sort by tile).
+
+    Returns
+    -------
+    order : (n_points,) int64
+    starts : (n_tiles_used + 1,) int64
+        ``order[starts[i]:starts[i + 1]]`` are the points of the ``i``-th tile written.
+    """
+    pos = returns_position_m(returns, air_index)
     pulse_tile = layout.tile_of_xy(pos[:, 0], pos[:, 1])
     by_id = np.argsort(returns.pulse_id)
     row = by_id[np.searchsorted(returns.pulse_id[by_id], points.pulse_id)]

@@ -43,6 +43,7 @@ slope gives millimetres).
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -59,6 +60,10 @@ __all__ = [
     "plane_slope_var",
     "wave_sea",
     "MIN_SLOPE_VAR",
+    "FacetWide",
+    "apply_facets",
+    "facet_wide",
+    "line_axes",
     "with_facets",
 ]
 
@@ -67,17 +72,17 @@ __all__ = [
 _H = 1e-3
 
 
-def track_directions(origin_xy_m: np.ndarray, line_id=None) -> np.ndarray:
-    """Unit horizontal direction of each pulse's flight line, ``(n, 2)``.
+def line_axes(origin_xy_m: np.ndarray, line_id=None) -> tuple[np.ndarray, np.ndarray]:
+    """Each flight line's id ``(u,)`` and unit horizontal direction ``(u, 2)``.
 
     The principal axis of the measured origins ``(n, 2)`` of the pulses of each line
-    (``line_id`` ``(n,)``; all pulses as one line without it); x where a line's origins do not
-    spread (one pulse). The sign is arbitrary (the axes enter squared).
+    (``line_id`` ``(n,)``; all pulses as one line 0 without it); x where a line's origins do
+    not spread (one pulse). The sign is arbitrary (the axes enter squared).
     """
     xy = np.asarray(origin_xy_m, dtype=np.float64).reshape(-1, 2)
     n = len(xy)
     line = np.zeros(n, np.int64) if line_id is None else np.asarray(line_id)
-    _, inv = np.unique(line, return_inverse=True)
+    lines, inv = np.unique(line, return_inverse=True)
     inv = inv.ravel()
     cnt = np.bincount(inv).astype(np.float64)
     mean = np.column_stack([np.bincount(inv, weights=xy[:, k]) / cnt for k in range(2)])
@@ -87,8 +92,20 @@ def track_directions(origin_xy_m: np.ndarray, line_id=None) -> np.ndarray:
     sxy = np.bincount(inv, weights=d[:, 0] * d[:, 1])
     # the major axis of each line's 2x2 scatter, at angle atan2(2 sxy, sxx - syy) / 2
     ang = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
-    axis = np.column_stack([np.cos(ang), np.sin(ang)])
-    return axis[inv]
+    return lines, np.column_stack([np.cos(ang), np.sin(ang)])
+
+
+def track_directions(origin_xy_m: np.ndarray, line_id=None) -> np.ndarray:
+    """Unit horizontal direction of each pulse's flight line, ``(n, 2)`` (:func:`line_axes`)."""
+    n = len(np.asarray(origin_xy_m).reshape(-1, 2))
+    lines, axes = line_axes(origin_xy_m, line_id)
+    return _axes_of(lines, axes, line_id, n)
+
+
+def _axes_of(lines: np.ndarray, axes: np.ndarray, line_id, n: int) -> np.ndarray:
+    """The axis ``(n, 2)`` of each pulse's line (``line_id`` None: line 0)."""
+    line = np.zeros(n, np.int64) if line_id is None else np.asarray(line_id)
+    return axes[np.searchsorted(lines, line)]
 
 
 def track_axes(track_xy, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -323,6 +340,58 @@ def wave_sea(returns, surface, group=None) -> bool:
     return bool((d_mean[1] - d_mean[0]) / (h2[1] - h2[0]) > MIN_SLOPE_VAR)
 
 
+@dataclass(frozen=True)
+class FacetWide:
+    """A wave sea's survey-wide facet figures (:func:`facet_wide`).
+
+    Attributes
+    ----------
+    line_id : (u,) int64
+        The survey's flight lines (0: no line ids).
+    axis_xy : (u, 2) float64
+        Each line's unit direction (:func:`line_axes`).
+    plane_var : (float or None, float or None)
+        :func:`plane_slope_var` of the survey's water pulses.
+    """
+
+    line_id: np.ndarray
+    axis_xy: np.ndarray
+    plane_var: tuple[float | None, float | None]
+
+
+def facet_wide(returns, surface, mss: float, group=None) -> FacetWide | None:
+    """The survey's facet figures; None where ``mss`` is 0 or the echoes show no wave sea.
+
+    ``group``: pulses sharing one detection (:func:`wave_sea`).
+    """
+    if mss <= 0.0 or not wave_sea(returns, surface, group):
+        return None
+    lines, axes = line_axes(returns.origin_meas_m[:, :2], returns.line_id)
+    track = _axes_of(lines, axes, returns.line_id, len(returns))
+    var = plane_slope_var(surface.normal, surface.is_water, surface.flags, track)
+    return FacetWide(lines, axes, var)
+
+
+def apply_facets(returns, surface, mss: float, facets: FacetWide | None):
+    """``surface`` with the facets' slope variance about its planes and its flight lines.
+
+    ``facets``: the survey's (:func:`facet_wide`); None: ``surface`` unchanged.
+    """
+    if facets is None:
+        return surface
+    track = _axes_of(facets.line_id, facets.axis_xy, returns.line_id, len(returns))
+    var = unresolved_slope_var(
+        mss,
+        surface.normal,
+        surface.normal_sigma_rad,
+        surface.is_water,
+        surface.flags,
+        track,
+        facets.plane_var,
+    )
+    return dataclasses.replace(surface, facet_slope_var=var, track_xy=track)
+
+
 def with_facets(returns, surface, mss: float, group=None):
     """``surface`` with the facets' slope variance about its planes and its flight lines.
 
@@ -330,10 +399,4 @@ def with_facets(returns, surface, mss: float, group=None):
     (``RefractionSettings.facet_mss``). Unchanged where it is 0 or the echoes show no wave sea
     (:func:`wave_sea`; ``group``: pulses sharing one detection).
     """
-    if mss <= 0.0 or not wave_sea(returns, surface, group):
-        return surface
-    track = track_directions(returns.origin_meas_m[:, :2], returns.line_id)
-    var = unresolved_slope_var(
-        mss, surface.normal, surface.normal_sigma_rad, surface.is_water, surface.flags, track
-    )
-    return dataclasses.replace(surface, facet_slope_var=var, track_xy=track)
+    return apply_facets(returns, surface, mss, facet_wide(returns, surface, mss, group))

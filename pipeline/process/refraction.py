@@ -69,14 +69,14 @@ import numpy as np
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S, refract_direction
 from pipeline.process.classify import ClassifySettings, classify_points
-from pipeline.process.facet_excess import expected_depth_excess_m, with_facets
+from pipeline.process.facet_excess import apply_facets, expected_depth_excess_m
 from pipeline.process.refraction_settings import RefractionSettings
 from pipeline.process.returns import DetectedReturns, PointFlag, Points, ReturnKind
 from pipeline.process.scatter_bias import range_bias_m
-from pipeline.process.sea_correlation import sea_correlation
 from pipeline.process.sea_kriging import sea_field
 from pipeline.process.surface_fit import SurfaceFitSettings, WaterSurface, fit_water_surface
 from pipeline.process.surface_points import returns_numbering, timing_sigma, water_surface_points
+from pipeline.process.survey_wide import SurveyWide, sea_wide
 
 __all__ = [
     "RefractionSettings",
@@ -335,6 +335,7 @@ def georeference(
     classify_settings: ClassifySettings | None = None,
     include_derived_surface: bool = False,
     shots_per_window: int | None = None,
+    wide: SurveyWide | None = None,
 ) -> ProcessedPoints:
     """Detected returns to classified points: surface fit, refraction, classification.
 
@@ -346,25 +347,27 @@ def georeference(
         points.
 
     ``shots_per_window``: photon counting, the shots of one accumulation window (they share
-    one detection: the sea correlation does not pair them).
+    one detection: the sea correlation does not pair them). ``wide``: the survey-wide figures
+    (:func:`~pipeline.process.survey_wide.survey_wide` of the whole survey) to use instead of
+    measuring them from ``returns`` (a tile of the survey and its halo).
     """
-    surface = fit_water_surface(returns, surface_settings)
-    group = None if shots_per_window is None else returns.pulse_id // shots_per_window
-    corr = sea_correlation(returns, surface, max_dt_s=surface.time_window_s, group=group)
-    field = None
     st = surface_settings or SurfaceFitSettings()
-    if group is None and st.time_window_s is not None:  # photon windows: one detection each
+    surface = fit_water_surface(returns, st, None if wide is None else wide.surface)
+    group = None if shots_per_window is None else returns.pulse_id // shots_per_window
+    sea = sea_wide(returns, surface, st, refraction_settings, group) if wide is None else wide.sea
+    field = None
+    if sea.covariance is not None:  # photon windows: one detection each, never kriged
         field = sea_field(
             returns,
             surface,
             neighbours=st.kriging_neighbours,
             window_s=st.kriging_window_s,
             speed_m_s=st.radius_m / st.time_window_s,
+            covariance=sea.covariance,
         )
-    surface = dataclasses.replace(surface, sea_correlation=corr, sea_field=field)
-    surface = with_facets(
-        returns, surface, (refraction_settings or RefractionSettings()).facet_mss, group
-    )
+    surface = dataclasses.replace(surface, sea_correlation=sea.correlation, sea_field=field)
+    mss = (refraction_settings or RefractionSettings()).facet_mss
+    surface = apply_facets(returns, surface, mss, sea.facets)
     bottom, sea_change = _seabed_points(returns, surface, refraction_settings, True)
     parts = [water_surface_points(returns, surface, refraction_settings), bottom]
     if include_derived_surface:

@@ -43,7 +43,13 @@ from scipy.spatial import cKDTree
 from pipeline.process.returns import DetectedReturns, PointFlag
 from pipeline.process.sea_correlation import LAG_EDGES_M, MIN_PAIRS, time_pairs
 
-__all__ = ["SeaField", "sea_field"]
+__all__ = [
+    "SeaCovariance",
+    "SeaField",
+    "sea_covariance",
+    "sea_field",
+    "survey_sea_covariance",
+]
 
 #: Soundings per batched solve (``(chunk, k, k)`` matrices).
 _CHUNK = 20_000
@@ -154,42 +160,51 @@ def _distance(dx_m: np.ndarray, dy_m: np.ndarray) -> np.ndarray:
     return np.sqrt(dx_m * dx_m + dy_m * dy_m)
 
 
-def sea_field(
-    returns: DetectedReturns, surface, *, neighbours: int, window_s: float, speed_m_s: float
-) -> SeaField | None:
-    """Measure the covariance of the surface echoes and keep them for kriging (module notes).
+@dataclass(frozen=True)
+class SeaCovariance:
+    """The survey's measured sea covariance (:class:`SeaField`'s fields of the same names)."""
 
-    Parameters
-    ----------
-    returns : DetectedReturns
-        Every pulse; ``t_emit_s`` needed (None: no field).
-    surface : WaterSurface
-        The fitted surface of the same pulses (its global plane is the known mean).
-    neighbours : int
-        Echoes per prediction (0: no field).
-    window_s : float
-        Time window of the pairs and of the neighbours.
-    speed_m_s : float
-        Time scale of the neighbour search.
+    lag_m: np.ndarray
+    cov_m2: np.ndarray
+    sill_m2: float
+    decay_per_m: float
+    nugget_m2: float
 
-    Returns
-    -------
-    SeaField or None
-        None without emission times, neighbours, enough pairs, or a positive covariance at
-        the shortest lag (no sea seen: the plane is read).
+
+def _echoes(returns: DetectedReturns, surface):
+    """The water pulses' own, non-outlier surface echoes in time order.
+
+    Returns their emission times ``(m,)``, points ``(m, 3)`` and heights above the global
+    plane ``(m,)``.
     """
-    if returns.t_emit_s is None or neighbours < 1:
-        return None
     ok = surface.is_water & returns.has_surface
     ok &= (surface.flags & np.uint16(PointFlag.SURFACE_OUTLIER)) == 0
     idx = np.flatnonzero(ok)
-    if idx.size < 2:
-        return None
     t = np.asarray(returns.t_emit_s, dtype=np.float64)[idx]
     order = np.argsort(t, kind="stable")
     idx, t = idx[order], t[order]
     p = surface.surface_point_m[idx]
-    a = p[:, 2] - surface.global_z_m(p[:, 0], p[:, 1])
+    return t, p, p[:, 2] - surface.global_z_m(p[:, 0], p[:, 1])
+
+
+def sea_covariance(t: np.ndarray, p: np.ndarray, a: np.ndarray, window_s: float):
+    """The exponential covariance of echoes' heights (module notes); None: no sea resolved.
+
+    Parameters
+    ----------
+    t : (m,) float64
+        The echoes' emission times, ascending.
+    p : (m, 3) float64
+        Their points.
+    a : (m,) float64
+        Their heights above the global plane.
+    window_s : float
+        Pairs at most this far apart in time.
+
+    Returns
+    -------
+    SeaCovariance or None
+    """
     i, j = time_pairs(t, None, float(window_s))
     x, y = (np.ascontiguousarray(c) for c in p[:, :2].T)
     edges = np.asarray(LAG_EDGES_M)
@@ -224,15 +239,67 @@ def sea_field(
         return None
     sill = float(cov[0]) * float(np.exp(decay * h[0]))
     nugget = max(float(np.mean(a * a)) - sill, _NUGGET_FLOOR * sill)
+    return SeaCovariance(h, cov, sill, decay, nugget)
+
+
+def survey_sea_covariance(returns: DetectedReturns, surface, window_s: float):
+    """:func:`sea_covariance` of a survey's echoes (None without emission times or echoes)."""
+    if returns.t_emit_s is None:
+        return None
+    t, p, a = _echoes(returns, surface)
+    return None if t.size < 2 else sea_covariance(t, p, a, window_s)
+
+
+def sea_field(
+    returns: DetectedReturns,
+    surface,
+    *,
+    neighbours: int,
+    window_s: float,
+    speed_m_s: float,
+    covariance: SeaCovariance | None = None,
+) -> SeaField | None:
+    """Measure the covariance of the surface echoes and keep them for kriging (module notes).
+
+    Parameters
+    ----------
+    returns : DetectedReturns
+        Every pulse; ``t_emit_s`` needed (None: no field).
+    surface : WaterSurface
+        The fitted surface of the same pulses (its global plane is the known mean).
+    neighbours : int
+        Echoes per prediction (0: no field).
+    window_s : float
+        Time window of the pairs and of the neighbours.
+    speed_m_s : float
+        Time scale of the neighbour search.
+    covariance : SeaCovariance, optional
+        The covariance to use instead of measuring it from these echoes (the whole survey's,
+        when ``returns`` are a tile of it).
+
+    Returns
+    -------
+    SeaField or None
+        None without emission times, neighbours, enough pairs, or a positive covariance at
+        the shortest lag (no sea seen: the plane is read).
+    """
+    if returns.t_emit_s is None or neighbours < 1:
+        return None
+    t, p, a = _echoes(returns, surface)
+    if t.size < (1 if covariance is not None else 2):
+        return None
+    cov = covariance or sea_covariance(t, p, a, window_s)
+    if cov is None:
+        return None
     return SeaField(
         xy_m=p[:, :2].copy(),
         t_s=t,
         height_m=a,
-        lag_m=h,
-        cov_m2=cov,
-        sill_m2=sill,
-        decay_per_m=decay,
-        nugget_m2=nugget,
+        lag_m=cov.lag_m,
+        cov_m2=cov.cov_m2,
+        sill_m2=cov.sill_m2,
+        decay_per_m=cov.decay_per_m,
+        nugget_m2=cov.nugget_m2,
         neighbours=int(neighbours),
         window_s=float(window_s),
         speed_m_s=float(speed_m_s),

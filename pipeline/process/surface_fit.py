@@ -59,28 +59,20 @@ from scipy.spatial import cKDTree
 from pipeline.constants import MAD_TO_SIGMA
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.returns import DetectedReturns, PointFlag
-from pipeline.process.surface_evidence import clipped_into_column, level_points, no_water_seen
-from pipeline.process.surface_land import (
-    global_plane,
-    land_surface_points,
-    masked_median,
-    own_echo_weight,
-    sea_sigma_m,
-)
+from pipeline.process.surface_land import land_surface_points, masked_median, own_echo_weight
 from pipeline.process.surface_settings import SurfaceFitSettings
+from pipeline.process.surface_wide import (
+    SurfaceWide,
+    surface_inputs,
+    surface_points_m,
+    surface_wide,
+)
 from pipeline.process.water_surface import WaterSurface
 
 __all__ = ["SurfaceFitSettings", "WaterSurface", "fit_water_surface", "surface_points_m"]
 
 #: |N . d| below this: the beam runs along the surface (no usable entry point).
 _GRAZING_COS = 1e-6
-
-
-def surface_points_m(returns: DetectedReturns, air_index: float) -> np.ndarray:
-    """Surface-return points ``origin + direction * c t_s / (2 n_air)``; (n, 3), 0 where none."""
-    r = SPEED_OF_LIGHT_M_S * returns.t_surface_s / (2.0 * air_index)
-    p = returns.origin_meas_m + returns.direction_meas * r[:, None]
-    return np.where(returns.has_surface[:, None], p, 0.0)
 
 
 def _solve(w, dx, dy, z, lam):
@@ -175,7 +167,9 @@ def _intersect(origin, direction, point, normal):
 
 
 def fit_water_surface(
-    returns: DetectedReturns, settings: SurfaceFitSettings | None = None
+    returns: DetectedReturns,
+    settings: SurfaceFitSettings | None = None,
+    wide: SurfaceWide | None = None,
 ) -> WaterSurface:
     """Fit the water surface under every pulse from the surface returns.
 
@@ -185,6 +179,10 @@ def fit_water_surface(
         Measured navigation and detected return times.
     settings : SurfaceFitSettings, optional
         Defaults if omitted.
+    wide : SurfaceWide, optional
+        The survey-wide figures (water level, sea sigma, dry or wet) to use instead of
+        measuring them from ``returns`` (:func:`~pipeline.process.surface_wide.surface_wide`
+        of the whole survey, when ``returns`` are a tile of it).
 
     Returns
     -------
@@ -195,26 +193,19 @@ def fit_water_surface(
     n = len(returns)
     o, d = returns.origin_meas_m, returns.direction_meas
     c = SPEED_OF_LIGHT_M_S
-    ps = surface_points_m(returns, st.air_index)
-    # a surface return clipped into the column's plateau is only an early bound of the
-    # surface (pipeline.process.detect_clipped): not a timing reference of the fit; it sets
-    # the level only when nothing else shows water (pipeline.process.surface_evidence)
-    bound = clipped_into_column(returns)
-    has_s = returns.has_surface & ~bound
+    inputs = surface_inputs(returns, st)
+    ps, pb, pc, bound, has_s, wet = (
+        inputs.ps,
+        inputs.pb,
+        inputs.pc,
+        inputs.bound,
+        inputs.has_s,
+        inputs.wet,
+    )
+    wide = wide or surface_wide(returns, st, inputs)
+    lvl = has_s | bound if wide.bounds_set_level else has_s
     flags = np.zeros(n, dtype=np.uint16)
-
-    pb = o + d * (c * returns.t_bottom_s / (2.0 * st.air_index))[:, None]
-    pc = o + d * (c * returns.t_column_s / (2.0 * st.air_index))[:, None]
-    wet = returns.has_bottom & (ps[:, 2] - pb[:, 2] > st.level_min_depth_m)
-    lvl, lvl_wet = level_points(has_s, bound, wet)
-    level_m = float(np.median(ps[lvl, 2])) if lvl.any() else np.nan
-    no_water = no_water_seen(returns, wet, ps[:, 2] - pc[:, 2], level_m, st)
-    if lvl.sum() >= 3:
-        gplane, gsigma = global_plane(ps[lvl], st, lvl_wet[lvl])
-    else:
-        level = st.water_level_hint_m
-        gplane = np.array([st.fallback_water_level_m if level is None else level, 0.0, 0.0])
-        gsigma = 0.0
+    gplane, gsigma = wide.global_plane, wide.global_sigma_m
     z0, gx, gy = gplane
 
     def zg(x, y):
@@ -231,19 +222,16 @@ def fit_water_surface(
     # clipped bounds that set the level are the sea the land stands above (water under them)
     water_below |= bound & lvl
     if lvl.any():
-        land_s[lvl] = land_surface_points(ps[lvl, :2], res_s[lvl], water_below[lvl], st)[0]
+        land_s[lvl] = land_surface_points(
+            ps[lvl, :2], res_s[lvl], water_below[lvl], st, sigma_m=wide.land_sigma_m
+        )[0]
     land_s &= has_s
-    # a trough is water: the band below the level widens with the measured sea, as the land
-    # margin above it does (a 2.5 m Hs sea has troughs 1.5 m down; a fixed 1 m band dropped
-    # them, the pulses fell back to the mean plane and went 1-2 m deep)
-    below = st.below_margin_m
-    if has_s.any():
-        below = max(below, st.below_sea_sigmas * sea_sigma_m(res_s[has_s], st))
+    # a trough is water, down to the band below the level the measured sea sets (SurfaceWide);
     # and a surface point with a bottom well under it saw water below: it is the surface
-    low_s = has_s & (res_s <= -below) & ~wet
+    low_s = has_s & (res_s <= -wide.below_m) & ~wet
     water_s = has_s & ~land_s & ~low_s
     land_b = ~has_s & returns.has_bottom & (res_b >= st.land_margin_m)
-    if no_water:
+    if wide.no_water:
         # no pulse saw under its first return: no evidence of water, whatever level the
         # surface returns make (a flat field is as level as a calm sea)
         land_s, water_s, low_s = has_s.copy(), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
@@ -312,7 +300,7 @@ def fit_water_surface(
     entry[grazing] = o[grazing]
     rng[grazing] = 0.0
     is_water = ~is_land & ~grazing
-    if has_s.sum() < 3:
+    if wide.few_surface_returns:
         flags[is_water] |= np.uint16(PointFlag.SURFACE_GLOBAL_FALLBACK)
     # the echo's offset from the plane is wave where the fit scatters more than it ranges
     own_weight = np.ones(n)

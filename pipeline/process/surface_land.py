@@ -207,7 +207,12 @@ def _neighbours(tree, xy_m: np.ndarray, st) -> tuple[np.ndarray, np.ndarray]:
 
 
 def land_surface_points(
-    xy_m: np.ndarray, res_m: np.ndarray, water_below: np.ndarray, st
+    xy_m: np.ndarray,
+    res_m: np.ndarray,
+    water_below: np.ndarray,
+    st,
+    *,
+    sigma_m: float | None = None,
 ) -> tuple[np.ndarray, float, float]:
     """Which surface points are land (see the module docstring).
 
@@ -221,6 +226,9 @@ def land_surface_points(
         Their pulse has a later return (bottom or in-column) below the water level.
     st : SurfaceFitSettings
         The ``land_*`` settings and ``below_margin_m``.
+    sigma_m : float, optional
+        The sea's sigma to use (the whole survey's, when these points are a tile of it);
+        None: :func:`sea_sigma_m` of ``res_m``.
 
     Returns
     -------
@@ -238,7 +246,7 @@ def land_surface_points(
     3.5 and ``land_extent_sigmas`` 150 up; the defaults (4, 400) keep a margin.
     """
     m = len(res_m)
-    sigma = sea_sigma_m(res_m, st)
+    sigma = sea_sigma_m(res_m, st) if sigma_m is None else sigma_m
     sea_margin = max(st.land_margin_m, st.land_sea_sigmas * sigma)
     high = res_m >= st.land_margin_m
     land = np.zeros(m, dtype=bool)

@@ -17,6 +17,7 @@ from pipeline.process.context import ProcessingContext
 from pipeline.process.refraction import ProcessedPoints, georeference, seabed_points
 from pipeline.process.return_order import number_all_returns
 from pipeline.process.returns import DetectedReturns, PointFlag, Points
+from pipeline.process.survey_wide import SurveyWide
 
 __all__ = ["process_detections", "no_bottom_points"]
 
@@ -27,6 +28,7 @@ def process_detections(
     classify: ClassifySettings,
     *,
     water_column: bool = True,
+    wide: SurveyWide | None = None,
 ) -> ProcessedPoints:
     """Points from the detections, as ``bathy run`` makes them.
 
@@ -40,6 +42,9 @@ def process_detections(
         LAS class rules.
     water_column : bool
         Add the class-64 points of in-column returns (the detector reports them).
+    wide : SurveyWide, optional
+        The whole survey's survey-wide figures, when ``returns`` are a tile of it
+        (:func:`~pipeline.process.survey_wide.survey_wide`); None: measured from ``returns``.
 
     Returns
     -------
@@ -56,6 +61,7 @@ def process_detections(
         refraction_settings=ctx.refraction,
         classify_settings=classify,
         shots_per_window=ins.shots_per_window if ins.photon_counting else None,
+        wide=wide,
     )
     # the class-45 points join their pulses' echo sequence: number every pulse again (LAS
     # return numbers 1..n in time order, the class-45 point after its surface)

@@ -235,10 +235,10 @@ def test_flat_berm_does_not_take_the_water_level():
     np.testing.assert_array_equal(ws.is_land, land)
 
 
-def test_wide_berm_below_the_wave_height_is_land():
-    # a flat berm 1.6 m up (above the 1 m margin, below Hs = 2 m of the test sea) over 160 m by
-    # 240 m, behind a foreshore; the sea shows its seabed. No part of it stands above the
-    # sea's crests, but it spans far more than a crest region (a few wavelengths of <= 24 m)
+def wide_berm():
+    """A flat berm 1.6 m up (above the 1 m margin, below Hs = 2 m of the test sea) over 160 m
+    by 240 m, east of x = 44 m behind a foreshore, and the sea west of x = 40 m showing its
+    seabed. Returns the returns, the sea heights, the land mask and the land heights."""
     x, y, d = beams(n_side=160, spacing_m=1.5)  # 240 m square
     j = np.arange(SEA_COMPONENTS)
     wavelength_m = 6.0 + 18.0 * j / (SEA_COMPONENTS - 1)
@@ -250,7 +250,14 @@ def test_wide_berm_below_the_wave_height_is_land():
     z = np.where(land, ground, sea)
     o, r = from_hits(np.column_stack([x, y, z]), d)
     tb = np.where(land, 0.0, 2 * (r + 10.0) * N_AIR / C)
-    ws = fit_water_surface(make_returns(o, d, r, t_bottom_s=tb), FIT)
+    return make_returns(o, d, r, t_bottom_s=tb), sea, land, ground
+
+
+def test_wide_berm_below_the_wave_height_is_land():
+    # no part of the berm stands above the sea's crests, but it spans far more than a crest
+    # region (a few wavelengths of <= 24 m)
+    ret, sea, land, ground = wide_berm()
+    ws = fit_water_surface(ret, FIT)
     assert np.sum(~land & (sea > FIT.land_margin_m)) > 100  # crests above the margin
     assert not ws.is_land[~land].any()
     assert ws.is_land[land & (ground > FIT.land_margin_m + 0.1)].all()
