@@ -25,8 +25,11 @@ still measured over the whole survey, and the TPU's mean tilt sigma and the datu
 Halo
 ----
 A tile's neighbour searches reach :func:`halo_m` past its edges: the largest of the
-surface fit's neighbour and land radii, the TPU's gradient radius and pair separation and the
-class-43 neighbour radius (the settings that set those searches, not a constant). A tile loads
+surface fit's neighbour and land radii, the TPU's reach (its regional and local seabed planes
+and the pair scatter's allowance, :func:`~pipeline.uncertainty.tpu_survey_wide.tpu_halo_m`)
+and the class-43 neighbour radius (the settings that set those searches, not a constant);
+processing's own reach along each beam is :func:`pipeline.process_tiles.processing_halo_m`
+(a tile loader takes the larger). A tile loads
 the stored chunks whose bounding box meets the tile grown by the halo
 (:func:`chunks_meeting`).
 """
@@ -80,16 +83,11 @@ def halo_m(ctx, objects) -> float:
     objects : ObjectSettings
         The class-43 search (``process.objects``).
     """
-    sf, st = ctx.surface_fit, ctx.tpu
-    return float(
-        max(
-            sf.radius_m,
-            sf.land_radius_m,
-            st.gradient_radius_m,
-            st.pair_max_separation_m,
-            objects.radius_m,
-        )
-    )
+    from pipeline.uncertainty.tpu_survey_wide import tpu_halo_m
+
+    sf = ctx.surface_fit
+    # the TPU's reach holds its gradient radius and pair separation (tpu_halo_m)
+    return float(max(sf.radius_m, sf.land_radius_m, tpu_halo_m(ctx.tpu), objects.radius_m))
 
 
 @dataclass(frozen=True)

@@ -86,6 +86,10 @@ def _cells(xy, dep, cell_m):
     return inv, cxy, cdep, np.bincount(inv).astype(np.float64)
 
 
+#: Defaults of :func:`seabed_gradient`'s local plane radius, regional plane radius and cell
+#: (m): what a gradient made without the TPU's settings (the pair scatter's own) reaches.
+RADIUS_M, REGIONAL_RADIUS_M, REGIONAL_CELL_M = 10.0, 50.0, 5.0
+
 #: Fewest pairs of cells the relief's slope is measured from (a 40 m profiler line has ~9).
 _MIN_PAIRS = 5
 
@@ -210,9 +214,9 @@ def seabed_gradient(
     *,
     group: Any = None,
     neighbours: int = 16,
-    radius_m: float = 10.0,
-    regional_radius_m: float = 50.0,
-    regional_cell_m: float = 5.0,
+    radius_m: float = RADIUS_M,
+    regional_radius_m: float = REGIONAL_RADIUS_M,
+    regional_cell_m: float = REGIONAL_CELL_M,
     regional_neighbours: int = 64,
     prior_slope_deg: float = 10.0,
     local_sigma: float | None = None,

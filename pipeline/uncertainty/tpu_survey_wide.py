@@ -43,7 +43,19 @@ from pipeline.process.facet_excess import plane_slope_var, wave_sea
 from pipeline.uncertainty.tpu_facet import track_directions
 from pipeline.uncertainty.tpu_measured import SurfaceVariogram
 
-__all__ = ["TpuSurveyWide", "line_table", "axes_of_lines", "survey_tracks", "facet_sea"]
+__all__ = [
+    "TpuSurveyWide",
+    "tpu_halo_m",
+    "line_table",
+    "axes_of_lines",
+    "survey_tracks",
+    "facet_sea",
+]
+
+#: Allowance (m) for the pair scatter's nearest pairs of successive soundings (< 2 m apart
+#: each; their ``scatter_neighbours`` nearest lie within metres where soundings are dense):
+#: an allowance, not a bound, as the kriging's nearest echoes are in processing.
+PAIR_ALLOWANCE_M = 10.0
 
 
 @dataclass(frozen=True)
@@ -83,6 +95,24 @@ class TpuSurveyWide:
     line_axes: np.ndarray
     wave_sea: bool | None
     facet_plane_slope_var: tuple[float | None, float | None] | None = None
+
+
+def tpu_halo_m(st) -> float:
+    """How far from a tile's soundings the TPU's neighbour searches reach (m).
+
+    The seabed gradient's regional plane (its radius, and the diagonal of the cell a sounding
+    takes it from), then its local plane's radius, for the TPU's gradient (``st``:
+    :class:`~pipeline.uncertainty.tpu_settings.TpuSettings`) and for the pair scatter's own
+    (:func:`~pipeline.uncertainty.seabed_gradient.seabed_gradient`'s defaults), plus
+    :data:`PAIR_ALLOWANCE_M`. A tile with this halo, given the survey's
+    :class:`TpuSurveyWide`, gets the survey's TPU (``tests/uncertainty/
+    test_tpu_survey_wide.py``).
+    """
+    from pipeline.uncertainty.seabed_gradient import RADIUS_M, REGIONAL_CELL_M, REGIONAL_RADIUS_M
+
+    regional = max(st.gradient_regional_radius_m, REGIONAL_RADIUS_M)
+    local = max(st.gradient_radius_m, RADIUS_M)
+    return float(regional + np.sqrt(2.0) * REGIONAL_CELL_M + local + PAIR_ALLOWANCE_M)
 
 
 def line_table(line_id: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -25,6 +25,7 @@ from pipeline.scene import load_scene
 from pipeline.stages import StageClock, plan
 from pipeline.suite.generate import ci_draws, write_scene
 from pipeline.uncertainty.survey_uncertainty import survey_uncertainty
+from pipeline.uncertainty.tpu_survey_wide import tpu_halo_m
 from pipeline.uncertainty.tpu_terms import _take_surface
 
 
@@ -66,10 +67,9 @@ def test_the_survey_given_its_own_figures_is_unchanged(survey):
 def test_a_tile_given_the_survey_figures_gets_the_survey_tpu(survey):
     returns, processed, ctx, grid = survey
     whole = survey_uncertainty(returns, processed, ctx, grid)
-    st = ctx.tpu
-    # the regional plane (its radius and a cell's diagonal), the local plane's radius, and a
-    # margin for the pair scatter's nearest pairs (successive soundings, < 2 m apart)
-    halo = st.gradient_regional_radius_m + 7.1 + st.gradient_radius_m + 10.0
+    # the regional plane (its radius and a cell's diagonal), the local plane's radius, and an
+    # allowance for the pair scatter's nearest pairs: 77 m at the defaults
+    halo = tpu_halo_m(ctx.tpu)
     x = processed.surface.entry_m[:, 0]
     # the swath's western part, and its halo eastwards (the survey ends to the west)
     core = x <= -60.0
