@@ -72,8 +72,10 @@ case "$cmd" in
       shift
       select=(-m "not slow")  # the slow and statistical tests are left to the full run
     fi
-    log "pytest ${select[*]}"
-    "$VENV/bin/python" -m pytest "${select[@]}" "$@"
+    # one test file per worker, a worker per core (pytest-xdist): a file's module fixtures
+    # (the CI suite subset, simulated surveys) are made once
+    log "pytest -n auto --dist loadfile ${select[*]}"
+    "$VENV/bin/python" -m pytest -n auto --dist loadfile "${select[@]}" "$@"
     ;;
   *)
     echo "usage: bash dev.sh demo|test [--quick]|install" >&2
