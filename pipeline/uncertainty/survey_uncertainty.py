@@ -291,19 +291,10 @@ def survey_uncertainty(
     # what the facet excess taken off by refraction is uncertain by (the logged wind's sigma)
     tpu40 = with_facet_excess(tpu40, returns.direction_meas, surf, refr)
     # or, with the correction off, the excess left on the soundings at its predicted size
-    # survey-wide: whether the echoes show a wave sea (only where the term applies)
+    # survey-wide: the wave sea's facet figures (only where the term applies)
     pulse_group = None if shots is None else returns.pulse_id // shots
-    seen, plane_var = facet_sea(returns, surf, refr, pulse_group, tracks, wide)
-    tpu40 = with_uncorrected_facet_excess(
-        tpu40,
-        returns,
-        surf,
-        refr,
-        pulse_group,
-        wave_sea_seen=seen,
-        track_xy=tracks,
-        plane_var=plane_var,
-    )
+    facets = facet_sea(returns, surf, refr, pulse_group, wide)
+    tpu40 = with_uncorrected_facet_excess(tpu40, returns, surf, refr, facets=facets)
     # what the sounding's horizontal uncertainty makes of the gradient's own (unmeasured
     # across a profiler's line: the slope prior)
     tpu40 = with_random_term(
@@ -334,8 +325,7 @@ def survey_uncertainty(
             variogram=vg,
             line_ids=line_ids,
             line_axes=line_axes,
-            wave_sea=seen,
-            facet_plane_slope_var=plane_var,
+            facets=facets,
         ),
     )
 

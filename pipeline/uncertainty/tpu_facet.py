@@ -58,11 +58,11 @@ import numpy as np
 
 from pipeline.optics import refract_direction
 from pipeline.process.facet_excess import (
+    apply_facets,
     expected_depth_excess_m,
+    facet_wide,
     normal_with_slope,
     track_axes,
-    unresolved_slope_var,
-    with_facets,
 )
 from pipeline.process.facet_excess import track_directions as _track_directions
 from pipeline.process.returns import DetectedReturns, PointFlag
@@ -89,6 +89,9 @@ EXCESS_TERM = "wave_facet_excess"
 
 #: The term of the facet excess left on the soundings (its whole predicted size).
 UNCORRECTED_TERM = "wave_facet_excess_uncorrected"
+
+#: ``facets`` not given: measured (None is an answer: no wave sea).
+_MEASURE = object()
 
 #: Names of the two terms (facet slope along and across the pulse's flight line).
 FACET_TERMS = ("wave_facet_along", "wave_facet_across")
@@ -333,9 +336,7 @@ def with_uncorrected_facet_excess(
     refr,
     group=None,
     *,
-    wave_sea_seen: bool | None = None,
-    track_xy=None,
-    plane_var=None,
+    facets=_MEASURE,
 ) -> PointTpu:
     """``tpu`` with the correlated :data:`UNCORRECTED_TERM`: the facet excess left on.
 
@@ -357,30 +358,18 @@ def with_uncorrected_facet_excess(
     refr : RefractionSettings
     group : (n_pulses,) int, optional
         Pulses sharing one detection (a photon window's shots).
-    wave_sea_seen, track_xy, plane_var : bool, (n_pulses, 2) and (float, float), optional
-        Whether the survey's echoes show a wave sea, each pulse's flight-line direction and
-        the planes' slope variance (:func:`~pipeline.process.facet_excess.plane_slope_var`),
-        as measured over the whole survey (a tile of it is given them,
-        :mod:`pipeline.uncertainty.tpu_survey_wide`); default: measured from ``returns``.
+    facets : FacetWide or None, optional
+        The survey's facet figures (:func:`~pipeline.process.facet_excess.facet_wide` at
+        ``refr.facet_mss_uncorrected``; None: no wave sea), as measured over the whole survey
+        (a tile of it is given them, :mod:`pipeline.uncertainty.tpu_survey_wide`); default:
+        measured from ``returns``.
     """
     mss = refr.facet_mss_uncorrected
     if refr.facet_mss > 0.0 or mss <= 0.0:
         return tpu
-    if wave_sea_seen is None or track_xy is None:
-        faceted = with_facets(returns, surface, mss, group)
-    elif wave_sea_seen:  # with_facets' surface, from the survey's figures
-        var = unresolved_slope_var(
-            mss,
-            surface.normal,
-            surface.normal_sigma_rad,
-            surface.is_water,
-            surface.flags,
-            track_xy,
-            plane_var,
-        )
-        faceted = dataclasses.replace(surface, facet_slope_var=var, track_xy=track_xy)
-    else:
-        return tpu
+    if facets is _MEASURE:
+        facets = facet_wide(returns, surface, mss, group)
+    faceted = apply_facets(returns, surface, mss, facets)
     if faceted.facet_slope_var is None:
         return tpu
     sigma = np.abs(_points_excess_m(tpu, returns.direction_meas, faceted, refr))

@@ -21,10 +21,10 @@ made):
   (:func:`~pipeline.uncertainty.tpu_measured.surface_variogram`);
 * ``line_ids`` / ``line_axes``: each flight line's direction
   (:func:`~pipeline.uncertainty.tpu_facet.track_directions`);
-* ``wave_sea`` and ``facet_plane_slope_var``: whether the echoes show a wave sea, and the
-  water planes' slope variance the facets' is taken from (the facet excess left on,
-  :func:`~pipeline.uncertainty.tpu_facet.with_uncorrected_facet_excess`); None where the
-  term does not apply.
+* ``facets``: processing's facet figures (:class:`~pipeline.process.facet_excess.FacetWide`:
+  the lines' directions and the water planes' slope variance) where the echoes show a wave
+  sea and the facet excess left on applies
+  (:func:`~pipeline.uncertainty.tpu_facet.with_uncorrected_facet_excess`); else None.
 
 A survey's TPU made with its own :class:`TpuSurveyWide` (``SurveyUncertainty.wide``) is the TPU
 made without one, bit for bit: the figures are only carried, not changed. A tile (its pulses
@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.process.facet_excess import plane_slope_var, wave_sea
+from pipeline.process.facet_excess import FacetWide, facet_wide
 from pipeline.uncertainty.tpu_facet import track_directions
 from pipeline.uncertainty.tpu_measured import SurfaceVariogram
 
@@ -79,10 +79,8 @@ class TpuSurveyWide:
     line_ids : (n_lines,) int64
     line_axes : (n_lines, 2) float64
         Unit horizontal direction of each line (sign arbitrary).
-    wave_sea : bool or None
-        The echoes show a wave sea (where the uncorrected facet term applies; else None).
-    facet_plane_slope_var : (float or None, float or None) or None
-        The planes' slope variance along and across the track (with a wave sea).
+    facets : FacetWide or None
+        The facet figures of the uncorrected facet term (None: no wave sea, or no term).
     """
 
     relief_slope_sigma: float | None
@@ -93,8 +91,7 @@ class TpuSurveyWide:
     variogram: SurfaceVariogram
     line_ids: np.ndarray
     line_axes: np.ndarray
-    wave_sea: bool | None
-    facet_plane_slope_var: tuple[float | None, float | None] | None = None
+    facets: FacetWide | None = None
 
 
 def tpu_halo_m(st) -> float:
@@ -157,18 +154,15 @@ def survey_tracks(returns, wide: TpuSurveyWide | None):
     return axes_of_lines(wide, line_id), wide.line_ids, wide.line_axes
 
 
-def facet_sea(returns, surface, refr, group, tracks, wide: TpuSurveyWide | None):
-    """Whether the echoes show a wave sea, and the planes' slope variance (with one).
+def facet_sea(returns, surface, refr, group, wide: TpuSurveyWide | None):
+    """The facet figures of the uncorrected facet term (:class:`FacetWide` or None).
 
-    Only where the uncorrected facet term applies (the correction off, a logged wind):
-    ``(None, None)`` elsewhere. ``wide`` None: measured from ``returns`` (:func:`~pipeline.
-    process.facet_excess.wave_sea`, :func:`~pipeline.process.facet_excess.plane_slope_var`);
-    else the survey's.
+    None where the term does not apply (the correction on, or no logged wind) or the echoes
+    show no wave sea. ``wide`` None: measured from ``returns``
+    (:func:`~pipeline.process.facet_excess.facet_wide`); else the survey's.
     """
     if not (refr.facet_mss == 0.0 and refr.facet_mss_uncorrected > 0.0):
-        return None, None
+        return None
     if wide is not None:
-        return wide.wave_sea, wide.facet_plane_slope_var
-    if not wave_sea(returns, surface, group):
-        return False, None
-    return True, plane_slope_var(surface.normal, surface.is_water, surface.flags, tracks)
+        return wide.facets
+    return facet_wide(returns, surface, refr.facet_mss_uncorrected, group)
