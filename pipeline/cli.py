@@ -106,7 +106,12 @@ def _parser() -> argparse.ArgumentParser:
     )
     su.add_argument("--n", type=int, default=40, help="number of scenes (default 40)")
     su.add_argument("--half", choices=("tuning", "heldout", "both"), default="both")
-    su.add_argument("--subset", choices=("ci",), default=None, help="the fixed CI subset")
+    su.add_argument(
+        "--subset",
+        choices=("ci", "shallow"),
+        default=None,
+        help="a fixed subset: ci (the CI's eight), shallow (shoals per receiver, calm and 5 m/s)",
+    )
     su.add_argument("--out", default="out/suite", help="folder of scenes, runs and tables")
     su.add_argument("--workers", type=int, default=1, help="scenes run side by side")
     su.add_argument("--results", default=None, help="Markdown path (default OUT/RESULTS_suite.md)")

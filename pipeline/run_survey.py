@@ -395,16 +395,18 @@ def run_survey(
             "grid": write_grid_tif(out / "grid.tif", grid, unc.cells),
             "grid_nc": write_grid_nc(out / "grid.nc", grid, unc.cells),
         }
-    with clock.stage("views"):
-        # the evaluation side (the truth's seabed and water, the points' errors); a failure
-        # costs only the views (one warning line)
-        from pipeline.outputs.view3d import write_views
+    pictures = None  # left out by the plan (run.views = false)
+    if plan.runs("views"):
+        with clock.stage("views"):
+            # the evaluation side (the truth's seabed and water, the points' errors); a failure
+            # costs only the views (one warning line)
+            from pipeline.outputs.view3d import write_views
 
-        # in the LAS's order: a view's point i is the LAS's point i
-        vtp, pictures = write_views(
-            out / "view", processed.points.select(las_order), sim, origin, fr.crs, log
-        )
-        files.update({f"view_{k}": p for k, p in vtp.items()})
+            # in the LAS's order: a view's point i is the LAS's point i
+            vtp, pictures = write_views(
+                out / "view", processed.points.select(las_order), sim, origin, fr.crs, log
+            )
+            files.update({f"view_{k}": p for k, p in vtp.items()})
     with clock.stage("evaluate"):
         from pipeline.survey_report import evaluate_survey
 

@@ -236,6 +236,11 @@ class RunSettings:
         "rounded to a whole number of grid cells so a cell lies in one tile; larger than the "
         "survey: one tile (the outputs are the same for any tile size)",
     )
+    views: bool = setting(
+        True,
+        doc="write the 3D views (view/*.vtp) and the report's pictures; false leaves them out "
+        "(runs of many scenes, as bathy suite makes: a few seconds and hundreds of MB each)",
+    )
 
 
 @dataclass(frozen=True, kw_only=True)

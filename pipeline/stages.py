@@ -56,6 +56,10 @@ def _no_bottom_limit(scene) -> str | None:
     return "photon counting: class 45 stays at the window's end (no column to measure)"
 
 
+def _views(scene) -> str | None:
+    return None if scene.run.views else "run.views = false"
+
+
 def _water_column(scene) -> str | None:
     if scene.detector.mode != "full_waveform":
         return "the photon-counting detector reports no in-column return"
@@ -110,7 +114,9 @@ STAGES: tuple[Stage, ...] = (
         _survey_and(_posterior),
     ),
     Stage("outputs", "points.laz, grid.tif (COG), grid.nc (CF)", _survey),
-    Stage("views", "3D scene: view/*.vtp for ParaView, pictures for the report", _survey),
+    Stage(
+        "views", "3D scene: view/*.vtp for ParaView, pictures for the report", _survey_and(_views)
+    ),
     Stage("evaluate", "points and grid against the truth; report.html", _survey),
 )
 

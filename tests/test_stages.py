@@ -65,7 +65,10 @@ def _palmer(**process):
 
 
 def _photon():
-    return _small("photon_profiler", flight={"area_m": [-1.0, 1.0, 0.0, 40.0]})
+    # and without the 3D views: the plan leaves a stage out by a run key too
+    return _small(
+        "photon_profiler", flight={"area_m": [-1.0, 1.0, 0.0, 40.0]}, run={"views": False}
+    )
 
 
 @pytest.mark.parametrize("which", ["palmer", "photon"])
@@ -87,6 +90,12 @@ def test_run_executes_exactly_the_plan_and_times_each_stage(tmp_path, monkeypatc
             assert st["wall_s"] >= 0.0 and st["cpu_s"] >= 0.0
     ev = json.loads((tmp_path / "evaluation.json").read_text())
     assert set(ev["stages"]) <= {s["stage"] for s in manifest["plan"] if s["runs"]}
+    views = next(s for s in manifest["plan"] if s["stage"] == "views")
+    assert views["runs"] == (which == "palmer")
+    assert (tmp_path / "view").is_dir() == (which == "palmer")
+    if which == "photon":
+        assert views["reason"] == "run.views = false"
+        assert "left out of this run" in (tmp_path / "report.html").read_text()
 
 
 _PROBE = """

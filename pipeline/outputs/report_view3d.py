@@ -13,10 +13,12 @@ __all__ = ["view3d_section"]
 def view3d_section(pictures: list[tuple[bytes, str]] | None) -> str:
     """The section's HTML: each ``(png, alt)`` picture, and what the pictures show.
 
-    ``pictures``: empty or None when the 3D views could not be rendered (the run's log says
-    why); the section then says so.
+    ``pictures``: None when the run left the views out (``run.views = false``); empty when
+    they could not be rendered (the run's log says why). The section then says which.
     """
     head = "<h2 id='view3d'>11. 3D views</h2>"
+    if pictures is None:
+        return head + para("The 3D views were left out of this run (run.views = false).")
     if not pictures:
         return head + para(
             "The 3D views were not rendered in this run (see the run's log for the warning); "

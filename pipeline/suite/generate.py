@@ -166,8 +166,9 @@ def draw(seed: int, size: str = "suite", force: dict[str, str] | None = None) ->
         a lower pulse rate (a few seconds).
     force : dict, optional
         Values to impose (``receiver``, ``scanner``, ``surface``, ``depth_centre_m``,
-        ``attenuation_per_m``, ``wind_m_s``); every value is still drawn first, in the same
-        order, so the rest of the scene does not change.
+        ``attenuation_per_m``, ``wind_m_s``, ``slope_deg``, ``aspect_deg``,
+        ``roughness_rms_m``); every value is still drawn first, in the same order, so the rest
+        of the scene does not change.
 
     Returns
     -------
@@ -199,6 +200,9 @@ def draw(seed: int, size: str = "suite", force: dict[str, str] | None = None) ->
     d_centre = float(force.get("depth_centre_m", d_centre))
     c = float(force.get("attenuation_per_m", c))
     wind = float(force.get("wind_m_s", wind))
+    slope = float(force.get("slope_deg", slope))
+    aspect = float(force.get("aspect_deg", aspect))
+    rough_rms = float(force.get("roughness_rms_m", rough_rms))
     ext_guess = min(4.5 / c, 60.0)
     if surface == "waves":
         wind = max(wind, 1.0)  # a wind sea needs wind
@@ -369,6 +373,8 @@ def _tables(d: Draw) -> dict[str, dict[str, Any]]:
             "posterior_pulses_per_km2": 0.0,
             "posterior_min_pulses": n_post,
         },
+        # the suite reads the runs' numbers, never their 3D views (seconds and MB per scene)
+        "run": {"views": False},
     }
     if d.logged_wind_m_s is not None:  # the survey's wind log (process/context.py)
         t["process"]["wind_speed_m_s"] = d.logged_wind_m_s

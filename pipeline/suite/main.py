@@ -9,6 +9,7 @@ from pathlib import Path
 from pipeline.suite.generate import ci_draws, draw, suite_seeds
 from pipeline.suite.report import write_csv, write_markdown
 from pipeline.suite.run import collect, run_suite
+from pipeline.suite.shallow import shallow_draws
 from pipeline.suite.strata import all_strata, pool_rows
 
 __all__ = ["suite"]
@@ -36,11 +37,12 @@ def suite(
     Parameters
     ----------
     n : int
-        Scenes (ignored with ``subset="ci"``).
+        Scenes (ignored with a ``subset``).
     which : {"tuning", "heldout", "both"}
         Half to draw from.
-    subset : {None, "ci"}
-        ``ci``: the fixed CI subset (:data:`pipeline.suite.generate.CI_SCENES`).
+    subset : {None, "ci", "shallow"}
+        ``ci``: the fixed CI subset (:data:`pipeline.suite.generate.CI_SCENES`); ``shallow``:
+        the shoal subset (:mod:`pipeline.suite.shallow`).
     out : path
         Folder of the scenes and the runs (and by default of the results).
     workers : int
@@ -59,8 +61,8 @@ def suite(
         0 when every scene ran (the floors do not set it: they are reported), 1 otherwise.
     """
     out = Path(out)
-    if subset == "ci":
-        draws = ci_draws()
+    if subset in ("ci", "shallow"):
+        draws = ci_draws() if subset == "ci" else shallow_draws()
         if which != "both":
             draws = [d for d in draws if d.half == which]
     else:

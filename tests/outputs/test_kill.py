@@ -162,10 +162,12 @@ def test_killed_before_any_output_leaves_no_folder(tmp_path, scene_file):
         assert list(work.iterdir()) == [], trigger  # the folder comes with its first file
 
 
-@pytest.mark.parametrize("nth_write", [1, 2, 3, 4, 5, 6, 7, 8, 9, 10])
+# the four view/*.vtp share one writer: the first (it makes the folder) and the last are
+# enough; the middle two cost a run each (~20 s of CI) and test nothing the others do not
+@pytest.mark.parametrize("nth_write", [1, 2, 3, 4, 7, 8, 9, 10])
 def test_killed_while_writing_leaves_only_complete_files(tmp_path, scene_file, nth_write):
-    """SIGKILL as the ``nth_write`` output (points, grids, the four view/*.vtp, evaluation,
-    report, manifest) is written."""
+    """SIGKILL as the ``nth_write`` output (points, grids, the first and last view/*.vtp,
+    evaluation, report, manifest) is written."""
     work = tmp_path / "run"
     work.mkdir()
     proc, log = _start(scene_file, work)
@@ -177,6 +179,9 @@ def test_killed_while_writing_leaves_only_complete_files(tmp_path, scene_file, n
         was_open = now_open
         if writes == nth_write:
             break
+        # a look per millisecond: the shortest write caught (points.laz) lasts tens of ms, and
+        # a spinning loop would take a core from the run it watches and from other tests
+        time.sleep(0.001)
     caught = writes == nth_write and proc.poll() is None
     rc = _finish(proc, log, kill=caught)
     names = _assert_complete_or_nothing(work)
