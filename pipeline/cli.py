@@ -108,9 +108,10 @@ def _parser() -> argparse.ArgumentParser:
     su.add_argument("--half", choices=("tuning", "heldout", "both"), default="both")
     su.add_argument(
         "--subset",
-        choices=("ci", "shallow"),
+        choices=("ci", "shallow", "cubes"),
         default=None,
-        help="a fixed subset: ci (the CI's eight), shallow (shoals per receiver, calm and 5 m/s)",
+        help="a fixed subset: ci (the CI's eight), shallow (shoals per receiver, calm and 5 m/s),"
+        " cubes (IHO cubes by the dozen)",
     )
     su.add_argument("--out", default="out/suite", help="folder of scenes, runs and tables")
     su.add_argument("--workers", type=int, default=1, help="scenes run side by side")

@@ -10,6 +10,8 @@ import math
 import tomllib
 from collections import Counter
 
+import numpy as np
+
 import terrain
 from pipeline.scene import parse_scene
 from pipeline.suite.generate import CI_SCENES, half, scene_toml
@@ -62,3 +64,30 @@ def test_the_scan_runs_from_the_shore_to_the_deep_end_in_each_scene():
             ends = [_depth_m(scene, -reach, 0.5 * line), _depth_m(scene, reach, 0.5 * line)]
         assert math.isclose(min(ends), SHORE_DEPTH_M, abs_tol=2e-3), (d.seed, ends)
         assert math.isclose(max(ends), DEEP_DEPTH_M, abs_tol=2e-3), (d.seed, ends)
+
+
+def test_cube_subset_puts_a_dozen_separate_cubes_under_each_scan():
+    from pipeline.suite.cubes import COPIES, MIN_SEPARATION_M, SEEDS_PER_HALF, SIZES_M, cube_draws
+
+    draws = cube_draws()
+    assert Counter(d.half for d in draws) == {"tuning": SEEDS_PER_HALF, "heldout": SEEDS_PER_HALF}
+    for d in draws:
+        scene = parse_scene(tomllib.loads(scene_toml(d)), f"seed {d.seed}")
+        cubes = scene.seabed.features
+        assert sorted(f.size_m for f in cubes) == sorted(SIZES_M * COPIES)
+        assert scene.seabed.mesh_resolution_m <= 0.5  # two cells under the smallest cube
+        xy = np.array([(f.x_m, f.y_m) for f in cubes])
+        gaps = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
+        assert gaps[~np.eye(len(xy), dtype=bool)].min() >= MIN_SEPARATION_M - 0.02
+        line = scene.flight.area_m[3]
+        reach = scene.flight.altitude_m * math.tan(math.radians(20.0))
+        for x, y in xy:
+            if d.scanner == "profiler":
+                assert x == 0.0 and 0.0 <= y <= line
+            elif d.scanner == "oscillating":
+                assert abs(x) <= reach and 0.0 <= y <= line
+            else:  # on the trailing arc of the circle of an aircraft inside the line
+                y_aircraft = y + math.sqrt(max(reach**2 - x**2, 0.0))
+                assert abs(x) <= reach and 0.0 <= y_aircraft <= line, (d.seed, x, y)
+            depth = _depth_m(scene, x, y)  # the cube's base, on the true plane
+            assert 1.0 <= depth <= 0.5 * 4.5 / scene.water.extinction_per_m, (d.seed, depth)

@@ -140,6 +140,8 @@ class Draw:
     window_s: float
     cubes: tuple[tuple[float, float, float], ...] = field(default_factory=tuple)
     logged_wind_m_s: float | None = None
+    #: seabed mesh resolution (m); None: 0.5 under a profiler, 1 under a scanner
+    mesh_m: float | None = None
 
     @property
     def half(self) -> str:
@@ -167,8 +169,8 @@ def draw(seed: int, size: str = "suite", force: dict[str, str] | None = None) ->
     force : dict, optional
         Values to impose (``receiver``, ``scanner``, ``surface``, ``depth_centre_m``,
         ``attenuation_per_m``, ``wind_m_s``, ``slope_deg``, ``aspect_deg``,
-        ``roughness_rms_m``); every value is still drawn first, in the same order, so the rest
-        of the scene does not change.
+        ``roughness_rms_m``, ``altitude_m``); every value is still drawn first, in the same
+        order, so the rest of the scene does not change.
 
     Returns
     -------
@@ -203,6 +205,7 @@ def draw(seed: int, size: str = "suite", force: dict[str, str] | None = None) ->
     slope = float(force.get("slope_deg", slope))
     aspect = float(force.get("aspect_deg", aspect))
     rough_rms = float(force.get("roughness_rms_m", rough_rms))
+    altitude = float(force.get("altitude_m", altitude))
     ext_guess = min(4.5 / c, 60.0)
     if surface == "waves":
         wind = max(wind, 1.0)  # a wind sea needs wind
@@ -365,7 +368,7 @@ def _tables(d: Draw) -> dict[str, dict[str, Any]]:
             "roughness_correlation_m": d.roughness_correlation_m,
             # 0.5 m under a profiler's narrow strip; 1 m (the default) under a wide swath,
             # where a 0.5 m mesh of a 600 m extent would cost more than the survey
-            "mesh_resolution_m": 0.5 if d.scanner == "profiler" else 1.0,
+            "mesh_resolution_m": d.mesh_m or (0.5 if d.scanner == "profiler" else 1.0),
         },
         "background": {"solar_irradiance_w_m2_nm": 1.5},
         "process": {

@@ -6,6 +6,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from pipeline.suite.cubes import cube_draws
 from pipeline.suite.generate import ci_draws, draw, suite_seeds
 from pipeline.suite.report import write_csv, write_markdown
 from pipeline.suite.run import collect, run_suite
@@ -40,9 +41,10 @@ def suite(
         Scenes (ignored with a ``subset``).
     which : {"tuning", "heldout", "both"}
         Half to draw from.
-    subset : {None, "ci", "shallow"}
+    subset : {None, "ci", "shallow", "cubes"}
         ``ci``: the fixed CI subset (:data:`pipeline.suite.generate.CI_SCENES`); ``shallow``:
-        the shoal subset (:mod:`pipeline.suite.shallow`).
+        the shoal subset (:mod:`pipeline.suite.shallow`); ``cubes``: the cube subset
+        (:mod:`pipeline.suite.cubes`).
     out : path
         Folder of the scenes and the runs (and by default of the results).
     workers : int
@@ -61,8 +63,8 @@ def suite(
         0 when every scene ran (the floors do not set it: they are reported), 1 otherwise.
     """
     out = Path(out)
-    if subset in ("ci", "shallow"):
-        draws = ci_draws() if subset == "ci" else shallow_draws()
+    if subset is not None:
+        draws = {"ci": ci_draws, "shallow": shallow_draws, "cubes": cube_draws}[subset]()
         if which != "both":
             draws = [d for d in draws if d.half == which]
     else:
