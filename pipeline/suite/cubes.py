@@ -34,7 +34,7 @@ import math
 
 import numpy as np
 
-from pipeline.suite.generate import Draw, _cube_xy, draw, half
+from pipeline.suite.generate import Draw, _cube_xy, draw, suite_seeds
 
 __all__ = [
     "FIRST_SEED",
@@ -68,14 +68,7 @@ _SCAN_HALF_ANGLE_DEG = 20.0  # the suite's scanners (pipeline.suite.generate)
 
 def cube_seeds() -> list[int]:
     """The subset's seeds: the first :data:`SEEDS_PER_HALF` of each half from FIRST_SEED."""
-    out, want, seed = [], {"tuning": SEEDS_PER_HALF, "heldout": SEEDS_PER_HALF}, FIRST_SEED
-    while sum(want.values()) > 0:
-        h = half(seed)
-        if want[h] > 0:
-            out.append(seed)
-            want[h] -= 1
-        seed += 1
-    return out
+    return suite_seeds(2 * SEEDS_PER_HALF, "both", FIRST_SEED)
 
 
 def _cubes(d: Draw, ext_guess: float) -> tuple[tuple[float, float, float], ...]:

@@ -28,7 +28,7 @@ import dataclasses
 import math
 from typing import Any
 
-from pipeline.suite.generate import Draw, draw, half
+from pipeline.suite.generate import Draw, draw, suite_seeds
 
 __all__ = [
     "FIRST_SEED",
@@ -83,13 +83,9 @@ def shallow_seeds() -> list[tuple[int, str, tuple[str, str, float]]]:
     out, seed = [], FIRST_SEED
     for receiver in RECEIVERS:
         for water in WATERS:
-            want = {"tuning": SEEDS_PER_HALF, "heldout": SEEDS_PER_HALF}
-            while sum(want.values()) > 0:
-                h = half(seed)
-                if want[h] > 0:
-                    out.append((seed, receiver, water))
-                    want[h] -= 1
-                seed += 1
+            seeds = suite_seeds(2 * SEEDS_PER_HALF, "both", seed)
+            out += [(s, receiver, water) for s in seeds]
+            seed = seeds[-1] + 1
     return out
 
 
