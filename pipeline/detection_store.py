@@ -226,8 +226,9 @@ class SurveyAggregates:
         Full waveform: sampled bottom losses (the excess-decay fit) and column decays.
     nb_counts : dict of str to int
         Exact counts of the no-bottom inputs.
-    nb_stack : ColumnStack or None
-        Full waveform: the stacked column of every chunk, added chunk by chunk (exact).
+    nb_stack, nb_stack_open : ColumnStack or None
+        Full waveform: the stacked closed and open columns of every chunk, added chunk by
+        chunk (exact; :func:`pipeline.process.no_bottom.chunk_inputs`).
     """
 
     n_pulses_total: int
@@ -242,6 +243,7 @@ class SurveyAggregates:
     nb_alpha: list = field(default_factory=list)
     nb_counts: dict = field(default_factory=lambda: {"bottoms": 0, "no_column": 0})
     nb_stack: ColumnStack | None = None
+    nb_stack_open: ColumnStack | None = None
 
     def __post_init__(self) -> None:
         self.fraction = min(1.0, SAMPLE_PULSES / max(self.n_pulses_total, 1))
@@ -280,8 +282,9 @@ class SurveyAggregates:
             self.nb_alpha.append(nb["alpha"][nb["ok"] & s])
             self.nb_counts["bottoms"] += int(nb["t_b"].size)
             self.nb_counts["no_column"] += int(np.count_nonzero(nb["none"] & ~nb["ok"]))
-            stack = nb["column_stack"]
+            stack, open_ = nb["column_stack"], nb["column_stack_open"]
             self.nb_stack = stack if self.nb_stack is None else self.nb_stack + stack
+            self.nb_stack_open = open_ if self.nb_stack_open is None else self.nb_stack_open + open_
 
     def median_surface_range_m(self) -> float | None:
         """Median slant range to the surface returns (sampled); None without any."""

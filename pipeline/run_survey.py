@@ -253,7 +253,7 @@ def _no_bottom_limits(store: DetectionStore, agg: SurveyAggregates, ctx, detect)
 
     t_b, loss, alpha = agg.no_bottom_sample()
     delta, summary = excess_decay_summary(
-        t_b, loss, alpha, agg.nb_stack, agg.nb_counts, ctx, detect
+        t_b, loss, alpha, agg.nb_stack, agg.nb_counts, ctx, detect, agg.nb_stack_open
     )
     n_limit = 0
     for c in range(len(store.chunks)):

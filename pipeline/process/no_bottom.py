@@ -77,9 +77,11 @@ def chunk_inputs(
         The column margins of the pulses with a surface, no bottom and no saturation
         (:func:`~pipeline.process.detection_limit.column_margins`; zeros elsewhere) and the
         losses of the well-detected bottoms, SNR ≥ 2 × threshold
-        (:func:`~pipeline.process.detection_limit.bottom_losses`); ``column_stack``, the
-        :class:`~pipeline.process.column_stack.ColumnStack` of the columns of both sets of
-        pulses (added over the chunks, not concatenated).
+        (:func:`~pipeline.process.detection_limit.bottom_losses`); ``column_stack`` and
+        ``column_stack_open``, the :class:`~pipeline.process.column_stack.ColumnStack` of the
+        columns that end before an echo (the well-detected bottoms', and those above an
+        in-column echo) and of those that run to the searched end (no echo found), added over
+        the chunks, not concatenated.
     """
     det = detector_model(ctx, detect)
     n = found.has_surface.shape[0]
@@ -123,10 +125,19 @@ def chunk_inputs(
     searched_end_s = (m - max(2, math.ceil(1.5 * det.pulse_fwhm_s / det.dt_s))) * det.dt_s
     t_end = np.where(strong, found.t_bottom_s - sep_s, searched_end_s)
     t_end = np.where(found.has_column, np.minimum(t_end, found.t_column_s - sep_s), t_end)
-    stacked = none | strong
-    stack = stack_column(samples[stacked], found.t_surface_s[stacked], t_end[stacked], det)
+    # two stacks: a column that ends before an echo is water all along; one that runs to the
+    # searched end also runs past the seabed of a pulse whose bottom was too faint to be found,
+    # where the column stops, and a stack of such cliffs falls faster than the water decays
+    # (pipeline.process.column_stack)
+    closed = strong | (none & found.has_column)
+    open_ = none & ~found.has_column
+
+    def stack_of(rows):
+        return stack_column(samples[rows], found.t_surface_s[rows], t_end[rows], det)
+
     return {
-        "column_stack": stack,
+        "column_stack": stack_of(closed),
+        "column_stack_open": stack_of(open_),
         "none": none,
         "margin": margin,
         "alpha": alpha,
@@ -147,6 +158,7 @@ def excess_decay_summary(
     counts: dict[str, int],
     ctx: ProcessingContext,
     detect: DetectSettings,
+    open_stack: ColumnStack | None = None,
 ) -> tuple[float, dict[str, Any]]:
     """The bottoms' extra decay ``δ`` (1/s) fitted once per survey, and the survey's summary.
 
@@ -158,9 +170,10 @@ def excess_decay_summary(
         SurveyAggregates`), in pulse order.
     alpha_ok : (k,) float
         The measured column decays (1/s) of the pulses whose column was measured (same sample).
-    stack : ColumnStack or None
-        The stacked column of every chunk (:func:`chunk_inputs`' ``column_stack``, added);
-        None: no chunk.
+    stack, open_stack : ColumnStack or None
+        The stacked columns of every chunk (:func:`chunk_inputs`' ``column_stack`` and
+        ``column_stack_open``, added); None: no chunk. The decay is the closed columns' (water
+        down to an echo), else, where they show none, the open columns'.
     counts : dict
         ``bottoms`` and ``no_column`` counted over every pulse.
 
@@ -171,13 +184,23 @@ def excess_decay_summary(
         Without ``pulses_with_limit`` (counted by :func:`limit_times_s` chunk by chunk).
         ``column_decay_per_m`` is the lidar decay of the survey's stacked column
         (:func:`~pipeline.process.column_stack.stacked_decay_per_m`, None without a measurable
-        column); ``column_decay_median_fit_per_m`` the median of the per-pulse fits (biased
+        column) and ``column_decay_from`` which stack gave it (``closed``, ``open`` or None);
+        ``column_decay_median_fit_per_m`` the median of the per-pulse fits (biased
         high in clear water; kept for the record, the limits use the per-pulse fits).
     """
     delta = excess_decay_per_s(t_b, loss)
     det = detector_model(ctx, detect)
     g = det.group_index
-    stack = ColumnStack.empty(det.dt_s) if stack is None else stack
+    # closed columns first: an open one may run past a seabed whose echo was too faint to be
+    # found, where it stops (shoal tuning seed 7003, c 0.73 /m, a plane 0-4.9 m deep: 21 500
+    # open columns ended there and fell at 0.74 /m against the water's 0.21 /m; c through
+    # Gordon's bridge 3.5 /m, the soundings 5-9 cm shallow from 2 m down)
+    k, source = None, None
+    for name, st in (("closed", stack), ("open", open_stack)):
+        k = stacked_decay_per_m(ColumnStack.empty(det.dt_s) if st is None else st, g)
+        if k is not None:
+            source = name
+            break
     summary = {
         "excess_decay_per_m": delta * 2.0 * g / SPEED_OF_LIGHT_M_S,
         "bottoms_used": int(t_b.size),
@@ -186,7 +209,8 @@ def excess_decay_summary(
         # the lidar attenuation k of the measured columns: C ~ exp(-2 k L), L = c t / (2 n_g),
         # from their stack (the per-pulse fits are biased high in clear water, where a pulse's
         # column is a few noise-selected samples: pipeline.process.column_stack)
-        "column_decay_per_m": stacked_decay_per_m(stack, g),
+        "column_decay_per_m": k,
+        "column_decay_from": source,
         # the median of the per-pulse fits, for the record
         "column_decay_median_fit_per_m": (
             float(np.median(alpha_ok)) * g / SPEED_OF_LIGHT_M_S if alpha_ok.size else None

@@ -52,11 +52,15 @@ def _filtered_noise():
     return NOISE_COUNTS / math.sqrt(2.0 * math.sqrt(math.pi) * SIGMA_SAMPLES)
 
 
-def _waveforms(n, seed=0, column_top_sigma=4.0, bottoms=True, faint_bottoms=False):
+def _waveforms(
+    n, seed=0, column_top_sigma=4.0, bottoms=True, faint_bottoms=False, dark_seabed=None
+):
     """(n, N_SAMPLES) waveforms: baseline, noise, surface, column of decay ``K_PER_M``, bottoms.
 
     ``faint_bottoms``: every pulse without a bright bottom has one 240-250 samples below the
     surface whose filtered peak is two filtered noise σ (under the detector's 5 σ threshold).
+    ``dark_seabed``: ``(lo, hi)`` samples below the surface; every pulse without a bright
+    bottom meets a black seabed there (no echo): its column stops.
     """
     rng = np.random.default_rng(seed)
     s = SIGMA_SAMPLES
@@ -68,6 +72,10 @@ def _waveforms(n, seed=0, column_top_sigma=4.0, bottoms=True, faint_bottoms=Fals
     level = column_top_sigma * _filtered_noise() * rng.lognormal(0.0, 0.3, (n, 1))
     # exp(−a τ) H(τ) blurred by the system Gaussian (exponentially modified Gaussian)
     column = level * np.exp(-a * tau + 0.5 * (a * s) ** 2) * ndtr(tau / s - a * s)
+    if dark_seabed is not None:  # the column ends at the seabed, blurred by the system
+        has = (np.arange(n) % 3 == 0)[:, None] if bottoms else np.zeros((n, 1), dtype=bool)
+        t_sea = rng.uniform(*dark_seabed, (n, 1))
+        column = column * np.where(has, 1.0, ndtr((t_sea - tau) / s))
     surface = rng.uniform(300.0, 900.0, (n, 1)) * np.exp(-0.5 * (tau / s) ** 2)
     y = 50.0 + column + surface + rng.normal(0.0, NOISE_COUNTS, (n, N_SAMPLES))
     if bottoms:
@@ -96,9 +104,14 @@ def _survey(y, n_chunks=1):
         k: np.concatenate([d[k] for d in inputs]) for k in ("t_b", "loss", "alpha", "ok", "none")
     }
     counts = {"bottoms": cat["t_b"].size, "no_column": int(np.sum(cat["none"] & ~cat["ok"]))}
-    stack = sum((d["column_stack"] for d in inputs[1:]), inputs[0]["column_stack"])
+    stack, open_ = (
+        ColumnStack.total([d[k] for d in inputs], DT_S)
+        for k in ("column_stack", "column_stack_open")
+    )
     alpha_ok = cat["alpha"][cat["ok"]]
-    return excess_decay_summary(cat["t_b"], cat["loss"], alpha_ok, stack, counts, CTX, detect)[1]
+    return excess_decay_summary(
+        cat["t_b"], cat["loss"], alpha_ok, stack, counts, CTX, detect, open_
+    )[1]
 
 
 @pytest.fixture(scope="module")
@@ -129,6 +142,31 @@ def test_faint_bottoms_under_the_noise_do_not_flatten_the_decay():
     found = detect_full_waveform(y, DT_S, FWHM_S, DetectSettings(), noise_samples=NOISE_SAMPLES)
     assert found.has_bottom.sum() <= 1000 + 20  # the bright ones (and a handful of faint ones)
     assert _survey(y)["column_decay_per_m"] == pytest.approx(K_PER_M, rel=REL_TOL)
+
+
+def test_faint_bottoms_do_not_flatten_the_decay_of_open_columns_alone():
+    # no bright bottom anywhere: the decay is the open columns', and their stack holds the bump
+    y = _waveforms(3000, seed=3, bottoms=False, faint_bottoms=True)
+    summary = _survey(y)
+    assert summary["column_decay_from"] == "open"
+    assert summary["column_decay_per_m"] == pytest.approx(K_PER_M, rel=REL_TOL)
+
+
+def test_open_columns_that_stop_at_an_unseen_seabed_do_not_steepen_the_decay():
+    """Two pulses in three find no bottom: a black seabed 40-60 samples down (4.5-6.7 m of
+    path, the shoal of tuning seed 7003) stops their column with no echo, while the stack still
+    shows the column there (~5 filtered noise σ at the top, half of it at the seabed, from 2000
+    pulses). Their stack falls off a cliff there; the closed columns (ending before a bright
+    bottom) are water all the way, and the decay is theirs."""
+    y = _waveforms(3000, seed=5, column_top_sigma=5.0, dark_seabed=(40.0, 60.0))
+    summary = _survey(y)
+    assert summary["column_decay_from"] == "closed"
+    assert summary["column_decay_per_m"] == pytest.approx(K_PER_M, rel=REL_TOL)
+    # the open columns alone: steepened by their ends (what the survey's decay was before)
+    open_only = _survey(_waveforms(3000, seed=5, column_top_sigma=5.0, bottoms=False,
+                                   dark_seabed=(40.0, 60.0)))  # fmt: skip
+    assert open_only["column_decay_from"] == "open"
+    assert open_only["column_decay_per_m"] > (1.0 + REL_TOL) * K_PER_M
 
 
 def test_bright_column_agrees_with_per_pulse_fits():
