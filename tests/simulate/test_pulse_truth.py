@@ -60,3 +60,42 @@ def test_without_pulses_the_depth_is_below_the_sea_at_t0():
     assert out.shape == (2, 2)
     np.testing.assert_allclose(out, _direct(x, x, 0))
     assert isinstance(truth.depth_at_pulses_m, PulseDepth)
+
+
+class _CountingSea(_Sea):
+    """Also counts the calls: each call of a real moving sea walks its time slabs."""
+
+    def __init__(self):
+        super().__init__()
+        self.calls = 0
+
+    def height_m(self, x, y, t):
+        self.calls += 1
+        return super().height_m(x, y, t)
+
+
+def test_the_survey_evaluation_meets_the_sea_in_one_call():
+    from types import SimpleNamespace
+
+    from pipeline.evaluate import truth_at
+    from pipeline.survey_report import _meet_the_sea_once
+
+    sea = _CountingSea()
+    truth = Truth(seabed=_Plane(), water=sea, frame=None, pulse_time_s=lambda p: 0.01 * p)
+    rng = np.random.default_rng(9)
+
+    def pts(n):
+        return SimpleNamespace(xyz_m=rng.uniform(0, 50, (n, 3)), pulse_id=rng.permutation(n))
+
+    points, uncorrected, medians = pts(300), pts(300), pts(12)
+    processed = SimpleNamespace(points=points, uncorrected=uncorrected)
+    post = SimpleNamespace(
+        posteriors=SimpleNamespace(xyz_median_m=medians.xyz_m, pulse_id=medians.pulse_id)
+    )
+    _meet_the_sea_once(truth.depth_at_pulses_m, processed, post)
+    assert sea.calls == 1 and sea.asked == 612
+    for s in (points, uncorrected, medians):  # what the evaluation then asks: remembered
+        x, y = s.xyz_m[:, 0], s.xyz_m[:, 1]
+        got = truth_at(truth.depth_at_pulses_m, x, y, s.pulse_id)
+        np.testing.assert_allclose(got, _direct(x, y, s.pulse_id), rtol=0, atol=1e-12)
+    assert sea.calls == 1
