@@ -15,7 +15,8 @@ seabed             a smooth plane 5 m deep at the line's centre, deepening along
 water              the seed's attenuation mapped log-uniformly onto 0.05 to
                    :data:`MAX_ATTENUATION_PER_M` (cubes well above the extinction depth)
 altitude           the seed's 200-800 m mapped to 200-400 m (a feature search flies low; the
-                   density still spans ~0.2-10 soundings per m² through the pulse rate and scan)
+                   density still spans <0.25 to >4 soundings per m², measured, through the
+                   pulse rate and the scan)
 cubes              :data:`COPIES` of each of 0.5, 1 and 2 m, placed as the suite places its cubes
                    (:func:`pipeline.suite.generate._cube_xy`: under the scan, base 1.5 m to half
                    the planning extinction depth) from their own random stream, at least
@@ -34,7 +35,16 @@ import math
 
 import numpy as np
 
-from pipeline.suite.generate import Draw, _cube_xy, draw, suite_seeds
+from pipeline.suite.generate import (
+    ALTITUDE_RANGE_M,
+    ATTENUATION_RANGE_PER_M,
+    Draw,
+    _cube_xy,
+    cube_base_range_m,
+    draw,
+    half_swath_m,
+    suite_seeds,
+)
 
 __all__ = [
     "FIRST_SEED",
@@ -60,10 +70,7 @@ MESH_M = 0.5
 MAX_SLOPE_DEG = 2.0
 MAX_ATTENUATION_PER_M = 0.3
 _DEPTH_CENTRE_M = 5.0
-#: a cube's base: from 1.5 m to this fraction of the planning extinction depth (the suite's)
-_BASE_M = (1.5, 0.5)
 _ALTITUDE_M = (200.0, 400.0)
-_SCAN_HALF_ANGLE_DEG = 20.0  # the suite's scanners (pipeline.suite.generate)
 
 
 def cube_seeds() -> list[int]:
@@ -74,9 +81,8 @@ def cube_seeds() -> list[int]:
 def _cubes(d: Draw, ext_guess: float) -> tuple[tuple[float, float, float], ...]:
     """:data:`COPIES` cubes per size under ``d``'s scan, from the seed's own cube stream."""
     rng = np.random.default_rng([d.seed, 4242])
-    half_swath = 0.0
-    if d.scanner != "profiler":
-        half_swath = d.altitude_m * math.tan(math.radians(_SCAN_HALF_ANGLE_DEG))
+    half_swath = half_swath_m(d.scanner, d.altitude_m)
+    base_lo, base_hi = cube_base_range_m(ext_guess)
     grad = math.tan(math.radians(d.slope_deg))
     placed: list[tuple[float, float, float]] = []
     for size_m in SIZES_M * COPIES:
@@ -95,7 +101,7 @@ def _cubes(d: Draw, ext_guess: float) -> tuple[tuple[float, float, float], ...]:
             )
             # the base on the plane (aspect 0: deepening north from the line's centre)
             base_m = d.depth_centre_m + grad * (y - 0.5 * d.line_length_m)
-            if not _BASE_M[0] <= base_m <= max(_BASE_M[0] + 1.0, _BASE_M[1] * ext_guess):
+            if not base_lo <= base_m <= base_hi:
                 continue
             if all(math.hypot(x - px, y - py) >= MIN_SEPARATION_M for px, py, _ in placed):
                 placed.append((round(float(x), 2), round(float(y), 2), size_m))
@@ -110,10 +116,11 @@ def cube_draws() -> list[Draw]:
     draws = []
     for seed in cube_seeds():
         own = draw(seed, "suite")
-        u_alt = (own.altitude_m - 200.0) / 600.0  # the seed's own altitude draw, in [0, 1)
-        # the seed's log-uniform 0.05-0.8 mapped log-uniformly onto 0.05-MAX
-        lo = math.log(0.05)
-        u_c = (math.log(own.attenuation_per_m) - lo) / (math.log(0.8) - lo)
+        a0, a1 = ALTITUDE_RANGE_M
+        u_alt = (own.altitude_m - a0) / (a1 - a0)  # the seed's own altitude draw, in [0, 1)
+        # the seed's log-uniform draw mapped log-uniformly onto its lower bound to MAX
+        lo, hi = (math.log(v) for v in ATTENUATION_RANGE_PER_M)
+        u_c = (math.log(own.attenuation_per_m) - lo) / (hi - lo)
         c = math.exp(lo + u_c * (math.log(MAX_ATTENUATION_PER_M) - lo))
         force = {
             "depth_centre_m": _DEPTH_CENTRE_M,

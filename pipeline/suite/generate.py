@@ -76,6 +76,11 @@ CI_SCENES: tuple[tuple[int, dict[str, Any]], ...] = tuple(
     for row in _CI_TABLE
 )
 
+#: The drawn ranges of the beam attenuation (log-uniform) and the altitude (uniform)
+ATTENUATION_RANGE_PER_M = (0.05, 0.8)
+ALTITUDE_RANGE_M = (200.0, 800.0)
+#: Half the scan angle of the suite's scanners (the presets' Palmer and oscillating scans)
+SCAN_HALF_ANGLE_DEG = 20.0
 _GROUP_INDEX = 1.3638  # sea water at 532 nm (the presets' value): sizes the range gate only
 _C0_M_S = 299_792_458.0
 
@@ -181,13 +186,13 @@ def draw(seed: int, size: str = "suite", force: dict[str, str] | None = None) ->
     scanner = _choice(rng, ("palmer", "oscillating", "profiler"), (0.5, 0.3, 0.2))
     wind = float(rng.uniform(0.0, 12.0))
     surface = "waves" if (rng.uniform() < 0.5 and wind >= 1.0) else "flat"
-    c = float(math.exp(rng.uniform(math.log(0.05), math.log(0.8))))
+    c = float(math.exp(rng.uniform(*np.log(ATTENUATION_RANGE_PER_M))))
     slope = float(rng.uniform(0.0, 20.0))
     aspect = float(rng.choice((0.0, 90.0)))
     rough = rng.uniform() < 0.5
     rough_rms = float(rng.uniform(0.05, 0.3)) if rough else 0.0
     rough_corr = float(rng.uniform(3.0, 10.0))
-    altitude = float(rng.uniform(200.0, 800.0))
+    altitude = float(rng.uniform(*ALTITUDE_RANGE_M))
     ext_guess = min(4.5 / c, 60.0)
     shore = rng.uniform() < 1.0 / 6.0
     d_centre = float(rng.uniform(-3.0, 1.0) if shore else rng.uniform(0.1, 1.2 * ext_guess))
@@ -219,7 +224,7 @@ def draw(seed: int, size: str = "suite", force: dict[str, str] | None = None) ->
         prf = 2000.0 + 3000.0 * u_prf
     else:
         prf = (4000.0 + 4000.0 * u_prf) if ci else (8000.0 + 17000.0 * u_prf)
-    half_swath = 0.0 if scanner == "profiler" else altitude * math.tan(math.radians(20.0))
+    half_swath = half_swath_m(scanner, altitude)
     cubes = []
     for size_m, (ua, ub) in zip((0.5, 1.0, 2.0), u_cubes, strict=True):
         x, y = _cube_xy(
@@ -230,7 +235,7 @@ def draw(seed: int, size: str = "suite", force: dict[str, str] | None = None) ->
     reach = half_swath if aspect == 90.0 else 0.5 * line + half_swath
     d_max = max(d_centre + math.tan(math.radians(slope)) * reach + 3.0 * rough_rms, 1.0)
     d_max = min(d_max, 1.5 * ext_guess + 5.0)  # past extinction nothing comes back anyway
-    theta_w = math.asin(math.sin(math.radians(20.0)) / 1.34)
+    theta_w = math.asin(math.sin(math.radians(SCAN_HALF_ANGLE_DEG)) / 1.34)
     window = 2e-8 + 2.0 * _GROUP_INDEX * (d_max / math.cos(theta_w) + 2.0) / _C0_M_S + 4e-8
     window = float(np.clip(window, 1.5e-7, 8e-7))
     return Draw(
@@ -277,6 +282,18 @@ _CUBE_MIN_DEPTH_M = 1.5
 _CUBE_EXT_FRACTION = 0.5
 
 
+def cube_base_range_m(ext_guess: float) -> tuple[float, float]:
+    """Depths (m) a cube's base is drawn between, for a planning extinction depth."""
+    return _CUBE_MIN_DEPTH_M, max(_CUBE_MIN_DEPTH_M + 1.0, _CUBE_EXT_FRACTION * ext_guess)
+
+
+def half_swath_m(scanner: str, altitude_m: float) -> float:
+    """Half the swath's width on the ground (m): 0 under a profiler."""
+    if scanner == "profiler":
+        return 0.0
+    return altitude_m * math.tan(math.radians(SCAN_HALF_ANGLE_DEG))
+
+
 def _cube_xy(ua, ub, half_swath, line, palmer, d_centre, slope_deg, aspect_deg, ext_guess):
     """Where a cube goes: under the scan, on seabed a survey can reach.
 
@@ -291,8 +308,7 @@ def _cube_xy(ua, ub, half_swath, line, palmer, d_centre, slope_deg, aspect_deg, 
     profiler's cubes sit on its planned track (the flown track wanders by metres: see the
     issue's feature report).
     """
-    lo = _CUBE_MIN_DEPTH_M
-    hi = max(lo + 1.0, _CUBE_EXT_FRACTION * ext_guess)
+    lo, hi = cube_base_range_m(ext_guess)
     grad = math.tan(math.radians(slope_deg))
     target = lo + ua * (hi - lo)
     across = aspect_deg == 90.0 and grad > 1e-3

@@ -28,7 +28,7 @@ import dataclasses
 import math
 from typing import Any
 
-from pipeline.suite.generate import Draw, draw, suite_seeds
+from pipeline.suite.generate import Draw, draw, half_swath_m, suite_seeds
 
 __all__ = [
     "FIRST_SEED",
@@ -37,7 +37,6 @@ __all__ = [
     "DEEP_DEPTH_M",
     "WATERS",
     "RECEIVERS",
-    "SCAN_HALF_ANGLE_DEG",
     "shallow_force",
     "shallow_seeds",
     "shallow_draws",
@@ -53,8 +52,6 @@ DEEP_DEPTH_M = 4.9
 #: (name, surface, wind m/s) of the two waters the issue names
 WATERS: tuple[tuple[str, str, float], ...] = (("calm", "flat", 1.0), ("5 m/s", "waves", 5.0))
 RECEIVERS = ("full_waveform", "photon_counting")
-#: The suite's scanners' half angle (pipeline.suite.generate: the swath's half width)
-SCAN_HALF_ANGLE_DEG = 20.0
 
 
 def shallow_force(d: Draw) -> dict[str, Any]:
@@ -69,7 +66,7 @@ def shallow_force(d: Draw) -> dict[str, Any]:
     if d.scanner == "profiler":
         reach, aspect = 0.5 * d.line_length_m, 0.0
     else:
-        reach, aspect = d.altitude_m * math.tan(math.radians(SCAN_HALF_ANGLE_DEG)), 90.0
+        reach, aspect = half_swath_m(d.scanner, d.altitude_m), 90.0
     return {
         "depth_centre_m": 0.5 * (SHORE_DEPTH_M + DEEP_DEPTH_M),
         "slope_deg": math.degrees(math.atan(0.5 * span / reach)),
