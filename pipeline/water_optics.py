@@ -55,6 +55,9 @@ __all__ = [
     "secchi_depth_m",
     "water_attenuation",
     "scattering_split",
+    "PURE_WATER_ABSORPTION_PER_M",
+    "PETZOLD_NONWATER_ALBEDOS",
+    "albedo_from_nonwater",
 ]
 
 #: Fournier-Forand fit to Petzold's average particle phase function (Mobley et al. 2002).
@@ -69,6 +72,15 @@ SEAWATER_SLOPE = 4.32
 GORDON_DIAMETER_COEFF = 0.85
 #: Poole & Atkins (1926): ``K_d Z_SD = 1.7``.
 SECCHI_KD_PRODUCT = 1.7
+#: Absorption of pure water near 532 nm (1/m; Pope & Fry 1997, Appl. Opt. 36:8710): the
+#: green lidars' wavelength, used as the floor of every water's absorption (model choice: the
+#: same value at any wavelength a scene names).
+PURE_WATER_ABSORPTION_PER_M = 0.045
+#: ``b_nw / c_nw`` of what is not sea water in Petzold's (1972) three waters (clear ocean,
+#: coastal ocean, turbid harbour; ``b, c`` = 0.037, 0.151 / 0.219, 0.398 / 1.824, 2.19 1/m at
+#: 530 nm, Mobley 1994 *Light and Water* table 3.10) once sea water's
+#: :data:`PURE_WATER_ABSORPTION_PER_M` and its scattering at 530 nm are taken out.
+PETZOLD_NONWATER_ALBEDOS = (0.335, 0.618, 0.850)
 
 
 def _ff_delta(psi, n):
@@ -135,6 +147,27 @@ def default_backscatter_180_per_m_sr(
     p_w = float(seawater_phase_per_sr(math.pi))
     p_p = float(ff_phase_per_sr(math.pi))
     return b_w * p_w + (b - b_w) * p_p
+
+
+def albedo_from_nonwater(
+    extinction_per_m: float, nonwater_albedo: float, wavelength_nm: float
+) -> float:
+    """Single-scattering albedo ``omega_0`` of sea water plus matter of albedo ``omega_nw``.
+
+    Sea water absorbs :data:`PURE_WATER_ABSORPTION_PER_M` and scatters
+    :func:`seawater_scattering_per_m`; the rest of ``c`` (particles and dissolved matter)
+    scatters the share ``omega_nw`` of what it takes out: ``omega_0 = (b_w + omega_nw (c - a_w -
+    b_w)) / c``. So a clear water cannot scatter more than sea water does (``c = 0.05`` 1/m is
+    nearly pure water: ``omega_0`` <= 0.1, where a fixed 0.55 would absorb half what pure water
+    absorbs), and the absorption ``(1 - omega_0) c`` never falls below ``a_w``. Below sea water's
+    own ``c`` (not a natural water) the scattering is ``min(b_w, c)``; 0 for ``c = 0``.
+    """
+    c = float(extinction_per_m)
+    if c <= 0.0:
+        return 0.0
+    b_w = seawater_scattering_per_m(wavelength_nm)
+    rest = max(c - PURE_WATER_ABSORPTION_PER_M - b_w, 0.0)
+    return (min(b_w, c) + float(nonwater_albedo) * rest) / c
 
 
 def default_diffuse_attenuation_per_m(extinction_per_m: float) -> float:

@@ -14,8 +14,9 @@ import tomllib
 import numpy as np
 import pytest
 
-from pipeline.suite.generate import CI_SCENES, ci_draws, draw, half, scene_toml, suite_seeds
+from pipeline.suite.generate import CI_SCENES, ci_draws, draw, half, suite_seeds
 from pipeline.suite.report import floors
+from pipeline.suite.scene_file import scene_toml
 from pipeline.suite.strata import (
     MIN_NO_BOTTOM,
     all_strata,

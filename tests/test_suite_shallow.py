@@ -14,7 +14,8 @@ import numpy as np
 
 import terrain
 from pipeline.scene import parse_scene
-from pipeline.suite.generate import CI_SCENES, half, scene_toml
+from pipeline.suite.generate import CI_SCENES, half
+from pipeline.suite.scene_file import scene_toml
 from pipeline.suite.shallow import (
     DEEP_DEPTH_M,
     RECEIVERS,

@@ -16,6 +16,9 @@ What processing assumes (named settings, :class:`ForwardScatterSettings`)
   L n_air / n_w)`` (the slant air range and the slant path carry the nadir angle) and the
   scattering ``b = omega_0 c``. It gives the mixture ``(1 - w) delta + w Exp(tau)`` of the
   two-way excess path.
+* The single-scattering albedo ``omega_0``: the user's, else sea water plus matter of albedo
+  ``nonwater_albedo`` at the ``c`` assumed (:func:`pipeline.water_optics.albedo_from_nonwater`):
+  clear water scatters little, whatever a coastal prior says.
 * The beam attenuation ``c``: the user's, else estimated from the survey's measured column decay
   (:func:`attenuation_from_column`), else ``fallback_attenuation_per_m``; which one is recorded in
   the manifest's ``processing_context``.
@@ -85,19 +88,31 @@ class ForwardScatterSettings:
     fallback_attenuation_per_m: float = setting(
         0.15, gt=0.0, le=100.0, doc="c assumed when no column decay was measured"
     )
-    single_scattering_albedo: float = setting(
-        0.55, gt=0.0, le=1.0, doc="b / c assumed (Petzold's coastal waters)"
+    single_scattering_albedo: float | None = setting(
+        None,
+        gt=0.0,
+        le=1.0,
+        doc="b / c assumed (None: sea water plus matter of nonwater_albedo at the c assumed, "
+        "pipeline.water_optics.albedo_from_nonwater)",
+    )
+    nonwater_albedo: float = setting(
+        0.618,
+        ge=0.0,
+        le=1.0,
+        doc="b / c assumed of what is not sea water, when single_scattering_albedo is None: "
+        "Petzold's coastal water (his three waters: 0.335, 0.618, 0.850)",
     )
     receiver_fov_mrad: float | None = setting(
         None, gt=0.0, le=1000.0, doc="receiver full field of view (None: scanner.receiver_fov_mrad)"
     )
     # 0.5 is a prior for the model's error in real water, not a figure fitted on simulated
-    # scenes: the simulator and this correction share one forward-scattering model
-    # (pipeline/forward_scatter.py, forward_scatter_mc.py), so a simulated scene cannot measure
-    # how wrong that model is, and published Monte Carlo range biases differ from ours by ~2x
-    # (benchmarks/RESULTS_realism.md). The realised error on simulated tuning scenes (0.12 rms,
-    # RESULTS_tpu_calibration.md) measures only the attenuation estimate's share. Keep 0.5 until
-    # a measurement independent of our own model exists.
+    # scenes: the simulator and this correction share one forward-scattering model and phase
+    # function (pipeline/forward_scatter.py, forward_scatter_mc.py), so a simulated scene cannot
+    # measure how wrong that model is, and published Monte Carlo range biases differ from ours
+    # by ~2x (benchmarks/RESULTS_realism.md). Suite scenes differ from the assumption only by
+    # their albedo (drawn over Petzold's three waters, pipeline/suite/generate.py: ~0.3
+    # relative in the scattering) and the attenuation estimate. Keep 0.5 until a measurement
+    # independent of our own model exists.
     relative_sigma: float = setting(
         0.5,
         ge=0.0,
@@ -415,7 +430,11 @@ def bias_model(
         return None
     return ScatterBiasModel(
         beam_attenuation_per_m=float(attenuation_per_m),
-        single_scattering_albedo=float(settings.single_scattering_albedo),
+        single_scattering_albedo=float(
+            settings.single_scattering_albedo
+            if settings.single_scattering_albedo is not None
+            else wo.albedo_from_nonwater(attenuation_per_m, settings.nonwater_albedo, wavelength_nm)
+        ),
         fov_half_tan=math.tan(0.5e-3 * fov_mrad),
         system_sigma_s=float(system_fwhm_s * FWHM_TO_SIGMA),
         sample_interval_s=float(sample_interval_s),

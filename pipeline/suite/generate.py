@@ -37,18 +37,18 @@ from __future__ import annotations
 import hashlib
 import math
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from pipeline.water_optics import PETZOLD_NONWATER_ALBEDOS
 
 __all__ = [
     "Draw",
     "half",
     "suite_seeds",
     "draw",
-    "scene_toml",
-    "write_scene",
+    "NONWATER_ALBEDO_RANGE",
     "CI_SCENES",
     "ci_draws",
 ]
@@ -79,6 +79,9 @@ CI_SCENES: tuple[tuple[int, dict[str, Any]], ...] = tuple(
 #: The drawn ranges of the beam attenuation (log-uniform) and the altitude (uniform)
 ATTENUATION_RANGE_PER_M = (0.05, 0.8)
 ALTITUDE_RANGE_M = (200.0, 800.0)
+#: The drawn range of the non-sea-water matter's albedo: Petzold's clear ocean to his turbid
+#: harbour (:data:`pipeline.water_optics.PETZOLD_NONWATER_ALBEDOS`)
+NONWATER_ALBEDO_RANGE = (PETZOLD_NONWATER_ALBEDOS[0], PETZOLD_NONWATER_ALBEDOS[-1])
 #: Half the scan angle of the suite's scanners (the presets' Palmer and oscillating scans)
 SCAN_HALF_ANGLE_DEG = 20.0
 _GROUP_INDEX = 1.3638  # sea water at 532 nm (the presets' value): sizes the range gate only
@@ -147,6 +150,9 @@ class Draw:
     logged_wind_m_s: float | None = None
     #: seabed mesh resolution (m); None: 0.5 under a profiler, 1 under a scanner
     mesh_m: float | None = None
+    #: b / c of the water's matter that is not sea water (:func:`_nonwater_albedo`); None: the
+    #: scene keeps the default single-scattering albedo
+    nonwater_albedo: float | None = None
 
     @property
     def half(self) -> str:
@@ -258,6 +264,7 @@ def draw(seed: int, size: str = "suite", force: dict[str, str] | None = None) ->
         window_s=float(f"{window:.3e}"),
         cubes=tuple(cubes),
         logged_wind_m_s=_logged_wind(seed, wind),
+        nonwater_albedo=_nonwater_albedo(seed),
     )
 
 
@@ -275,6 +282,19 @@ def _logged_wind(seed: int, wind_m_s: float) -> float:
     """
     err = float(np.random.default_rng([int(seed), 1954]).normal(0.0, LOGGED_WIND_SIGMA_M_S))
     return round(max(wind_m_s + err, 0.0) * 2.0) / 2.0
+
+
+def _nonwater_albedo(seed: int) -> float:
+    """``b / c`` of the matter in the water beside sea water, over Petzold's three waters.
+
+    Uniform over :data:`NONWATER_ALBEDO_RANGE`; with sea water's own absorption and scattering
+    it sets the scene's single-scattering albedo
+    (:func:`pipeline.water_optics.albedo_from_nonwater`), which the forward-scattering delay of
+    the bottom echo follows and processing does not know. Its own random stream (``[seed,
+    1972]``), so every other condition of the seed's draw is as before.
+    """
+    u = float(np.random.default_rng([int(seed), 1972]).uniform(*NONWATER_ALBEDO_RANGE))
+    return round(u, 3)
 
 
 #: cube bases between these depths where the plane allows (m; and a fraction of 4.5 / c)
@@ -329,109 +349,3 @@ def _cube_xy(ua, ub, half_swath, line, palmer, d_centre, slope_deg, aspect_deg, 
 def ci_draws() -> list[Draw]:
     """The fixed CI subset (:data:`CI_SCENES`), small scenes."""
     return [draw(seed, "ci", force) for seed, force in CI_SCENES]
-
-
-def _value(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_value(x) for x in v) + "]"
-    return repr(float(v)) if isinstance(v, float) else str(int(v))
-
-
-def _tables(d: Draw) -> dict[str, dict[str, Any]]:
-    """The scene file's tables (scene keys only)."""
-    fw = d.receiver == "full_waveform"
-    # the line centre sits at (0, L/2); the plane's depth_m is the depth at (0, 0), so shift
-    # it by the along-line slope when the seabed deepens north
-    dz = math.tan(math.radians(d.slope_deg)) * 0.5 * d.line_length_m if d.aspect_deg == 0 else 0
-    # photon counting: windows (one posterior each, pipeline.uncertainty.photon_posterior)
-    n_post = 8 if d.size == "ci" else 24
-    t: dict[str, dict[str, Any]] = {
-        "scene": {
-            "name": f"suite_{d.seed:05d}",
-            "seed": d.seed,
-            "preset": "topobathy_full_waveform" if fw else "photon_counting",
-            "description": (
-                f"suite {d.half} seed {d.seed}: {d.receiver} {d.scanner}, {d.surface} water, "
-                f"wind {d.wind_m_s:g} m/s, c {d.attenuation_per_m:g} 1/m, slope "
-                f"{d.slope_deg:g} deg, altitude {d.altitude_m:g} m"
-            ),
-        },
-        "scanner": {"kind": d.scanner, "prf_hz": d.prf_hz},
-        "flight": {
-            "altitude_m": d.altitude_m,
-            "speed_m_s": 60.0,
-            "heading_deg": 0.0,
-            "area_m": [-1.0, 1.0, 0.0, d.line_length_m],
-            "n_lines": 1,
-        },
-        "water": {
-            "extinction_per_m": d.attenuation_per_m,
-            "backscatter_180_per_m_sr": round(2.0e-3 * d.attenuation_per_m / 0.15, 6),
-            "wind_speed_m_s": d.wind_m_s,
-        },
-        "water_surface": {"kind": d.surface},
-        "seabed": {
-            "kind": "plane",
-            "depth_m": round(d.depth_centre_m - dz, 3),
-            "slope_deg": d.slope_deg,
-            "aspect_deg": d.aspect_deg,
-            "reflectance": d.reflectance,
-            "roughness_rms_m": d.roughness_rms_m,
-            "roughness_correlation_m": d.roughness_correlation_m,
-            # 0.5 m under a profiler's narrow strip; 1 m (the default) under a wide swath,
-            # where a 0.5 m mesh of a 600 m extent would cost more than the survey
-            "mesh_resolution_m": d.mesh_m or (0.5 if d.scanner == "profiler" else 1.0),
-        },
-        "background": {"solar_irradiance_w_m2_nm": 1.5},
-        "process": {
-            "grid_resolution_m": 2.0,
-            "posterior_pulses_per_km2": 0.0,
-            "posterior_min_pulses": n_post,
-        },
-        # the suite reads the runs' numbers, never their 3D views (seconds and MB per scene)
-        "run": {"views": False},
-    }
-    if d.logged_wind_m_s is not None:  # the survey's wind log (process/context.py)
-        t["process"]["wind_speed_m_s"] = d.logged_wind_m_s
-    if d.scanner == "oscillating":
-        t["scanner"]["scan_rate_hz"] = 20.0
-    if fw:
-        t["detector"] = {"window_s": d.window_s}
-    else:
-        t["process"]["photon_detect"] = {"shots_per_window": 200, "bin_m": 0.1}
-    return t
-
-
-def scene_toml(d: Draw) -> str:
-    """The TOML scene file of ``d`` (deterministic text)."""
-    lines = [
-        "# Generated by pipeline.suite.generate (bathy suite); do not edit: regenerate.",
-        f"# half: {d.half} (sha256 split of the seed; never tune on the held-out half)",
-        "",
-    ]
-    for name, table in _tables(d).items():
-        subs = {k: v for k, v in table.items() if isinstance(v, dict)}
-        lines.append(f"[{name}]")
-        lines += [f"{k} = {_value(v)}" for k, v in table.items() if not isinstance(v, dict)]
-        lines.append("")
-        for sub, st in subs.items():
-            lines.append(f"[{name}.{sub}]")
-            lines += [f"{k} = {_value(v)}" for k, v in st.items()]
-            lines.append("")
-        if name == "seabed":
-            for x, y, s in d.cubes:
-                lines += ["[[seabed.features]]", 'kind = "cube"', f"x_m = {x!r}", f"y_m = {y!r}"]
-                lines += [f"size_m = {s!r}", ""]
-    return "\n".join(lines)
-
-
-def write_scene(d: Draw, folder: str | Path) -> Path:
-    """Write ``d``'s scene file into ``folder`` as ``suite_<seed>.toml``; return its path."""
-    path = Path(folder) / f"suite_{d.seed:05d}.toml"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(scene_toml(d))
-    return path

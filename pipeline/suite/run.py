@@ -25,7 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.suite.generate import Draw, write_scene
+from pipeline.suite.generate import Draw
+from pipeline.suite.scene_file import write_scene
 
 __all__ = ["RunResult", "run_one", "run_suite", "collect"]
 

@@ -116,8 +116,10 @@ def _delayed_pulses(c=0.15):
     r_air = 400.0 / np.cos(theta)
     tan_half = math.tan(0.5e-3 * FOV_MRAD)
     radius = tan_half * (r_air + length * N_AIR / N_PHASE)  # the field at the seabed
-    b = 0.55 * c
     b_w = 2.88e-3 * (532.0 / 500.0) ** -4.32  # sea water (Morel 1974)
+    # the water processing assumes by default: sea water (absorbing 0.045 1/m, Pope & Fry
+    # 1997) plus matter of Petzold's coastal albedo 0.618
+    b = b_w + 0.618 * (c - 0.045 - b_w)
     delay = bottom_delay(length, radius, (b - b_w, b_w), water_tables(), c - b)
     # delays in time: two-way excess path at the group speed
     tail_s = delay.tail_mean_m * N_GROUP / C

@@ -23,7 +23,8 @@ from pipeline.process.survey_points import process_detections
 from pipeline.run_survey import simulate_detections
 from pipeline.scene import load_scene
 from pipeline.stages import StageClock, plan
-from pipeline.suite.generate import ci_draws, write_scene
+from pipeline.suite.generate import ci_draws
+from pipeline.suite.scene_file import write_scene
 from pipeline.uncertainty.survey_uncertainty import survey_uncertainty
 from pipeline.uncertainty.tpu_survey_wide import tpu_halo_m
 from pipeline.uncertainty.tpu_terms import _take_surface
