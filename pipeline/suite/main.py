@@ -6,6 +6,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from pipeline.suite.chance_tpu import simulated_tpu_failures
 from pipeline.suite.cubes import cube_draws
 from pipeline.suite.generate import ci_draws, draw, suite_seeds
 from pipeline.suite.report import write_csv, write_markdown
@@ -78,6 +79,8 @@ def suite(
         return 1
     pool = pool_rows(rows)
     strata = all_strata(pool)
+    # a TPU exactly right, its shared terms one draw per scene: ~1 s per simulated suite
+    chance = {h: simulated_tpu_failures(pool, rows, h, n_rep=100) for h in ("tuning", "heldout")}
     md_path = Path(results) if results else out / "RESULTS_suite.md"
     csv_path = write_csv(md_path.with_name("suite.csv"), strata)
     command = "bathy " + " ".join(shlex.quote(a) for a in sys.argv[1:])
@@ -89,6 +92,7 @@ def suite(
         [(r["wall_s"], r["cpu_s"]) for r in rows],
         failed,
         preface=_PREFACE,
+        tpu_chance=chance,
     )
     log(f"bathy suite: wrote {csv_path} and {md}")
     return 1 if failed else 0

@@ -302,6 +302,24 @@ def _scene_table(pool: Pool, times: list[tuple[float, float]]) -> list[str]:
     return lines
 
 
+def _shared_chance(chance: dict[str, dict[str, dict[str, float]]]) -> str:
+    """The sentence on the TPU floors' chance with the shared terms drawn once per scene."""
+
+    def half(h: str) -> str:
+        return ", ".join(
+            f"{k} {v['mean']:.1f} ({v['p10']:.0f}-{v['p90']:.0f}) of {v['strata']}"
+            for k, v in chance[h].items()
+        )
+
+    return (
+        ": with the TPU's own terms as the truth's model, those shared by a scene (navigation,"
+        " attitude, heading, forward scattering, temperature, salinity) drawn once per scene"
+        " and the rest per point (`pipeline/suite/chance_tpu.py`), a TPU exactly right would"
+        f" fail on average {half('heldout')} held-out strata (10-90 % of the simulated suites"
+        f" in brackets; tuning: {half('tuning')})."
+    )
+
+
 def write_markdown(
     path: str | Path,
     command: str,
@@ -310,10 +328,12 @@ def write_markdown(
     times: list[tuple[float, float]],
     failed: list[int],
     preface: str = "",
+    tpu_chance: dict[str, dict[str, dict[str, float]]] | None = None,
 ) -> Path:
     """``RESULTS_suite.md``: command, tables per stratum (halves side by side), floors.
 
-    ``times``: per run, wall and CPU seconds.
+    ``times``: per run, wall and CPU seconds. ``tpu_chance``: per half,
+    :func:`pipeline.suite.chance_tpu.simulated_tpu_failures`.
     """
     floor_lines, fails = _floor_table(strata)
     n_half = {h: sum(m["half"] == h for m in pool.meta) for h in ("tuning", "heldout")}
@@ -353,7 +373,7 @@ def write_markdown(
         + ", ".join(f"{k} {v:.1f}" for k, v in expected_failures(strata, "tuning").items())
         + "): the bands are as narrow as a coverage's binomial scatter at the strata's n."
         " Errors shared by many points (a survey's attitude, its water) make the real chance"
-        " larger.",
+        " larger" + (_shared_chance(tpu_chance) if tpu_chance else "."),
         "",
         *floor_lines,
         "",

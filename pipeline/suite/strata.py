@@ -39,6 +39,8 @@ import numpy as np
 __all__ = [
     "MIN_NO_BOTTOM",
     "DEPTH_BANDS_M",
+    "stratum_windows",
+    "tpu_window_mask",
     "extinction_depth_m",
     "cube_detections",
     "Pool",
@@ -303,6 +305,41 @@ STRATA: tuple[tuple[str, Callable[[dict], str]], ...] = (
 )
 
 
+def _windows(pool: Pool):
+    """``(dimension, label, runs, depth, in_floor_window)`` of every stratum (halves pooled)."""
+    window = (_FLOOR_MIN_DEPTH_M, _FLOOR_EXT_FRACTION, math.inf)
+    for dim, fn in STRATA:
+        labels = np.array([fn(m) for m in pool.meta])
+        for lab in sorted(set(labels)):
+            yield dim, lab, labels == lab, window, True
+    every = np.ones(len(pool.meta), dtype=bool)
+    for lo, hi in zip(DEPTH_BANDS_M[:-1], DEPTH_BANDS_M[1:], strict=True):
+        yield "depth m", f"{lo:g}-{hi:g}", every, (lo, _FLOOR_EXT_FRACTION, hi), lo >= 1.0
+
+
+def stratum_windows(pool: Pool) -> list[dict[str, Any]]:
+    """Every stratum of :func:`all_strata` but ``past 0.8 D_ext``, one entry per half.
+
+    Returns
+    -------
+    list of dict
+        ``dimension``, ``label``, ``half``, ``runs`` ((n_runs,) bool: the stratum's scenes of
+        that half), ``depth`` (the window of :func:`stratum_figures`), ``in_floor_window``.
+    """
+    halves = np.array([m["half"] for m in pool.meta])
+    return [
+        {"dimension": dim, "label": lab, "half": h, "runs": runs & (halves == h)}
+        | {"depth": depth, "in_floor_window": in_window}
+        for dim, lab, runs, depth, in_window in _windows(pool)
+        for h in ("tuning", "heldout")
+    ]
+
+
+def tpu_window_mask(pool: Pool, run: int, depth: tuple[float, float, float]) -> np.ndarray:
+    """Run ``run``'s TPU points (in its own order) whose true depth lies in the window ``depth``."""
+    return _depth_ok(pool, "tpu", *depth)[pool.scene["tpu"] == run]
+
+
 def all_strata(pool: Pool) -> list[dict[str, Any]]:
     """Every stratum's figures for both halves, in the floors' depth window.
 
@@ -327,14 +364,9 @@ def all_strata(pool: Pool) -> list[dict[str, Any]]:
             row[h] = stratum_figures(pool, runs & (halves == h), depth)
         out.append(row)
 
-    window = (_FLOOR_MIN_DEPTH_M, _FLOOR_EXT_FRACTION, math.inf)
-    for dim, fn in STRATA:
-        labels = np.array([fn(m) for m in pool.meta])
-        for lab in sorted(set(labels)):
-            add(dim, lab, labels == lab, window, True)
+    for dim, lab, runs, depth, in_window in _windows(pool):
+        add(dim, lab, runs, depth, in_window)
     every = np.ones(len(pool.meta), dtype=bool)
-    for lo, hi in zip(DEPTH_BANDS_M[:-1], DEPTH_BANDS_M[1:], strict=True):
-        add("depth m", f"{lo:g}-{hi:g}", every, (lo, _FLOOR_EXT_FRACTION, hi), lo >= 1.0)
     add("depth m", "past 0.8 D_ext", every, (0.0, math.inf, math.inf), False)
     _past_only(pool, out[-1])
     return out

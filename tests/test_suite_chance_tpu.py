@@ -1,0 +1,92 @@
+"""The TPU floors read against chance with shared terms, against analytic coverage laws.
+
+A scene's TPU point ``i`` carries one-sigma depth terms; shared ones take one normal draw per
+scene, the others one per point. With a shared part ``s`` and an own part ``o`` (``s^2 + o^2
+= 1``), a scene's coverage given its draw ``xi`` is, for many points,
+``P(|s xi + o eta| <= k) = Phi((k - s xi) / o) - Phi((-k - s xi) / o)``; the chance that the
+floor fails is the normal measure of the ``xi`` that put it outside its band. Written here by
+quadrature, not taken from the module.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy.stats import norm
+
+from pipeline.suite.chance_tpu import simulated_tpu_failures
+from pipeline.suite.generate import draw, suite_seeds
+from pipeline.suite.strata import pool_rows
+
+N_PTS = 4000
+
+
+def _row(shared_sigma: float, own_sigma: float):
+    d = dataclasses.replace(
+        draw(suite_seeds(1, "tuning")[0]),
+        receiver="full_waveform",
+        attenuation_per_m=0.15,
+        wind_m_s=3.0,
+        cubes=(),
+    )
+    n = N_PTS
+    true_d = np.full(n, 5.0)  # inside [1 m, 0.8 D_ext) with D_ext = 4.5 / 0.15 = 30 m
+    arrays = {
+        "pt_x_m": np.zeros(n),
+        "pt_y_m": np.zeros(n),
+        "pt_depth_m": true_d,
+        "pt_true_depth_m": true_d,
+        "pt_error_m": np.zeros(n),
+        "tpu_true_depth_m": true_d,
+        "tpu_error_m": np.zeros(n),
+        "tpu_sigma_depth_m": np.full(n, np.hypot(shared_sigma, own_sigma)),
+        "tpu_group": np.arange(n),
+        # signed terms: the attitude's sign follows the geometry, so half are negative
+        "tpu_term_attitude_y": np.where(np.arange(n) % 2, -1.0, 1.0) * shared_sigma,
+        "tpu_term_timing_bottom": np.full(n, own_sigma),
+        "nb_depth_m": np.zeros(0),
+    }
+    for k in ("post_true_depth_m", "post_median_m", "post_lo68_m", "post_hi68_m"):
+        arrays[k] = np.zeros(0)
+    for k in ("post_lo95_m", "post_hi95_m", "cell_x_m", "cell_y_m", "cell_depth_m"):
+        arrays[k] = np.zeros(0)
+    arrays |= {
+        "post_converged": np.zeros(0, bool),
+        "cell_true_depth_m": np.zeros(0),
+        "cell_error_m": np.zeros(0),
+        "cell_count": np.zeros(0, int),
+    }
+    return {"draw": d, "evaluation": {}, "arrays": arrays, "wall_s": 1.0}
+
+
+def _fail_probability(s: float, o: float, k: float, lo: float, hi: float) -> float:
+    """Normal measure of the draws ``xi`` whose coverage ``P(|s xi + o eta| <= k)`` misses."""
+    xi = np.linspace(-8.0, 8.0, 160_001)
+    cov = norm.cdf((k - s * xi) / o) - norm.cdf((-k - s * xi) / o)
+    w = norm.pdf(xi) * (xi[1] - xi[0])
+    return float(np.sum(w[(cov < lo) | (cov > hi)]))
+
+
+@pytest.mark.parametrize("s", [0.0, 0.5, 0.8])
+def test_one_scene_fails_as_often_as_its_shared_draw_says(s):
+    o = float(np.sqrt(1.0 - s * s))
+    rows = [_row(s, o)]
+    pool = pool_rows(rows)
+    got = simulated_tpu_failures(pool, rows, "tuning", n_rep=300, seed=3)
+    for name, k, lo, hi in (("tpu68", 1.0, 0.64, 0.72), ("tpu95", 1.96, 0.93, 0.97)):
+        strata = got[name]["strata"]
+        assert strata >= 9  # 8 scene dimensions and the 3-6 m band, all the same points
+        want = _fail_probability(s, o, k, lo, hi) if s > 0 else 0.0
+        # 300 replicates: sd <= 0.029 of the share; the binomial scatter of 4000 points
+        # (0.7 %) blurs the band's edges a little
+        assert got[name]["mean"] / strata == pytest.approx(want, abs=0.08)
+
+
+def test_a_fully_shared_error_fails_every_stratum():
+    rows = [_row(1.0, 0.0)]
+    got = simulated_tpu_failures(pool_rows(rows), rows, "tuning", n_rep=50, seed=1)
+    # coverage is 0 or 1 in every replicate: never inside a band
+    for name in ("tpu68", "tpu95"):
+        assert got[name]["mean"] == got[name]["strata"] == got[name]["p10"]
