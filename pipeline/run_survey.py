@@ -304,7 +304,10 @@ def run_survey(
     fs = ctx.refraction.forward_scatter
     if fs is not None:
         where = ctx.sources["process.forward_scatter.beam_attenuation_per_m"]
-        log(f"  forward-scattering correction at c = {fs.beam_attenuation_per_m:.3f}/m ({where})")
+        log(
+            f"  forward-scattering correction at c = {fs.beam_attenuation_per_m:.3f}/m ({where}),"
+            f" albedo {fs.single_scattering_albedo:.3f}"
+        )
     ps, fr = scene.process, scene.frame
     with clock.stage("process"):
         processed = process_detections(sim.returns, ctx, ps.classify, water_column=False)

@@ -58,6 +58,7 @@ __all__ = [
     "PURE_WATER_ABSORPTION_PER_M",
     "PETZOLD_NONWATER_ALBEDOS",
     "albedo_from_nonwater",
+    "attenuation_from_column",
 ]
 
 #: Fournier-Forand fit to Petzold's average particle phase function (Mobley et al. 2002).
@@ -261,3 +262,20 @@ def scattering_split(scene) -> tuple[float, float]:
     b = scene.water.scattering_per_m
     b_w = min(seawater_scattering_per_m(scene.system.wavelength_nm), b)
     return b - b_w, b_w
+
+
+def attenuation_from_column(
+    column_decay_per_m: float, fov_half_tan: float, r_air_m: float
+) -> float:
+    """Beam attenuation ``c`` whose lidar decay at the water entry is the measured one.
+
+    Inverts ``k = K_d + (c - K_d) exp(-0.85 c 2 R)`` with ``K_d = min(0.2 c + 0.04, c)``
+    (Gordon 1982; see the module), ``R = tan(FOV/2) r_air``, on a log grid of ``c``
+    (``k`` rises with ``c``). Raises ValueError for a decay that is not positive and finite.
+    """
+    if not (math.isfinite(column_decay_per_m) and column_decay_per_m > 0.0):
+        raise ValueError(f"`column_decay_per_m` must be > 0; got {column_decay_per_m!r}")
+    c = np.geomspace(1e-3, 100.0, 4001)
+    kd = np.minimum(0.2 * c + 0.04, c)
+    k = lidar_attenuation_per_m(c, kd, fov_half_tan * r_air_m)
+    return float(np.interp(column_decay_per_m, np.maximum.accumulate(k), c))

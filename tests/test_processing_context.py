@@ -145,3 +145,27 @@ def test_the_logged_wind_sets_the_facet_slope_and_a_users_value_wins():
     # survey measures its column (Gordon's bridge K_d = 0.2 c + 0.04)
     c = scene.process.forward_scatter.fallback_attenuation_per_m
     assert ctx.refraction.facet_decay_per_m == pytest.approx(0.2 * c + 0.04)
+
+
+def test_the_assumed_albedo_follows_the_measured_water_not_the_scene_truth():
+    from pipeline.process.context import with_measured_attenuation
+
+    scene = _small_survey()
+    ctx = processing_context(scene)
+    fs = ctx.refraction.forward_scatter
+    # sea water (0.045 1/m absorbed, Pope & Fry; 2.2e-3 scattered at 532 nm) plus Petzold's
+    # coastal matter (b/c 0.618) at the fallback c: written here, not read from the code
+    b_w = 2.88e-3 * (532.0 / 500.0) ** -4.32
+    c0 = scene.process.forward_scatter.fallback_attenuation_per_m
+    assert fs.single_scattering_albedo == pytest.approx((b_w + 0.618 * (c0 - 0.045 - b_w)) / c0)
+    # the survey measures a clear water's column decay: the albedo follows its c down
+    clear = with_measured_attenuation(ctx, 0.06, 400.0).refraction.forward_scatter
+    c = clear.beam_attenuation_per_m
+    assert c < c0
+    assert clear.single_scattering_albedo == pytest.approx((b_w + 0.618 * (c - 0.045 - b_w)) / c)
+    # a scene whose true water scatters otherwise does not move the assumption
+    other = parse_scene(
+        {**tomllib.loads((ROOT / "data_synthetic" / "scenes" / "palmer_survey.toml").read_text())}
+        | {"water": {"extinction_per_m": 0.15, "single_scattering_albedo": 0.9}}
+    )
+    assert processing_context(other).refraction.forward_scatter == fs

@@ -31,9 +31,10 @@ from pipeline import optics
 from pipeline.errors import SceneError
 from pipeline.lidar_equation import COX_MUNK_SLOPE_PER_M_S, cox_munk_mean_square_slope
 from pipeline.process.refraction import RefractionSettings
-from pipeline.process.scatter_bias import attenuation_from_column, bias_model
+from pipeline.process.scatter_bias import bias_model
 from pipeline.process.surface_fit import SurfaceFitSettings
 from pipeline.uncertainty.tpu import TpuSettings
+from pipeline.water_optics import attenuation_from_column
 
 __all__ = [
     "Instrument",
@@ -285,7 +286,7 @@ def with_measured_attenuation(
     and the survey measured its column decay (``column_decay_per_m``, the lidar decay of the
     stacked columns of its pulses, :mod:`pipeline.process.column_stack`); ``c`` is the one
     whose lidar decay at the median slant air range ``r_air_m`` matches it
-    (:func:`~pipeline.process.scatter_bias.attenuation_from_column`).
+    (:func:`~pipeline.water_optics.attenuation_from_column`).
     """
     fs = ctx.refraction.forward_scatter
     if fs is None or ctx.user_attenuation or column_decay_per_m is None:
@@ -302,7 +303,8 @@ def with_measured_attenuation(
     sources["process.facet_decay_per_m"] = f"measured column decay {column_decay_per_m:.4f}/m"
     refr = dataclasses.replace(
         ctx.refraction,
-        forward_scatter=dataclasses.replace(fs, beam_attenuation_per_m=c),
+        # the albedo follows the measured c when the user gave none (scatter_bias)
+        forward_scatter=fs.at_attenuation(c),
         facet_decay_per_m=float(column_decay_per_m),
     )
     return dataclasses.replace(ctx, refraction=refr, sources=sources)

@@ -20,8 +20,8 @@ What processing assumes (named settings, :class:`ForwardScatterSettings`)
   ``nonwater_albedo`` at the ``c`` assumed (:func:`pipeline.water_optics.albedo_from_nonwater`):
   clear water scatters little, whatever a coastal prior says.
 * The beam attenuation ``c``: the user's, else estimated from the survey's measured column decay
-  (:func:`attenuation_from_column`), else ``fallback_attenuation_per_m``; which one is recorded in
-  the manifest's ``processing_context``.
+  (:func:`pipeline.water_optics.attenuation_from_column`), else ``fallback_attenuation_per_m``;
+  which one is recorded in the manifest's ``processing_context``.
 * The detector: a matched filter of the system response (Gaussian, sigma ``s``), so the filtered
   echo is the mixture convolved with a Gaussian of sigma ``s sqrt(2)``, timed by a log-parabola
   through its three highest samples (:func:`peak_shift`, averaged over the sample phase), not
@@ -35,6 +35,7 @@ knob the TPU's ``forward_scatter`` term turns by ``relative_sigma``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from functools import lru_cache
@@ -60,7 +61,6 @@ __all__ = [
     "ScatterBiasModel",
     "peak_shift",
     "range_bias_m",
-    "attenuation_from_column",
     "bias_model",
 ]
 
@@ -143,6 +143,10 @@ class ScatterBiasModel:
         For the sea-water part of the scattering.
     relative_sigma : float
         One-sigma relative error of the correction (the TPU's ``forward_scatter`` term).
+    nonwater_albedo : float or None
+        The albedo of the matter beside sea water when ``omega_0`` follows ``c``
+        (:func:`pipeline.water_optics.albedo_from_nonwater`, :meth:`at_attenuation`); None: a
+        fixed ``omega_0`` (the user's).
     scale : float
         Multiplies the correction (1; the TPU perturbs it).
     estimator : str
@@ -160,6 +164,17 @@ class ScatterBiasModel:
     relative_sigma: float = 0.5
     scale: float = 1.0
     estimator: str = "detector"
+    nonwater_albedo: float | None = None
+
+    def at_attenuation(self, beam_attenuation_per_m: float) -> ScatterBiasModel:
+        """The model at another ``c`` (a measured one), ``omega_0`` following it if it does."""
+        c = float(beam_attenuation_per_m)
+        albedo = self.single_scattering_albedo
+        if self.nonwater_albedo is not None:
+            albedo = wo.albedo_from_nonwater(c, self.nonwater_albedo, self.wavelength_nm)
+        return dataclasses.replace(
+            self, beam_attenuation_per_m=c, single_scattering_albedo=float(albedo)
+        )
 
     def detector(self) -> DetectorTiming | None:
         """The detector's timing in sigma units (None without samples), as detect.py sets it."""
@@ -398,23 +413,6 @@ def range_bias_m(
     return np.where(ok, model.scale * 0.5 * two_way, 0.0)
 
 
-def attenuation_from_column(
-    column_decay_per_m: float, fov_half_tan: float, r_air_m: float
-) -> float:
-    """Beam attenuation ``c`` whose lidar decay at the water entry is the measured one.
-
-    Inverts ``k = K_d + (c - K_d) exp(-0.85 c 2 R)`` with ``K_d = min(0.2 c + 0.04, c)``
-    (Gordon 1982; :mod:`pipeline.water_optics`), ``R = tan(FOV/2) r_air``, on a log grid of ``c``
-    (``k`` rises with ``c``). Raises ValueError for a decay that is not positive and finite.
-    """
-    if not (math.isfinite(column_decay_per_m) and column_decay_per_m > 0.0):
-        raise ValueError(f"`column_decay_per_m` must be > 0; got {column_decay_per_m!r}")
-    c = np.geomspace(1e-3, 100.0, 4001)
-    kd = np.minimum(0.2 * c + 0.04, c)
-    k = wo.lidar_attenuation_per_m(c, kd, fov_half_tan * r_air_m)
-    return float(np.interp(column_decay_per_m, np.maximum.accumulate(k), c))
-
-
 def bias_model(
     settings: ForwardScatterSettings,
     *,
@@ -428,13 +426,16 @@ def bias_model(
     """The correction for resolved assumptions (None when ``model = "none"``)."""
     if settings.model == "none":
         return None
+    follows = settings.single_scattering_albedo is None
+    nonwater = float(settings.nonwater_albedo) if follows else None
     return ScatterBiasModel(
         beam_attenuation_per_m=float(attenuation_per_m),
         single_scattering_albedo=float(
-            settings.single_scattering_albedo
-            if settings.single_scattering_albedo is not None
-            else wo.albedo_from_nonwater(attenuation_per_m, settings.nonwater_albedo, wavelength_nm)
+            wo.albedo_from_nonwater(attenuation_per_m, nonwater, wavelength_nm)
+            if follows
+            else settings.single_scattering_albedo
         ),
+        nonwater_albedo=nonwater,
         fov_half_tan=math.tan(0.5e-3 * fov_mrad),
         system_sigma_s=float(system_fwhm_s * FWHM_TO_SIGMA),
         sample_interval_s=float(sample_interval_s),

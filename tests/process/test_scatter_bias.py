@@ -28,13 +28,12 @@ from pipeline.process.detect import DetectSettings, detect_full_waveform
 from pipeline.process.refraction import RefractionSettings, seabed_points
 from pipeline.process.scatter_bias import (
     ForwardScatterSettings,
-    attenuation_from_column,
     bias_model,
     peak_shift,
 )
 from pipeline.process.surface_fit import SurfaceFitSettings, fit_water_surface
 from pipeline.uncertainty.tpu import TpuSettings, point_tpu
-from pipeline.water_optics import lidar_attenuation_per_m
+from pipeline.water_optics import attenuation_from_column, lidar_attenuation_per_m
 
 C = constants.c
 FWHM_S = math.hypot(1.5e-9, 1.0e-9)  # the full-waveform preset's pulse and detector

@@ -69,6 +69,12 @@ def test_processing_assumes_clear_water_scatters_little_and_a_users_albedo_wins(
         ForwardScatterSettings(single_scattering_albedo=0.55), attenuation_per_m=0.05, **kw
     )
     assert user.single_scattering_albedo == 0.55
+    # the survey's measured c replaces the fallback one: the albedo follows it, a user's stays
+    fallback = bias_model(ForwardScatterSettings(), attenuation_per_m=0.15, **kw)
+    measured = fallback.at_attenuation(0.05)
+    assert measured.beam_attenuation_per_m == 0.05
+    assert measured.single_scattering_albedo == clear.single_scattering_albedo
+    assert user.at_attenuation(0.4).single_scattering_albedo == 0.55
 
 
 def test_suite_waters_are_physical_and_span_petzolds():
