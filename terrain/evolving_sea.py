@@ -166,7 +166,7 @@ class EvolvingSea:
             self._cache.move_to_end(j)
             return self._cache[j]
         t = j * self.slab_s
-        pair = (self.field.at_time(t), self.field.rate_at_time(t))
+        pair = self.field.surface_and_rate(t)
         self._cache[j] = pair
         while len(self._cache) > self._cache_size:
             self._cache.popitem(last=False)

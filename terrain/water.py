@@ -287,10 +287,15 @@ class WaveField:
             weight[-1] = 1.0
         self._weight = weight[None, :]
 
-    def _modes(self, t_s: float) -> np.ndarray:
+    def _parts(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """``h0(k) e^{-i w t}`` and ``conj(h0(-k)) e^{i w t}`` of every mode."""
         t = check_number("t_s", t_s)
         phase = np.exp(-1j * self._omega * t)
-        return self._h_plus * phase + self._h_minus * np.conj(phase)
+        return self._h_plus * phase, self._h_minus * np.conj(phase)
+
+    def _modes(self, t_s: float) -> np.ndarray:
+        up, down = self._parts(t_s)
+        return up + down
 
     def at_time(self, t_s: float = 0.0) -> GridSurface:
         """The surface frozen at time ``t_s`` (s): periodic GridSurface over ``extent``."""
@@ -303,10 +308,19 @@ class WaveField:
         derivative of :meth:`at_time`'s field (:mod:`terrain.evolving_sea` interpolates in time
         with it).
         """
-        t = check_number("t_s", t_s)
-        phase = np.exp(-1j * self._omega * t)
-        rate = -1j * self._omega * (self._h_plus * phase - self._h_minus * np.conj(phase))
-        return self._grid(rate, 0.0)
+        up, down = self._parts(t_s)
+        return self._grid(-1j * self._omega * (up - down), 0.0)
+
+    def surface_and_rate(self, t_s: float = 0.0) -> tuple[GridSurface, GridSurface]:
+        """:meth:`at_time` and :meth:`rate_at_time` at ``t_s``: the same numbers.
+
+        The modes' phases are computed once for both (an eighth of a boundary's cost on a
+        4096-node tile: one complex ``exp`` over 8.4 M modes of the two).
+        """
+        up, down = self._parts(t_s)
+        surface = self._grid(up + down, self.mean_level_m)
+        up -= down  # in place: the same bits as up - down, one array fewer
+        return surface, self._grid(-1j * self._omega * up, 0.0)
 
     def _grid(self, modes: np.ndarray, level_m: float) -> GridSurface:
         ny, nx = self.shape

@@ -88,6 +88,18 @@ def test_between_slab_boundaries_the_error_is_within_the_tolerance():
     np.testing.assert_allclose(rate, a * w * np.sin(k * x - w * 0.3), atol=2e-5 * a * w)
 
 
+def test_a_boundary_pair_is_the_surface_and_rate_to_the_bit():
+    # the slab boundaries compute the modes' phases once for both grids (issue 15): the same
+    # numbers as the two separate calls, which the test above holds to the exact field
+    field = WaveField(
+        6.0, extent=(0.0, 40.0, 0.0, 40.0), spacing_m=40.0 / 128, rng=5, calibrate_mss=False
+    )
+    for t in (0.0, 0.37, 12.5):
+        surface, rate = field.surface_and_rate(t)
+        assert np.array_equal(surface.z_m, field.at_time(t).z_m)
+        assert np.array_equal(rate.z_m, field.rate_at_time(t).z_m)
+
+
 def test_wind_sea_between_boundaries_keeps_its_slopes_and_heights():
     """Mid-slab (the worst point) against the exact field at the same time.
 
