@@ -192,7 +192,7 @@ def _hand_rows():
 
 
 def test_extinction_depth_source():
-    assert extinction_depth_m(np.full(MIN_NO_BOTTOM, 7.0), 0.3) == (7.0, "class45_median")
+    assert extinction_depth_m(np.full(MIN_NO_BOTTOM, 7.0), 0.3) == (7.0, "class45_beyond_found")
     d, src = extinction_depth_m(np.full(MIN_NO_BOTTOM - 1, 7.0), 0.3)
     assert src == "planning_4.5_over_c" and d == pytest.approx(15.0)
     # photon counting's class 45 sits at the range gate's end: never a detection limit

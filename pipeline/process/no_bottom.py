@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S
-from pipeline.process.classify import NO_BOTTOM_FOUND_AT
+from pipeline.process.classify import BATHYMETRIC_POINT, NO_BOTTOM_FOUND_AT
 from pipeline.process.column_stack import ColumnStack, stack_column, stacked_decay_per_m
 from pipeline.process.context import ProcessingContext
 from pipeline.process.detect import DetectSettings
@@ -28,6 +28,7 @@ from pipeline.process.detection_limit import (
     excess_decay_per_s,
     limit_after_surface_s,
 )
+from pipeline.process.extinction import extinction_depth
 from pipeline.process.returns import DetectedReturns, DetectorFlag, Points
 
 __all__ = [
@@ -255,19 +256,32 @@ def extinction_depth_summary(points: Points) -> dict[str, Any]:
     Each class-45 point stands at its pulse's detection limit (full waveform:
     :mod:`pipeline.process.detection_limit`; photon counting: the window's limit), so, where
     the survey lost the bottom in deep or turbid water, their median is its measured
-    extinction depth. Read it with the class-40 depths: over a shore, pulses whose bottom
-    merged with the surface also give shallow class-45 points and pull the median up (tuning
-    seed 54 of the suite: 4.2 m in c = 0.064 /m water, its 95th percentile 60 m).
+    extinction depth. Over a shore, pulses whose bottom merged with the surface also give
+    shallow class-45 points and pull their median up (tuning seed 54 of the suite: 4.2 m in
+    c = 0.064 /m water, its 95th percentile 60 m); the extinction depth reported keeps only the
+    limits as deep as the median sounding (:mod:`pipeline.process.extinction`).
 
     Returns
     -------
     dict
         ``class45_points`` and the 5th, 50th and 95th percentiles of their depths below the
         local surface, ``class45_depth_m_p05``, ``class45_depth_m_median``,
-        ``class45_depth_m_p95`` (None without class-45 points).
+        ``class45_depth_m_p95`` (None without class-45 points); ``seabed_found_to_m``,
+        ``extinction_depth_m`` (None: not reached) and ``extinction_depth_source``
+        (:func:`pipeline.process.extinction.extinction_depth`: the class-45 limits at least as
+        deep as the median sounding).
     """
     d = points.depth_m[points.classification == NO_BOTTOM_FOUND_AT]
     d = d[np.isfinite(d)]
     q = np.percentile(d, [5.0, 50.0, 95.0]).tolist() if d.size else [None] * 3
     keys = ("class45_depth_m_p05", "class45_depth_m_median", "class45_depth_m_p95")
-    return {"class45_points": int(d.size), **dict(zip(keys, q, strict=True))}
+    ext, src, found = extinction_depth(
+        d, points.depth_m[points.classification == BATHYMETRIC_POINT]
+    )
+    return {
+        "class45_points": int(d.size),
+        **dict(zip(keys, q, strict=True)),
+        "seabed_found_to_m": found,
+        "extinction_depth_m": ext,
+        "extinction_depth_source": src,
+    }

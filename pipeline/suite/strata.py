@@ -9,7 +9,9 @@ the scenes' RMSEs.
 ``[1 m, 0.8 D_ext]``. ``D_ext``, the scene's extinction depth, comes from the run's own
 outputs where it can: the median depth of its class-45 (no-bottom-found-at) points, each placed
 by processing at its pulse's own detection limit (:mod:`pipeline.process.detection_limit`),
-when a full-waveform run has at least :data:`MIN_NO_BOTTOM` of them. Other runs (photon
+those at least as deep as its median sounding (:mod:`pipeline.process.extinction`: a shore's
+merged bottoms are not the light giving out), when a full-waveform run has at least
+:data:`MIN_NO_BOTTOM` of them. Other runs (photon
 counting places class 45 at the end of its range gate, not at a detection limit; a shallow
 full-waveform scene finds the bottom everywhere) fall back to a
 planning value from the scene's beam attenuation ``c``: ``4.5 / c`` (the generator's guess,
@@ -36,6 +38,8 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.process.extinction import MIN_CLASS45, extinction_depth
+
 __all__ = [
     "MIN_NO_BOTTOM",
     "DEPTH_BANDS_M",
@@ -52,7 +56,7 @@ __all__ = [
 ]
 
 #: class-45 points a run needs for its median detection limit to stand as D_ext
-MIN_NO_BOTTOM = 20
+MIN_NO_BOTTOM = MIN_CLASS45  # class-45 points a run's own D_ext needs
 #: depth bands of the points (m, lower edge inclusive)
 DEPTH_BANDS_M = (0.1, 1.0, 3.0, 6.0, 12.0, 25.0, math.inf)
 #: finer bands of the shallowest-unbiased-depth search (m)
@@ -74,18 +78,24 @@ _REJ_EMPTY = {
 
 
 def extinction_depth_m(
-    nb_depth_m: np.ndarray, attenuation_per_m: float, receiver: str = "full_waveform"
+    nb_depth_m: np.ndarray,
+    attenuation_per_m: float,
+    receiver: str = "full_waveform",
+    class40_depth_m: np.ndarray | None = None,
 ) -> tuple[float, str]:
     """The scene's extinction depth and where it comes from (see the module docstring).
 
-    A photon-counting run takes the planning value: its class-45 points sit at its windows'
-    detection limits (:mod:`pipeline.process.photon_limit`) only since that limit was added,
-    and the suite keeps the planning value its baseline used, so figures stay comparable.
+    A full-waveform run's own (:func:`pipeline.process.extinction.extinction_depth` of its
+    class-45 and class-40 depths) where it reached one. A photon-counting run takes the
+    planning value: its class-45 points sit at its windows' detection limits
+    (:mod:`pipeline.process.photon_limit`) only since that limit was added, and the suite keeps
+    the planning value its baseline used, so figures stay comparable.
     """
-    nb = np.asarray(nb_depth_m, dtype=np.float64)
-    nb = nb[np.isfinite(nb) & (nb > 0)]
-    if receiver == "full_waveform" and nb.size >= MIN_NO_BOTTOM:
-        return float(np.median(nb)), "class45_median"
+    if receiver == "full_waveform":
+        d40 = np.zeros(0) if class40_depth_m is None else class40_depth_m
+        ext, src, _ = extinction_depth(nb_depth_m, d40)
+        if ext is not None:
+            return ext, src
     return 4.5 / attenuation_per_m, "planning_4.5_over_c"
 
 
@@ -174,7 +184,9 @@ def pool_rows(rows: list[dict[str, Any]]) -> Pool:
         a = {**{k: np.zeros(0, t) for k, t in _REJ_EMPTY.items()}, **row["arrays"]}
         # runs from before the THU search (pipeline.evaluate_thu): the strict error
         a.setdefault("pt_error_thu_m", a["pt_error_m"])
-        d_ext, src = extinction_depth_m(a["nb_depth_m"], d.attenuation_per_m, d.receiver)
+        d_ext, src = extinction_depth_m(
+            a["nb_depth_m"], d.attenuation_per_m, d.receiver, a["pt_depth_m"]
+        )
         meta.append({**d.to_dict(), "d_ext_m": d_ext, "d_ext_source": src})
         for name, v in a.items():
             if name != "nb_depth_m":

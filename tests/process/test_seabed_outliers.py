@@ -188,5 +188,10 @@ def test_extinction_depth_summary_is_the_class_45_depths():
         "class45_depth_m_p05": pytest.approx(10.5),
         "class45_depth_m_median": pytest.approx(15.0),
         "class45_depth_m_p95": pytest.approx(19.5),
+        # the seabed was found at 30 and 40 m: limits shallower than the median sounding
+        # (35 m) are local losses, so the survey did not reach its extinction depth
+        "seabed_found_to_m": pytest.approx(39.5),
+        "extinction_depth_m": None,
+        "extinction_depth_source": "not_reached",
     }
     assert extinction_depth_summary(p)["class45_depth_m_median"] is None
