@@ -6,12 +6,12 @@ down to there. Where the light gave out, those limits gather at the extinction d
 every class-45 point says that: over a shore a bottom merged with the surface, on a dark or
 steep patch one pulse's echo was too weak, and their limits lie shallower than bottoms the
 same water gave elsewhere (suite seeds 54 and 7006: a 4.2 m and a 2.0 m median in c = 0.064
-and 0.076 /m water, whose seabed was found to 4.9 m and deeper). So only the limits at least
-as deep as the median class-40 depth count: in one water a limit shallower than half the
-bottoms the survey found is a local loss, not the light's. The extinction depth is their
-median, and never shallower than the 95th percentile of the class-40 depths (the survey
-established the seabed that deep); with fewer than :data:`MIN_CLASS45` of them the survey
-did not reach it (``None``): it found a bottom wherever it sounded.
+and 0.076 /m water, whose seabed was found to 4.9 m and deeper). In one water, a bottom found
+deeper than a limit shows the light reached deeper; so only the limits at least as deep as the
+95th percentile of the class-40 depths count (the survey established the seabed that deep; the
+deepest 5 % of its soundings may be the lucky bright ones past a mean limit), and the
+extinction depth is their median. With fewer than :data:`MIN_CLASS45` of them the survey did
+not reach it (``None``): it found a bottom wherever it sounded.
 """
 
 from __future__ import annotations
@@ -50,8 +50,8 @@ def extinction_depth(
     d40 = np.asarray(class40_depth_m, dtype=np.float64)
     d40 = d40[np.isfinite(d40)]
     found = float(np.percentile(d40, 95.0)) if d40.size else None
-    if d40.size:
-        d45 = d45[d45 >= np.median(d40)]
+    if found is not None:
+        d45 = d45[d45 >= found]
     if d45.size < MIN_CLASS45:
         return None, "not_reached", found
-    return max(float(np.median(d45)), found or 0.0), "class45_beyond_found", found
+    return float(np.median(d45)), "class45_beyond_found", found

@@ -259,7 +259,7 @@ def extinction_depth_summary(points: Points) -> dict[str, Any]:
     extinction depth. Over a shore, pulses whose bottom merged with the surface also give
     shallow class-45 points and pull their median up (tuning seed 54 of the suite: 4.2 m in
     c = 0.064 /m water, its 95th percentile 60 m); the extinction depth reported keeps only the
-    limits as deep as the median sounding (:mod:`pipeline.process.extinction`).
+    limits at least as deep as 95 % of the soundings (:mod:`pipeline.process.extinction`).
 
     Returns
     -------
@@ -269,7 +269,7 @@ def extinction_depth_summary(points: Points) -> dict[str, Any]:
         ``class45_depth_m_p95`` (None without class-45 points); ``seabed_found_to_m``,
         ``extinction_depth_m`` (None: not reached) and ``extinction_depth_source``
         (:func:`pipeline.process.extinction.extinction_depth`: the class-45 limits at least as
-        deep as the median sounding).
+        deep as 95 % of the soundings).
     """
     d = points.depth_m[points.classification == NO_BOTTOM_FOUND_AT]
     d = d[np.isfinite(d)]

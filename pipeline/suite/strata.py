@@ -9,8 +9,8 @@ the scenes' RMSEs.
 ``[1 m, 0.8 D_ext]``. ``D_ext``, the scene's extinction depth, comes from the run's own
 outputs where it can: the median depth of its class-45 (no-bottom-found-at) points, each placed
 by processing at its pulse's own detection limit (:mod:`pipeline.process.detection_limit`),
-those at least as deep as its median sounding (:mod:`pipeline.process.extinction`: a shore's
-merged bottoms are not the light giving out), when a full-waveform run has at least
+those at least as deep as 95 % of its soundings (:mod:`pipeline.process.extinction`: a
+shore's merged bottoms are not the light giving out), when a full-waveform run has at least
 :data:`MIN_NO_BOTTOM` of them. Other runs (photon
 counting places class 45 at the end of its range gate, not at a detection limit; a shallow
 full-waveform scene finds the bottom everywhere) fall back to a
