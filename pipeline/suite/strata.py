@@ -55,8 +55,8 @@ __all__ = [
     "shallowest_unbiased_m",
 ]
 
-#: class-45 points a run needs for its median detection limit to stand as D_ext
-MIN_NO_BOTTOM = MIN_CLASS45  # class-45 points a run's own D_ext needs
+#: class-45 points a run needs for its own D_ext (:data:`pipeline.process.extinction.MIN_CLASS45`)
+MIN_NO_BOTTOM = MIN_CLASS45
 #: depth bands of the points (m, lower edge inclusive)
 DEPTH_BANDS_M = (0.1, 1.0, 3.0, 6.0, 12.0, 25.0, math.inf)
 #: finer bands of the shallowest-unbiased-depth search (m)
