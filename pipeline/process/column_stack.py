@@ -56,7 +56,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S
-from pipeline.process.detection_limit import BLOCK, DetectorModel, filtered_waveforms
+from pipeline.process.detection_limit import (
+    BLOCK,
+    DetectorModel,
+    column_first_s,
+    filtered_waveforms,
+)
 
 __all__ = ["MIN_PULSES", "MIN_SNR", "ColumnStack", "stack_column", "stacked_decay_per_m"]
 
@@ -170,6 +175,7 @@ def stack_column(
     t_surface_s: np.ndarray,
     t_end_s: np.ndarray,
     det: DetectorModel,
+    first_s: np.ndarray | None = None,
 ) -> ColumnStack:
     """Add the columns of a chunk's pulses, each aligned at its first column sample.
 
@@ -184,18 +190,22 @@ def stack_column(
         Each pulse's column ends before this time from the first sample (a separation before its
         bottom or in-column echo, or the detector's searched end), seconds.
     det : DetectorModel
+    first_s : (n,) ndarray, optional
+        Each pulse's first column time from the first sample
+        (:func:`~pipeline.process.detection_limit.column_first_s`: later after a clipped
+        surface echo); default ``surface + min_separation_fwhm × FWHM``.
 
     Returns
     -------
     ColumnStack
-        Bins from the first column sample, ``surface + min_separation_fwhm × FWHM`` (where the
-        surface echo no longer masks the column); ``m`` bins.
+        Bins from each pulse's first column sample (where its surface echo no longer masks
+        the column; a sum of exponentials of one decay, each aligned at its own start, is
+        still that exponential); ``m`` bins.
     """
     samples = np.asarray(samples)
     n, m = samples.shape
-    first = (
-        np.asarray(t_surface_s, dtype=np.float64) + det.min_separation_fwhm * det.pulse_fwhm_s
-    ) / det.dt_s
+    t_s = np.asarray(t_surface_s, dtype=np.float64)
+    first = (column_first_s(t_s, t_s, det) if first_s is None else first_s) / det.dt_s
     end = np.asarray(t_end_s, dtype=np.float64) / det.dt_s
     out = ColumnStack.empty(det.dt_s)
     for i in range(0, n, BLOCK):  # blocks bound the (pulses × samples) temporaries

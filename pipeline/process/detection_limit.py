@@ -58,6 +58,7 @@ __all__ = [
     "DetectorModel",
     "ColumnMargins",
     "bottom_to_column_ratio",
+    "column_first_s",
     "column_margins",
     "bottom_losses",
     "excess_decay_per_s",
@@ -146,6 +147,49 @@ def bottom_to_column_ratio(
     )
 
 
+def column_first_s(
+    t_surface_s: np.ndarray,
+    surface_amplitude: np.ndarray,
+    det: DetectorModel,
+    top_above_baseline: np.ndarray | float | None = None,
+) -> np.ndarray:
+    """Where each pulse's measurable column starts: past the tail of its surface echo.
+
+    An echo of the system's Gaussian filters to ``(A / √2) exp(−τ² / 4σ²)``: the column is
+    read from ``min_separation_fwhm`` FWHM after the surface, where the brightest echo the
+    digitiser records (``A`` at its top code) has fallen to ``L = (A_top / √2) exp(−sep² /
+    4σ²)``. A clipped echo is brighter than the top code (``A`` from its plateau's edges,
+    :mod:`pipeline.process.detect_clipped`); its tail falls to the same ``L`` only
+    ``τ = √(sep² + 4σ² ln(A / A_top))`` after its centre (clipping lowers samples, so the
+    filtered clipped echo stays below its Gaussian's). Without this, a clipped pulse's column
+    was not read at all, and a nadir profiler whose every surface echo clips measured no
+    column (suite held-out seeds 1 and 12: no decay, the water's c fell back to 0.15 /m).
+
+    Parameters
+    ----------
+    t_surface_s, surface_amplitude : (n,) ndarray
+        The detector's surface time (s) and filtered peak (``A / √2``; a clipped echo's is
+        its plateau's ``A`` over √2).
+    det : DetectorModel
+    top_above_baseline : (n,) ndarray or float, optional
+        The digitiser's top code above each pulse's baseline; None: no echo is clipped.
+
+    Returns
+    -------
+    (n,) ndarray
+        Seconds, on the surface time's clock.
+    """
+    t_s = np.asarray(t_surface_s, dtype=np.float64)
+    sep_s = det.min_separation_fwhm * det.pulse_fwhm_s
+    if top_above_baseline is None:
+        return t_s + sep_s
+    a = math.sqrt(2.0) * np.asarray(surface_amplitude, dtype=np.float64)
+    ratio = a / np.maximum(np.asarray(top_above_baseline, dtype=np.float64), 1e-300)
+    sigma_s = det.sigma_samples * det.dt_s
+    tail = np.sqrt(sep_s**2 + 4.0 * sigma_s**2 * np.log(np.maximum(ratio, 1.0)))
+    return t_s + np.where(ratio > 1.0, tail, sep_s)
+
+
 def _blocks(fn, n: int, *arrays):
     """``fn`` over blocks of ``BLOCK`` pulses (bounds the pulses × samples temporaries)."""
     parts = [fn(*(a[i : i + BLOCK] for a in arrays)) for i in range(0, n, BLOCK)]
@@ -167,12 +211,21 @@ def filtered_waveforms(samples: np.ndarray, det: DetectorModel) -> np.ndarray:
     return gaussian_filter1d(y - base, det.sigma_samples, axis=1, mode="nearest")
 
 
-def _column_fit(samples, t_surface_s, t_end_idx, noise_sigma, det, min_snr):
-    """``(log C0, α, ok)`` of the filtered column between the surface echo and ``t_end_idx``."""
+def _first_idx(t_surface_s, det, first_s) -> np.ndarray:
+    """Sample index of each column's start: ``first_s``, else one separation after the surface."""
+    if first_s is None:
+        first_s = column_first_s(t_surface_s, t_surface_s, det)
+    return np.asarray(first_s, dtype=np.float64) / det.dt_s
+
+
+def _column_fit(samples, t_surface_s, t_end_idx, noise_sigma, det, min_snr, first):
+    """``(log C0, α, ok)`` of the filtered column from index ``first`` to ``t_end_idx``.
+
+    ``log C0`` is the column carried back to the surface time.
+    """
     filt = filtered_waveforms(samples, det)
     n, m = filt.shape
     i_s = np.asarray(t_surface_s, dtype=np.float64) / det.dt_s
-    first = i_s + det.min_separation_fwhm * det.pulse_fwhm_s / det.dt_s
     cols = np.arange(m)[None, :]
     nf = np.maximum(np.asarray(noise_sigma, dtype=np.float64), 1e-300)[:, None]
     after = cols > first[:, None]
@@ -200,6 +253,7 @@ def column_margins(
     noise_sigma: np.ndarray,
     det: DetectorModel,
     settings: NoBottomSettings | None = None,
+    first_s: np.ndarray | None = None,
 ) -> ColumnMargins:
     """The measured column of waveforms without a bottom, against the assumed bottom's echo.
 
@@ -214,6 +268,9 @@ def column_margins(
         threshold it applied is ``threshold_sigma`` times it).
     det : DetectorModel
     settings : NoBottomSettings, optional
+    first_s : (n,) ndarray, optional
+        Where each column starts (:func:`column_first_s`); default one separation after the
+        surface.
 
     Returns
     -------
@@ -227,11 +284,12 @@ def column_margins(
     gap = max(2, math.ceil(1.5 * fwhm))
     t_s = np.asarray(t_surface_s, dtype=np.float64)
     nf = np.asarray(noise_sigma, dtype=np.float64)
+    first = _first_idx(t_s, det, first_s)
 
-    def fit(y, ts, noise):
-        return _column_fit(y, ts, np.full(len(ts), m - gap), noise, det, s.min_column_snr)
+    def fit(y, ts, noise, f):
+        return _column_fit(y, ts, np.full(len(ts), m - gap), noise, det, s.min_column_snr, f)
 
-    log_c0, alpha, ok = _blocks(fit, n, samples, t_s, nf)
+    log_c0, alpha, ok = _blocks(fit, n, samples, t_s, nf, first)
     # the assumed bottom at the threshold: r C = k √(σ_f² + F G C Σg²), solved for C
     r = bottom_to_column_ratio(s, det.group_index, det.sigma_samples * det.dt_s)
     kern_sq = 1.0 / (2.0 * math.sqrt(math.pi) * det.sigma_samples)  # Σ of the kernel squared
@@ -255,6 +313,7 @@ def bottom_losses(
     noise_sigma: np.ndarray,
     det: DetectorModel,
     settings: NoBottomSettings | None = None,
+    first_s: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """How much weaker found bottoms are than the model's bottom from their own column.
 
@@ -268,6 +327,9 @@ def bottom_losses(
         The detector's bottom peak (over the column trend) and filtered noise σ.
     det : DetectorModel
     settings : NoBottomSettings, optional
+    first_s : (n,) ndarray, optional
+        Where each column starts (:func:`column_first_s`); default one separation after the
+        surface.
 
     Returns
     -------
@@ -282,12 +344,13 @@ def bottom_losses(
     sep = det.min_separation_fwhm * det.pulse_fwhm_s / det.dt_s
     t_s = np.asarray(t_surface_s, dtype=np.float64)
     t_b = np.asarray(t_bottom_s, dtype=np.float64)
+    first = _first_idx(t_s, det, first_s)
 
-    def fit(y, ts, tb, noise):
+    def fit(y, ts, tb, noise, f):
         # the column up to one separation before the bottom echo
-        return _column_fit(y, ts, tb / det.dt_s - sep, noise, det, s.min_column_snr)
+        return _column_fit(y, ts, tb / det.dt_s - sep, noise, det, s.min_column_snr, f)
 
-    log_c0, alpha, ok = _blocks(fit, n, samples, t_s, t_b, np.asarray(noise_sigma, float))
+    log_c0, alpha, ok = _blocks(fit, n, samples, t_s, t_b, np.asarray(noise_sigma, float), first)
     r = bottom_to_column_ratio(s, det.group_index, det.sigma_samples * det.dt_s)
     dt = t_b - t_s
     amp = np.asarray(bottom_amplitude, dtype=np.float64)

@@ -24,6 +24,7 @@ from pipeline.process.detection_limit import (
     DetectorModel,
     NoBottomSettings,
     bottom_losses,
+    column_first_s,
     column_margins,
     excess_decay_per_s,
     limit_after_surface_s,
@@ -86,15 +87,20 @@ def chunk_inputs(
     """
     det = detector_model(ctx, detect)
     n = found.has_surface.shape[0]
-    # a saturated pulse's column is clipped or follows a clipped surface: its decay, and so
-    # the depth a bottom would have shown down to, is not measured
-    saturated = (found.flags & np.uint16(DetectorFlag.SATURATED)) != 0
-    none = found.has_surface & ~found.has_bottom & ~saturated
+    m = samples.shape[1]
+    first, clip_idx = _column_starts(samples, found, det, ctx)
+    whole = clip_idx >= m  # no sample clipped from the column's start on
+    none = found.has_surface & ~found.has_bottom & whole
     margin, alpha, t_max = np.zeros(n), np.ones(n), np.zeros(n)
     ok = np.zeros(n, dtype=bool)
     if none.any():
         cm = column_margins(
-            samples[none], found.t_surface_s[none], found.noise_sigma[none], det, settings
+            samples[none],
+            found.t_surface_s[none],
+            found.noise_sigma[none],
+            det,
+            settings,
+            first_s=first[none],
         )
         margin[none], alpha[none], t_max[none], ok[none] = (
             cm.log_margin,
@@ -104,11 +110,10 @@ def chunk_inputs(
         )
     # a bottom near the threshold is found only where it happened to be bright: its loss would
     # bias the extra decay low, so only clear detections are used
-    strong = (
-        found.has_bottom
-        & ~saturated
-        & (found.bottom_amplitude >= 2.0 * detect.threshold_sigma * found.noise_sigma)
+    bright = found.has_bottom & (
+        found.bottom_amplitude >= 2.0 * detect.threshold_sigma * found.noise_sigma
     )
+    strong = bright & whole  # (a clipped bottom's peak is not its amplitude)
     t_b, loss, ok_b = bottom_losses(
         samples[strong],
         found.t_surface_s[strong],
@@ -117,24 +122,24 @@ def chunk_inputs(
         found.noise_sigma[strong],
         det,
         settings,
+        first_s=first[strong],
     )
     # the stacked column (the survey's water decay, pipeline.process.column_stack) of the same
     # pulses, each up to its own end: the searched end, or one separation before its bottom or
     # in-column echo (no echo enters the stack)
     sep_s = det.min_separation_fwhm * det.pulse_fwhm_s
-    m = samples.shape[1]
     searched_end_s = (m - max(2, math.ceil(1.5 * det.pulse_fwhm_s / det.dt_s))) * det.dt_s
-    t_end = np.where(strong, found.t_bottom_s - sep_s, searched_end_s)
+    t_end = np.where(bright, found.t_bottom_s - sep_s, searched_end_s)
     t_end = np.where(found.has_column, np.minimum(t_end, found.t_column_s - sep_s), t_end)
     # two stacks: a column that ends before an echo is water all along; one that runs to the
     # searched end also runs past the seabed of a pulse whose bottom was too faint to be found,
     # where the column stops, and a stack of such cliffs falls faster than the water decays
-    # (pipeline.process.column_stack)
-    closed = strong | (none & found.has_column)
+    # (pipeline.process.column_stack). A column stacked up to a clipped bottom is whole.
+    closed = (bright & (clip_idx >= t_end / det.dt_s)) | (none & found.has_column)
     open_ = none & ~found.has_column
 
     def stack_of(rows):
-        return stack_column(samples[rows], found.t_surface_s[rows], t_end[rows], det)
+        return stack_column(samples[rows], found.t_surface_s[rows], t_end[rows], det, first[rows])
 
     return {
         "column_stack": stack_of(closed),
@@ -149,6 +154,42 @@ def chunk_inputs(
         # the chunk rows of those bottoms (the survey-wide sample is by pulse)
         "b_row": np.flatnonzero(strong)[ok_b],
     }
+
+
+def _column_starts(samples, found, det, ctx) -> tuple[np.ndarray, np.ndarray]:
+    """Each pulse's first column time, and its first clipped sample from there on.
+
+    A saturated pulse's surface echo, if clipped, hides the column under its tail: the column
+    is read from past it (:func:`~pipeline.process.detection_limit.column_first_s`, the echo's
+    amplitude from its plateau's edges). What is clipped from there on (the column itself, or
+    a bright bottom) is not read; nothing is where the plateau runs on into the column
+    (``CLIPPED_MERGED``).
+
+    Returns
+    -------
+    first_s : (n,) float
+        Seconds from the first sample.
+    clip_idx : (n,) float
+        Index of the first clipped sample at or after ``first_s`` (``m``: none; 0: the
+        column cannot be read at all).
+    """
+    flags = found.flags
+    n, m = samples.shape
+    first = column_first_s(found.t_surface_s, found.surface_amplitude, det)
+    clip_idx = np.full(n, float(m))
+    merged = (flags & np.uint16(DetectorFlag.CLIPPED_MERGED)) != 0
+    clip_idx[merged] = 0.0
+    rows = np.flatnonzero(((flags & np.uint16(DetectorFlag.SATURATED)) != 0) & ~merged)
+    if rows.size:
+        top = ctx.instrument.amplitude_full_scale - 1.0  # the digitiser's top code
+        y = np.asarray(samples[rows], dtype=np.float64)
+        k = min(max(int(det.noise_samples), 4), max(m - 1, 1))
+        base = np.median(y[:, :k], axis=1)  # as the filtered column's baseline
+        f = column_first_s(found.t_surface_s[rows], found.surface_amplitude[rows], det, top - base)
+        clipped = (y >= top) & (np.arange(m)[None, :] >= np.ceil(f / det.dt_s)[:, None])
+        first[rows] = f
+        clip_idx[rows] = np.where(clipped.any(axis=1), np.argmax(clipped, axis=1), m)
+    return first, clip_idx
 
 
 def excess_decay_summary(
