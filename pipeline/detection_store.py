@@ -279,7 +279,7 @@ class SurveyAggregates:
             sb = s[nb["b_row"]]
             self.nb_t_b.append(nb["t_b"][sb])
             self.nb_loss.append(nb["loss"][sb])
-            self.nb_alpha.append(nb["alpha"][nb["ok"] & s])
+            self.nb_alpha.append(nb["alpha_fit"][nb["ok"] & s])
             self.nb_counts["bottoms"] += int(nb["t_b"].size)
             self.nb_counts["no_column"] += int(np.count_nonzero(nb["none"] & ~nb["ok"]))
             stack, open_ = nb["column_stack"], nb["column_stack_open"]

@@ -32,7 +32,8 @@ Arrays (``n`` rows per group; a group is empty when the run has none):
   neither: a seabed outlier).
 * ``nb_depth_m`` - measured depths of the class-45 (no-bottom-found-at) points: each is a
   pulse's own detection limit (:mod:`pipeline.process.detection_limit`), the run's measured
-  extinction depth.
+  extinction depth; ``nb_true_depth_m`` the true depth at each (its claim, "no bottom down to
+  here", holds where the true depth is at least the point's).
 """
 
 from __future__ import annotations
@@ -55,6 +56,8 @@ __all__ = [
     "gross_report",
     "rejected_arrays",
     "rejected_report",
+    "class45_arrays",
+    "class45_report",
 ]
 
 
@@ -129,7 +132,7 @@ def point_arrays(
         cell_error_m=gerr[full],
         cell_count=grid.count[full],
     )
-    out["nb_depth_m"] = pts.depth_m[pts.classification == NO_BOTTOM_FOUND_AT]
+    out.update(class45_arrays(pts, truth_depth_m))
     out.update(rejected_arrays(pts, truth_depth_m))
     return out
 
@@ -153,6 +156,36 @@ def rejected_arrays(points, truth_depth_m) -> dict[str, np.ndarray]:
     tvu = (rej.flags & np.uint16(PointFlag.TVU_EXCEEDED)) != 0
     surf = (rej.flags & np.uint16(PointFlag.SURFACE_IMPLAUSIBLE)) != 0
     return {"rej_true_depth_m": true_d, "rej_error_m": err, "rej_tvu": tvu, "rej_surface": surf}
+
+
+def class45_arrays(points, truth_depth_m) -> dict[str, np.ndarray]:
+    """``nb_depth_m`` and ``nb_true_depth_m`` of the class-45 points (module notes)."""
+    sel = np.asarray(points.classification) == NO_BOTTOM_FOUND_AT
+    xyz = np.asarray(points.xyz_m, dtype=np.float64)[sel]
+    pid = None if getattr(points, "pulse_id", None) is None else np.asarray(points.pulse_id)[sel]
+    true = truth_at(truth_depth_m, xyz[:, 0], xyz[:, 1], pid) if sel.any() else np.zeros(0)
+    return {
+        "nb_depth_m": np.asarray(points.depth_m, dtype=np.float64)[sel],
+        "nb_true_depth_m": np.asarray(true, dtype=np.float64),
+    }
+
+
+def class45_report(points, truth_depth_m) -> dict[str, int | float | None]:
+    """``evaluation.json``'s ``no_bottom`` claims against the truth.
+
+    A class-45 point claims no bottom down to its depth: it holds where the true seabed at its
+    position is at least that deep. ``class45_past_seabed`` counts those that do not,
+    ``class45_past_seabed_over_0.5m`` those more than 0.5 m past it (beyond a footprint's
+    relief), ``class45_past_seabed_m_max`` the largest overshoot (None: none past).
+    """
+    a = class45_arrays(points, truth_depth_m)
+    past = a["nb_depth_m"] - a["nb_true_depth_m"]
+    over = past[past > 0.0]
+    return {
+        "class45_past_seabed": int(over.size),
+        "class45_past_seabed_over_0.5m": int(np.count_nonzero(over > 0.5)),
+        "class45_past_seabed_m_max": float(over.max()) if over.size else None,
+    }
 
 
 def rejected_report(points, truth_depth_m) -> dict[str, int | float | None]:

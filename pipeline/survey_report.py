@@ -114,6 +114,7 @@ def evaluate_survey(
         unc.points40, unc.tpu40.sigma_depth_m, truth_depth_m=truth.depth_at_pulses_m, group=group
     )
     from pipeline.evaluation_points import (
+        class45_report,
         gross_report,
         point_arrays,
         rejected_report,
@@ -154,7 +155,12 @@ def evaluate_survey(
         "datum": {**datum.to_dict(), "true_mean_water_level_m": true_level_m},
         # the detection limits, and the depths of the class-45 points they placed: the
         # survey's measured extinction depth
-        "no_bottom": {**(sim.no_bottom or {}), **extinction_depth_summary(processed.points)},
+        "no_bottom": {
+            **(sim.no_bottom or {}),
+            **extinction_depth_summary(processed.points),
+            # their claims ("no bottom down to here") against the true seabed
+            **class45_report(processed.points, truth.depth_at_pulses_m),
+        },
         "water_column": water_column_report(processed.points, scene.water.layer_depth_m),
         "subray_flags": sim.subray_flags,
         "receiver_pulse_flags": sim.pulse_flags,

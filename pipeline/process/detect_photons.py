@@ -387,6 +387,7 @@ def detect_photon_events(
             backscatter_180_per_m_sr=no_bottom.backscatter_180_per_m_sr,
             threshold_sigma=s.threshold_sigma,
             min_column_snr=no_bottom.min_column_snr,
+            detection_probability=no_bottom.detection_probability,
         )
     has_det = has_s & (i_det >= 0)
     beyond = has_b & has_det & (i_b < i_det) & (sig_b < 2 * s.threshold_sigma)

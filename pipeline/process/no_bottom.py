@@ -91,7 +91,7 @@ def chunk_inputs(
     first, clip_idx = _column_starts(samples, found, det, ctx)
     whole = clip_idx >= m  # no sample clipped from the column's start on
     none = found.has_surface & ~found.has_bottom & whole
-    margin, alpha, t_max = np.zeros(n), np.ones(n), np.zeros(n)
+    margin, alpha, t_max, alpha_fit = np.zeros(n), np.ones(n), np.zeros(n), np.ones(n)
     ok = np.zeros(n, dtype=bool)
     if none.any():
         cm = column_margins(
@@ -102,11 +102,12 @@ def chunk_inputs(
             settings,
             first_s=first[none],
         )
-        margin[none], alpha[none], t_max[none], ok[none] = (
+        margin[none], alpha[none], t_max[none], ok[none], alpha_fit[none] = (
             cm.log_margin,
             cm.alpha_per_s,
             cm.t_max_s,
             cm.ok,
+            cm.alpha_fit_per_s,
         )
     # a bottom near the threshold is found only where it happened to be bright: its loss would
     # bias the extra decay low, so only clear detections are used
@@ -149,6 +150,7 @@ def chunk_inputs(
         "alpha": alpha,
         "t_max": t_max,
         "ok": ok,
+        "alpha_fit": alpha_fit,
         "t_b": t_b[ok_b],
         "loss": loss[ok_b],
         # the chunk rows of those bottoms (the survey-wide sample is by pulse)

@@ -17,7 +17,10 @@ live-time corrected height histogram instead of a waveform (measured photons onl
   Poisson p-value over the box's expected level ``μ = (C + background) (2 m + 1)`` beats the
   detector's threshold with its look-elsewhere (Bonferroni) correction (the false-alarm
   criterion of :func:`~pipeline.process.detect_photons.detect_photon_events`);
-* a bottom is detectable there (detection probability about one half) while ``B ≥ k* − μ``.
+* a bottom is detectable there with probability ``p`` (``detection_probability``) while its
+  box's expected count ``λ = μ + B`` stands ``z_p √λ`` above ``k*`` (the normal approximation
+  of the Poisson count, as the full-waveform limit stands ``z_p`` noise σ above its
+  threshold): ``λ ≥ λ* = ((z_p + √(z_p² + 4 k*)) / 2)²``; at ``p = 1/2``, ``λ* = k*``.
 
 The limit is the deepest bin down to which every bin below the surface's box is detectable
 (capped at the window's lowest event). A window whose column gives no such fit (fewer than 3
@@ -68,6 +71,7 @@ def photon_detection_limit(
     backscatter_180_per_m_sr: float,
     threshold_sigma: float,
     min_column_snr: float,
+    detection_probability: float = 0.5,
 ) -> np.ndarray:
     """Deepest histogram bin at which each window could still detect a bottom.
 
@@ -93,6 +97,8 @@ def photon_detection_limit(
         The assumed ``ρ`` and ``β_π`` (:class:`~pipeline.process.detection_limit.NoBottomSettings`).
     threshold_sigma, min_column_snr : float
         The detector's significance and the column boxes' minimum SNR.
+    detection_probability : float
+        The probability with which the assumed bottom is detected at the limit.
 
     Returns
     -------
@@ -128,7 +134,9 @@ def photon_detection_limit(
     # k*: smallest count with P(X >= k | mu) <= p / n_searched, p the one-sided normal tail
     q = np.broadcast_to(special.ndtr(-threshold_sigma) / n_searched, mu.shape)
     k_star = _poisson_threshold(q, mu)
-    undetectable = below & (ratio * c_bin < k_star - mu)
+    z = float(special.ndtri(detection_probability))
+    lam_star = k_star if z == 0.0 else (0.5 * (z + np.sqrt(z * z + 4.0 * k_star))) ** 2
+    undetectable = below & (ratio * c_bin < lam_star - mu)
     # the shallowest undetectable bin below the surface; the limit is the bin above it, or the
     # lowest searched bin when none is
     first_bad = np.where(undetectable, col, -1.0).max(axis=1)

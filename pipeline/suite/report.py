@@ -284,11 +284,31 @@ def _shallow_table(pool: Pool) -> list[str]:
     return lines
 
 
+def _or_dash(v) -> str:
+    return "-" if v is None else str(v)
+
+
+def class45_line(pool: Pool) -> str:
+    """The class-45 claims ("no bottom down to here") past the true seabed, per half."""
+
+    def half(h: str) -> str:
+        ms = [m for m in pool.meta if m["half"] == h and m.get("class45_past_seabed") is not None]
+        n = sum(m["class45_n"] for m in ms)
+        past = sum(m["class45_past_seabed"] for m in ms)
+        return f"{past} of {n} ({100.0 * past / n:.2f} %)" if n else "none"
+
+    return (
+        "Class-45 points (no bottom found down to their depth) lying below the true seabed at "
+        f"their position, that is claims that do not hold: tuning {half('tuning')}, held-out "
+        f"{half('heldout')} (`pipeline/evaluation_points.class45_report`)."
+    )
+
+
 def _scene_table(pool: Pool, times: list[tuple[float, float]]) -> list[str]:
     lines = _head(
         ["seed", "half", "receiver", "scanner", "surface", "wind m/s", "c 1/m", "slope °"]
         + ["rough m", "altitude m", "depth at centre m", "D_ext m (source)", "class-40 points"]
-        + ["wall / CPU s"]
+        + ["class-45 points (past the seabed)", "wall / CPU s"]
     )
     n_pts = np.bincount(pool.scene["pt"], minlength=len(pool.meta))
     for i, m in enumerate(pool.meta):
@@ -297,6 +317,7 @@ def _scene_table(pool: Pool, times: list[tuple[float, float]]) -> list[str]:
             f"{m['wind_m_s']:.1f} | {m['attenuation_per_m']:.3f} | {m['slope_deg']:.1f} | "
             f"{m['roughness_rms_m']:.2f} | {m['altitude_m']:.0f} | {m['depth_centre_m']:.1f} | "
             f"{m['d_ext_m']:.1f} ({m['d_ext_source']}) | {n_pts[i]} | "
+            f"{m.get('class45_n', '-')} ({_or_dash(m.get('class45_past_seabed'))}) | "
             f"{times[i][0]:.0f} / {times[i][1]:.0f} |"
         )
     return lines
@@ -404,6 +425,8 @@ def write_markdown(
         *_shallow_table(pool),
         "",
         "## Scenes",
+        "",
+        class45_line(pool),
         "",
         *_scene_table(pool, times),
         "",

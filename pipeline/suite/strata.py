@@ -187,9 +187,21 @@ def pool_rows(rows: list[dict[str, Any]]) -> Pool:
         d_ext, src = extinction_depth_m(
             a["nb_depth_m"], d.attenuation_per_m, d.receiver, a["pt_depth_m"]
         )
-        meta.append({**d.to_dict(), "d_ext_m": d_ext, "d_ext_source": src})
+        # class-45 claims past the true seabed (runs from before nb_true_depth_m: None)
+        past = None
+        if "nb_true_depth_m" in a:
+            past = int(np.count_nonzero(a["nb_depth_m"] > np.asarray(a["nb_true_depth_m"])))
+        meta.append(
+            {
+                **d.to_dict(),
+                "d_ext_m": d_ext,
+                "d_ext_source": src,
+                "class45_n": int(np.asarray(a["nb_depth_m"]).size),
+                "class45_past_seabed": past,
+            }
+        )
         for name, v in a.items():
-            if name != "nb_depth_m":
+            if name not in ("nb_depth_m", "nb_true_depth_m"):
                 parts.setdefault(name, []).append(np.asarray(v))
         for g in _GROUPS:
             n = a[f"{g}_true_depth_m"].size

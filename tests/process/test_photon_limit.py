@@ -42,7 +42,11 @@ def _events(n_shots, lam_col, col_m, lam_bg, lam_b=0.0, bottom_m=0.0, seed=0):
 
 
 def _expected_limit_m(n, lam_col, col_m, lam_bg, nb: NoBottomSettings, s: PhotonDetectSettings):
-    """The limit by formula: the shallowest air-range depth where ``r C(h) < k* - mu``."""
+    """The limit by formula: the shallowest air-range depth where ``r C(h) < λ* - mu``.
+
+    ``λ*``: the box's expected count that stands ``z_p √λ*`` above the threshold count ``k*``
+    (the assumed bottom detected with probability ``p``; ``λ* = k*`` at one half).
+    """
     bin_m, width = s.bin_m, 2 * s.centroid_bins + 1
     h = np.arange(0.0, 60.0, bin_m)
     col = n * lam_col * bin_m / col_m * np.exp(-h / col_m)  # column counts per bin
@@ -51,7 +55,9 @@ def _expected_limit_m(n, lam_col, col_m, lam_bg, nb: NoBottomSettings, s: Photon
     mu = (col + bg) * width
     n_searched = (GATE_M[1] - GATE_M[0]) / bin_m
     k_star = stats.poisson.isf(stats.norm.sf(s.threshold_sigma) / n_searched, mu) + 1
-    return h[np.argmax(r * col < k_star - mu)]
+    z = stats.norm.ppf(nb.detection_probability)
+    lam_star = ((z + np.sqrt(z * z + 4.0 * k_star)) / 2.0) ** 2  # λ - z √λ = k*
+    return h[np.argmax(r * col < lam_star - mu)]
 
 
 def test_detection_limit_is_the_depth_a_bottom_would_sink_under_the_threshold():
