@@ -28,8 +28,16 @@ where its residual over the column trend exceeds ``k √(σ_f² + F G C(t) Σg²
 ``t_lim = ln(C0 / C*) / α`` with ``C* = (k² F G Σg² + √((k² F G Σg²)² + 4 r² k² σ_f²)) / (2 r²)``,
 
 capped at the last sample the detector searches (the window's end less the trend's gap). A pulse
-whose column is not measurable (fewer than 3 samples above ``min_column_snr`` σ, or no decay)
-gets no limit (0): nothing is established for it.
+whose column is not measurable (fewer than 3 samples above ``min_column_snr`` σ, or no decay,
+or a run that rises: an echo the detector did not report) gets no limit (0): nothing is
+established for it.
+
+**A claim at a probability.** At ``k`` the assumed bottom is found half the time, so a bottom
+just above the limit is missed as often as found. The limit is drawn at the settings'
+``detection_probability`` ``p`` instead: ``k`` becomes ``k + z_p`` (the peak ``z_p`` noise σ
+above the threshold), and the pulse's decay ``α + z_p σ_α`` (its fit turned about the centre of
+its samples; ``σ_α`` with the filtered noise's correlation), as fast as its own samples allow at
+``p``. ``p = 1/2`` is the formula above.
 
 **The bottom fades faster than the column.** Forward scattering stretches a deep bottom echo
 (its peak drops as it widens) and the column's apparent decay is slower than the beam's
@@ -262,6 +270,15 @@ def _column_fit(samples, t_surface_s, t_end_idx, noise_sigma, det, min_snr, firs
     slope = np.where(ok, (sw * stl - st * sl) / np.where(ok, den, 1.0), 0.0)
     log_c0 = np.where(ok, (sl - slope * st) / np.where(sw > 0, sw, 1.0), 0.0)
     ok &= slope < 0.0
+    # a column only decays: a run that rises past its first sample holds an echo the detector
+    # did not report (a bright bottom a metre under a weak surface echo, suite tuning seed 0:
+    # read as a column, it claimed no bottom down to 24 m)
+    has = use.any(axis=1)
+    first_y = filt[np.arange(n), np.where(has, np.argmax(use, axis=1), 0)]
+    top_y = np.max(np.where(use, filt, -np.inf), axis=1)
+    # (an echo stands the detector's threshold above the column; two samples' noise differ by
+    # √2 of one's)
+    ok &= ~(has & (top_y - first_y > det.threshold_sigma * math.sqrt(2.0) * nf[:, 0]))
     t_mid = np.where(ok, st / np.where(sw > 0, sw, 1.0), 0.0)
     var = sw / np.where(den > 0, den, 1.0) * (2.0 * math.sqrt(math.pi) * det.sigma_samples)
     return log_c0, np.where(ok, -slope, 1.0), ok, t_mid, np.where(ok, np.sqrt(var), 0.0)

@@ -22,6 +22,7 @@ from pipeline.process.detection_limit import (
     DetectorModel,
     NoBottomSettings,
     bottom_losses,
+    column_margins,
     excess_decay_per_s,
     no_bottom_limit_s,
 )
@@ -171,3 +172,17 @@ def test_an_assumed_bottom_at_the_limit_is_found_as_often_as_claimed():
     det = detect_full_waveform(y, DT_S, FWHM_S, DetectSettings(), noise_samples=30)
     found = det.has_bottom & (np.abs(det.t_bottom_s / DT_S - I_SURFACE - tb) < 2.0)
     assert found.mean() >= 0.92
+
+
+def test_an_echo_read_as_column_gives_no_limit():
+    # an echo inside the column run (a bright bottom a metre under a weak surface echo that
+    # the detector did not report) is no column: a column only decays from its first sample,
+    # and read as one it claimed no bottom down to the window's end (suite tuning seed 0)
+    y = _waveforms(8, 310, seed=8)
+    d = detect_full_waveform(y, DT_S, FWHM_S, DetectSettings(), noise_samples=30)
+    start = I_SURFACE + DET.min_separation_fwhm * FWHM_S / DT_S
+    # 800 counts (the column there: ~240), 4 samples past the column's start
+    echo = 800.0 * np.exp(-0.5 * ((np.arange(310) - (start + 4.0)) / SIGMA_SAMPLES) ** 2)
+    for add, measured in ((0.0, True), (1.0, False)):
+        cm = column_margins(y + add * echo, d.t_surface_s, d.noise_sigma, DET, SETTINGS)
+        assert np.all(cm.ok == measured)
