@@ -387,7 +387,10 @@ def detect_photon_events(
             backscatter_180_per_m_sr=no_bottom.backscatter_180_per_m_sr,
             threshold_sigma=s.threshold_sigma,
             min_column_snr=no_bottom.min_column_snr,
-            detection_probability=no_bottom.detection_probability,
+            # a window without a bottom claims its absence at the settings' probability; a
+            # found bottom is judged against the threshold's own limit (a weak bottom past
+            # where the assumed one is found half the time is suspect: BEYOND_DETECTION_LIMIT)
+            detection_probability=np.where(has_b, 0.5, no_bottom.detection_probability),
         )
     has_det = has_s & (i_det >= 0)
     beyond = has_b & has_det & (i_b < i_det) & (sig_b < 2 * s.threshold_sigma)

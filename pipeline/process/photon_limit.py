@@ -71,7 +71,7 @@ def photon_detection_limit(
     backscatter_180_per_m_sr: float,
     threshold_sigma: float,
     min_column_snr: float,
-    detection_probability: float = 0.5,
+    detection_probability: float | np.ndarray = 0.5,
 ) -> np.ndarray:
     """Deepest histogram bin at which each window could still detect a bottom.
 
@@ -97,8 +97,8 @@ def photon_detection_limit(
         The assumed ``ρ`` and ``β_π`` (:class:`~pipeline.process.detection_limit.NoBottomSettings`).
     threshold_sigma, min_column_snr : float
         The detector's significance and the column boxes' minimum SNR.
-    detection_probability : float
-        The probability with which the assumed bottom is detected at the limit.
+    detection_probability : float or (n_windows,) array
+        The probability with which the assumed bottom is detected at the limit (per window).
 
     Returns
     -------
@@ -134,8 +134,9 @@ def photon_detection_limit(
     # k*: smallest count with P(X >= k | mu) <= p / n_searched, p the one-sided normal tail
     q = np.broadcast_to(special.ndtr(-threshold_sigma) / n_searched, mu.shape)
     k_star = _poisson_threshold(q, mu)
-    z = float(special.ndtri(detection_probability))
-    lam_star = k_star if z == 0.0 else (0.5 * (z + np.sqrt(z * z + 4.0 * k_star))) ** 2
+    z = special.ndtri(np.broadcast_to(np.asarray(detection_probability, float), (n_win,)))
+    z = z[:, None]
+    lam_star = np.where(z == 0.0, k_star, (0.5 * (z + np.sqrt(z * z + 4.0 * k_star))) ** 2)
     undetectable = below & (ratio * c_bin < lam_star - mu)
     # the shallowest undetectable bin below the surface; the limit is the bin above it, or the
     # lowest searched bin when none is
