@@ -59,7 +59,7 @@ from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.detection_limit import (
     BLOCK,
     DetectorModel,
-    column_first_s,
+    column_first_index,
     filtered_waveforms,
 )
 
@@ -204,8 +204,7 @@ def stack_column(
     """
     samples = np.asarray(samples)
     n, m = samples.shape
-    t_s = np.asarray(t_surface_s, dtype=np.float64)
-    first = (column_first_s(t_s, t_s, det) if first_s is None else first_s) / det.dt_s
+    first = column_first_index(t_surface_s, det, first_s)
     end = np.asarray(t_end_s, dtype=np.float64) / det.dt_s
     out = ColumnStack.empty(det.dt_s)
     for i in range(0, n, BLOCK):  # blocks bound the (pulses × samples) temporaries

@@ -68,6 +68,7 @@ __all__ = [
     "ColumnMargins",
     "bottom_to_column_ratio",
     "column_first_s",
+    "column_first_index",
     "column_margins",
     "bottom_losses",
     "excess_decay_per_s",
@@ -104,8 +105,9 @@ class NoBottomSettings:
         3.0, ge=0.5, le=100.0, doc="column samples above this many noise σ enter the decay fit"
     )
     # 0.95: "no bottom down to here" is a claim; at the old one half, a bottom just above the
-    # limit was missed as often as found (palmer_survey at c 0.5: 7 % of the limits lay below
-    # the seabed, 5 % by more than 0.5 m; 4.6 % below it at 0.95)
+    # limit was missed as often as found (palmer_survey at c 0.5: 7.2 % of the limits lay below
+    # the seabed, 5.3 % by more than 0.5 m; at 0.95, with the decay at its bound too, 0.8 % and
+    # 0.4 %)
     detection_probability: float = setting(
         0.95,
         ge=0.5,
@@ -172,7 +174,7 @@ def bottom_to_column_ratio(
 
 def column_first_s(
     t_surface_s: np.ndarray,
-    surface_amplitude: np.ndarray,
+    surface_amplitude: np.ndarray | None,
     det: DetectorModel,
     top_above_baseline: np.ndarray | float | None = None,
 ) -> np.ndarray:
@@ -192,7 +194,7 @@ def column_first_s(
     ----------
     t_surface_s, surface_amplitude : (n,) ndarray
         The detector's surface time (s) and filtered peak (``A / √2``; a clipped echo's is
-        its plateau's ``A`` over √2).
+        its plateau's ``A`` over √2; None with ``top_above_baseline`` None).
     det : DetectorModel
     top_above_baseline : (n,) ndarray or float, optional
         The digitiser's top code above each pulse's baseline; None: no echo is clipped.
@@ -234,10 +236,14 @@ def filtered_waveforms(samples: np.ndarray, det: DetectorModel) -> np.ndarray:
     return gaussian_filter1d(y - base, det.sigma_samples, axis=1, mode="nearest")
 
 
-def _first_idx(t_surface_s, det, first_s) -> np.ndarray:
-    """Sample index of each column's start: ``first_s``, else one separation after the surface."""
+def column_first_index(t_surface_s, det: DetectorModel, first_s=None) -> np.ndarray:
+    """Sample index of each column's start, ``(n,)``.
+
+    ``first_s`` (seconds), else one separation after the surface (:func:`column_first_s` of
+    an unclipped echo).
+    """
     if first_s is None:
-        first_s = column_first_s(t_surface_s, t_surface_s, det)
+        first_s = column_first_s(t_surface_s, None, det)
     return np.asarray(first_s, dtype=np.float64) / det.dt_s
 
 
@@ -321,7 +327,7 @@ def column_margins(
     gap = max(2, math.ceil(1.5 * fwhm))
     t_s = np.asarray(t_surface_s, dtype=np.float64)
     nf = np.asarray(noise_sigma, dtype=np.float64)
-    first = _first_idx(t_s, det, first_s)
+    first = column_first_index(t_s, det, first_s)
 
     def fit(y, ts, noise, f):
         return _column_fit(y, ts, np.full(len(ts), m - gap), noise, det, s.min_column_snr, f)
@@ -343,7 +349,7 @@ def column_margins(
     c_star = (q + np.sqrt(q * q + 4.0 * r * r * k * k * np.maximum(nf, 1e-300) ** 2)) / (2 * r * r)
     return ColumnMargins(
         log_margin=np.where(ok, log_c0_claim - np.log(c_star), 0.0),
-        alpha_per_s=np.where(ok, alpha_claim, alpha),
+        alpha_per_s=alpha_claim,  # (σ_α is 0 where not ok: the fit's placeholder)
         t_max_s=(m - gap) * det.dt_s - t_s,
         ok=ok,
         t_min_s=det.min_separation_fwhm * det.pulse_fwhm_s,
@@ -390,7 +396,7 @@ def bottom_losses(
     sep = det.min_separation_fwhm * det.pulse_fwhm_s / det.dt_s
     t_s = np.asarray(t_surface_s, dtype=np.float64)
     t_b = np.asarray(t_bottom_s, dtype=np.float64)
-    first = _first_idx(t_s, det, first_s)
+    first = column_first_index(t_s, det, first_s)
 
     def fit(y, ts, tb, noise, f):
         # the column up to one separation before the bottom echo

@@ -26,6 +26,7 @@ from pipeline.process.detection_limit import (
     column_margins,
 )
 from pipeline.process.no_bottom import chunk_inputs, excess_decay_summary
+from pipeline.process.returns import DetectorFlag
 
 DT_S = 1e-9
 FWHM_S = 3e-9
@@ -96,8 +97,6 @@ def clipped():
 
 def test_every_surface_echo_is_clipped(clipped):
     found, _, _ = clipped
-    from pipeline.process.returns import DetectorFlag
-
     assert np.all(found.flags & np.uint16(DetectorFlag.SATURATED))
     assert not np.any(found.flags & np.uint16(DetectorFlag.CLIPPED_MERGED))
 
