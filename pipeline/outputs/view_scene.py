@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.evaluate import truth_at
 from pipeline.process.classify import BATHYMETRIC_POINT
 from pipeline.process.returns import ReturnKind
 
@@ -152,7 +153,7 @@ def view_scene(points, returns, truth, origin_m, crs: str) -> ViewScene:
     error = np.full(xyz.shape[0], np.nan)
     if is40.any():
         x, y = xyz[is40, 0], xyz[is40, 1]
-        error[is40] = points.depth_m[is40] - np.asarray(truth.depth_m(x, y), dtype=np.float64)
+        error[is40] = points.depth_m[is40] - truth_at(truth.depth_m, x, y)
     # the surfaces over the points (the bathymetric ones when there are any), plus a margin
     where = xyz[is40] if is40.any() else xyz
     if not where.shape[0]:

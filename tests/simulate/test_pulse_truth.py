@@ -99,3 +99,44 @@ def test_the_survey_evaluation_meets_the_sea_in_one_call():
         got = truth_at(truth.depth_at_pulses_m, x, y, s.pulse_id)
         np.testing.assert_allclose(got, _direct(x, y, s.pulse_id), rtol=0, atol=1e-12)
     assert sea.calls == 1
+
+
+class _OrderedSea(_Sea):
+    """Records each call's times: a real moving sea re-makes a slab it left for another."""
+
+    def __init__(self):
+        super().__init__()
+        self.spans = []
+
+    def height_m(self, x, y, t):
+        self.spans.append((float(np.min(t)), float(np.max(t))))
+        return super().height_m(x, y, t)
+
+
+def test_truth_in_blocks_is_the_one_call_truth_and_meets_the_sea_in_time_order(monkeypatch):
+    import pipeline.evaluate as ev
+
+    rng = np.random.default_rng(21)
+    n = 1000
+    pid = rng.permutation(n)
+    x, y = rng.uniform(0, 50, n), rng.uniform(0, 50, n)
+    monkeypatch.setattr(ev, "TRUTH_BLOCK", 64)
+    sea = _OrderedSea()
+    truth = Truth(seabed=_Plane(), water=sea, frame=None, pulse_time_s=lambda p: 0.01 * p)
+    got = ev.truth_at(truth.depth_at_pulses_m, x, y, pid)
+    np.testing.assert_allclose(got, _direct(x, y, pid), rtol=0, atol=1e-12)
+    assert len(sea.spans) == -(-n // 64) and sea.asked == n  # blocks, each pulse asked once
+    # blocks in pulse (time) order: each ends before the next starts
+    assert all(a[1] < b[0] for a, b in zip(sea.spans[:-1], sea.spans[1:], strict=True))
+
+    # a static truth (no pulse ids) in blocks: the same values as one call, in the input order
+    class _Still:
+        def height_m(self, x, y):
+            return 0.2 * np.cos(0.3 * np.asarray(x) * np.asarray(y))
+
+    flat = Truth(seabed=_Plane(), water=_Still(), frame=None)
+    want = 0.2 * np.cos(0.3 * x * y) + 5.0 + 0.1 * x
+    np.testing.assert_allclose(ev.truth_at(flat.depth_m, x, y), want, rtol=0, atol=1e-12)
+    monkeypatch.setattr(ev, "TRUTH_BLOCK", 10**9)
+    np.testing.assert_allclose(ev.truth_at(flat.depth_m, x, y), want, rtol=0, atol=1e-12)
+    assert ev.truth_at(flat.depth_m, x[:0], y[:0]).shape == (0,)
