@@ -222,8 +222,9 @@ class SurveyAggregates:
         median range).
     photon : dict
         Photon counting: sampled detection-limit paths and exact counts.
-    nb_t_b, nb_loss, nb_alpha : list of arrays
-        Full waveform: sampled bottom losses (the excess-decay fit) and column decays.
+    nb_t_b, nb_loss, nb_floor, nb_alpha : list of arrays
+        Full waveform: sampled bottom losses and their floors (the excess-decay fit) and
+        column decays.
     nb_counts : dict of str to int
         Exact counts of the no-bottom inputs.
     nb_stack, nb_stack_open : ColumnStack or None
@@ -240,6 +241,7 @@ class SurveyAggregates:
     photon_counts: dict = field(default_factory=lambda: {"with_limit": 0, "beyond": 0})
     nb_t_b: list = field(default_factory=list)
     nb_loss: list = field(default_factory=list)
+    nb_floor: list = field(default_factory=list)
     nb_alpha: list = field(default_factory=list)
     nb_counts: dict = field(default_factory=lambda: {"bottoms": 0, "no_column": 0})
     nb_stack: ColumnStack | None = None
@@ -279,6 +281,7 @@ class SurveyAggregates:
             sb = s[nb["b_row"]]
             self.nb_t_b.append(nb["t_b"][sb])
             self.nb_loss.append(nb["loss"][sb])
+            self.nb_floor.append(nb["floor"][sb])
             self.nb_alpha.append(nb["alpha_fit"][nb["ok"] & s])
             self.nb_counts["bottoms"] += int(nb["t_b"].size)
             self.nb_counts["no_column"] += int(np.count_nonzero(nb["none"] & ~nb["ok"]))
@@ -306,10 +309,10 @@ class SurveyAggregates:
             "photon_bottoms_beyond_detection_limit": self.photon_counts["beyond"],
         }
 
-    def no_bottom_sample(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Sampled ``(t_b, loss, alpha)`` of the no-bottom inputs (pulse order)."""
+    def no_bottom_sample(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Sampled ``(t_b, loss, floor, alpha)`` of the no-bottom inputs (pulse order)."""
 
         def cat(xs):
             return np.concatenate(xs) if xs else np.zeros(0)
 
-        return cat(self.nb_t_b), cat(self.nb_loss), cat(self.nb_alpha)
+        return cat(self.nb_t_b), cat(self.nb_loss), cat(self.nb_floor), cat(self.nb_alpha)

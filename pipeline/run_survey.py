@@ -251,9 +251,9 @@ def _no_bottom_limits(store: DetectionStore, agg: SurveyAggregates, ctx, detect)
     """Fit the bottoms' extra decay once, then set every stored chunk's ``t_no_bottom_s``."""
     from pipeline.process.no_bottom import excess_decay_summary, limit_times_s
 
-    t_b, loss, alpha = agg.no_bottom_sample()
+    t_b, loss, floor, alpha = agg.no_bottom_sample()
     delta, summary = excess_decay_summary(
-        t_b, loss, alpha, agg.nb_stack, agg.nb_counts, ctx, detect, agg.nb_stack_open
+        t_b, loss, floor, alpha, agg.nb_stack, agg.nb_counts, ctx, detect, agg.nb_stack_open
     )
     n_limit = 0
     for c in range(len(store.chunks)):

@@ -44,9 +44,13 @@ its samples; ``σ_α`` with the filtered noise's correlation), as fast as its ow
 attenuation (light scattered out of the beam still returns from the column). Both are seen in
 the survey's own bottoms: for every well-detected bottom (SNR ≥ 2 × threshold), the log of its
 measured peak over ``r C(t_b)`` predicted from its own column falls about linearly with
-``t_b``; the slope of a least-squares line through them is the extra decay ``δ`` (its intercept,
-which holds the unknown ratio of the true to the assumed ``ρ/β_π``, is not used), and the limit
-becomes ``ln(C0 / C*) / (α + δ)``. ``δ = 0`` when the survey found too few bottoms (< 20).
+``t_b``; the slope of a line through them is the extra decay ``δ`` (its intercept, which holds
+the unknown ratio of the true to the assumed ``ρ/β_π``, is not used), and the limit becomes
+``ln(C0 / C*) / (α + δ)``. Deep down only the bottoms that came out bright pass the selection,
+so the line is the truncated-normal one, each loss seen only above its own floor
+(:mod:`pipeline.process.truncated_regression`; a least-squares line measured no extra decay
+in clear water where the limits lay metres under the seabed). ``δ = 0`` when the survey found
+too few bottoms (< 20; :func:`pipeline.process.no_bottom.excess_decay_per_s`).
 """
 
 from __future__ import annotations
@@ -58,9 +62,9 @@ import numpy as np
 from scipy import special
 from scipy.ndimage import gaussian_filter1d
 
-from pipeline.config import setting
 from pipeline.constants import FWHM_TO_SIGMA
 from pipeline.optics import SPEED_OF_LIGHT_M_S
+from pipeline.process.no_bottom_settings import NoBottomSettings
 
 __all__ = [
     "NoBottomSettings",
@@ -71,7 +75,6 @@ __all__ = [
     "column_first_index",
     "column_margins",
     "bottom_losses",
-    "excess_decay_per_s",
     "filtered_waveforms",
     "limit_after_surface_s",
     "no_bottom_limit_s",
@@ -79,42 +82,6 @@ __all__ = [
 
 #: Waveforms handled at once (bounds the float64 temporaries to a few tens of MB).
 BLOCK = 4096
-
-
-@dataclass(frozen=True, kw_only=True)
-class NoBottomSettings:
-    """Assumptions of the no-bottom-found-at depth (``[process.no_bottom]``)."""
-
-    # 0.15: a mid value of sand/mud seabed reflectances at 532 nm used in bathymetric lidar
-    # depth-performance statements (e.g. 10-20 %)
-    bottom_reflectance: float = setting(
-        0.15,
-        ge=1e-3,
-        le=1.0,
-        doc="Lambertian reflectance of the bottom whose absence a class-45 point states",
-    )
-    # 2e-3: coastal water, Petzold (1972) coastal/harbour β(180°) ~ 1e-3 to 1e-2 m⁻¹ sr⁻¹
-    backscatter_180_per_m_sr: float = setting(
-        2.0e-3,
-        ge=1e-5,  # pure sea water is ~1e-4 at 532 nm
-        le=10.0,
-        doc="water volume backscatter β(180°) processing assumes: sets the ratio of a "
-        "bottom echo to the column return at the same depth",
-    )
-    min_column_snr: float = setting(
-        3.0, ge=0.5, le=100.0, doc="column samples above this many noise σ enter the decay fit"
-    )
-    # 0.95: "no bottom down to here" is a claim; at the old one half, a bottom just above the
-    # limit was missed as often as found (palmer_survey at c 0.5: 7.2 % of the limits lay below
-    # the seabed, 5.3 % by more than 0.5 m; at 0.95, with the decay at its bound too, 0.8 % and
-    # 0.4 %)
-    detection_probability: float = setting(
-        0.95,
-        ge=0.5,
-        lt=1.0,
-        doc="probability with which the assumed bottom would have been detected at the "
-        "class-45 limit (0.5: the threshold itself)",
-    )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -248,12 +215,13 @@ def column_first_index(t_surface_s, det: DetectorModel, first_s=None) -> np.ndar
 
 
 def _column_fit(samples, t_surface_s, t_end_idx, noise_sigma, det, min_snr, first):
-    """``(log C0, α, ok, t_mid, σ_α)`` of the filtered column from ``first`` to ``t_end_idx``.
+    """``(log C0, α, ok, t_mid, σ_α, σ_mid)`` of the filtered column, ``first`` to ``t_end_idx``.
 
     ``log C0`` is the column carried back to the surface time; ``t_mid`` the samples' weighted
     centre after the surface (s); ``σ_α`` the slope's standard error, its white-noise value
     (``Σw / den``) times the filtered noise's correlation length, ``2 √π σ`` samples (adjacent
-    filtered samples share their noise).
+    filtered samples share their noise); ``σ_mid`` that of the fitted ``log C`` at ``t_mid``
+    (``1 / Σw`` times the same length), independent of the slope's there.
     """
     filt = filtered_waveforms(samples, det)
     n, m = filt.shape
@@ -286,8 +254,18 @@ def _column_fit(samples, t_surface_s, t_end_idx, noise_sigma, det, min_snr, firs
     # √2 of one's)
     ok &= ~(has & (top_y - first_y > det.threshold_sigma * math.sqrt(2.0) * nf[:, 0]))
     t_mid = np.where(ok, st / np.where(sw > 0, sw, 1.0), 0.0)
-    var = sw / np.where(den > 0, den, 1.0) * (2.0 * math.sqrt(math.pi) * det.sigma_samples)
-    return log_c0, np.where(ok, -slope, 1.0), ok, t_mid, np.where(ok, np.sqrt(var), 0.0)
+    corr = 2.0 * math.sqrt(math.pi) * det.sigma_samples  # the filtered noise's correlation
+    var = sw / np.where(den > 0, den, 1.0) * corr
+    # the fitted log C's own sigma at t_mid (the line's two parameters are independent there)
+    var_mid = corr / np.where(sw > 0, sw, 1.0)
+    return (
+        log_c0,
+        np.where(ok, -slope, 1.0),
+        ok,
+        t_mid,
+        np.where(ok, np.sqrt(var), 0.0),
+        np.where(ok, np.sqrt(var_mid), 0.0),
+    )
 
 
 def column_margins(
@@ -332,7 +310,7 @@ def column_margins(
     def fit(y, ts, noise, f):
         return _column_fit(y, ts, np.full(len(ts), m - gap), noise, det, s.min_column_snr, f)
 
-    log_c0, alpha, ok, t_mid, sigma_alpha = _blocks(fit, n, samples, t_s, nf, first)
+    log_c0, alpha, ok, t_mid, sigma_alpha, _ = _blocks(fit, n, samples, t_s, nf, first)
     # "no bottom down to here" is claimed at probability p twice over: the assumed bottom
     # detected with probability p (its peak z_p noise σ above the threshold, r C = (k + z_p)
     # √(σ_f² + F G C Σg²), solved for C), and the column decaying as fast as its fit allows at
@@ -388,7 +366,8 @@ def bottom_losses(
     t_after_surface_s, log_loss : (n,) ndarray
         ``t_b − t_s`` and ``ln(A_b / (r C0 e^{−α (t_b − t_s)}))``.
     ok : (n,) bool
-        The column before the bottom was measurable.
+        The column before the bottom was measurable, and its fitted log level at the bottom
+        is sure to ``max_column_sigma``.
     """
     s = settings or NoBottomSettings()
     samples = np.asarray(samples)
@@ -402,7 +381,7 @@ def bottom_losses(
         # the column up to one separation before the bottom echo
         return _column_fit(y, ts, tb / det.dt_s - sep, noise, det, s.min_column_snr, f)
 
-    log_c0, alpha, ok, _, _ = _blocks(
+    log_c0, alpha, ok, t_mid, sigma_alpha, sigma_mid = _blocks(
         fit, n, samples, t_s, t_b, np.asarray(noise_sigma, float), first
     )
     r = bottom_to_column_ratio(s, det.group_index, det.sigma_samples * det.dt_s)
@@ -410,21 +389,9 @@ def bottom_losses(
     amp = np.asarray(bottom_amplitude, dtype=np.float64)
     ok &= amp > 0
     log_loss = np.where(ok, np.log(np.where(ok, amp, 1.0)) - math.log(r) - log_c0 + alpha * dt, 0.0)
+    # the column's own sigma carried to the bottom: a loss is only as sure as its column
+    ok &= np.hypot(sigma_mid, sigma_alpha * (dt - t_mid)) <= s.max_column_sigma
     return dt, log_loss, ok
-
-
-#: Bottoms the extra decay needs at least.
-MIN_BOTTOMS = 20
-
-
-def excess_decay_per_s(t_after_surface_s: np.ndarray, log_loss: np.ndarray) -> float:
-    """``δ``: minus the least-squares slope of ``log_loss`` on time (≥ 0; 0 with < 20 bottoms)."""
-    t = np.asarray(t_after_surface_s, dtype=np.float64)
-    y = np.asarray(log_loss, dtype=np.float64)
-    if t.size < MIN_BOTTOMS or np.ptp(t) <= 0.0:
-        return 0.0
-    slope = np.polyfit(t, y, 1)[0]
-    return float(max(-slope, 0.0))
 
 
 def limit_after_surface_s(margins: ColumnMargins, excess_decay_per_s: float = 0.0) -> np.ndarray:

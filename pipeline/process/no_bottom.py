@@ -26,15 +26,16 @@ from pipeline.process.detection_limit import (
     bottom_losses,
     column_first_s,
     column_margins,
-    excess_decay_per_s,
     limit_after_surface_s,
 )
 from pipeline.process.extinction import extinction_depth
 from pipeline.process.returns import DetectedReturns, DetectorFlag, Points
+from pipeline.process.truncated_regression import truncated_line_fit
 
 __all__ = [
     "detector_model",
     "chunk_inputs",
+    "excess_decay_per_s",
     "excess_decay_summary",
     "limit_times_s",
     "extinction_depth_summary",
@@ -109,11 +110,10 @@ def chunk_inputs(
             cm.ok,
             cm.alpha_fit_per_s,
         )
-    # a bottom near the threshold is found only where it happened to be bright: its loss would
-    # bias the extra decay low, so only clear detections are used
-    bright = found.has_bottom & (
-        found.bottom_amplitude >= 2.0 * detect.threshold_sigma * found.noise_sigma
-    )
+    # a bottom near the threshold is found only where it happened to be bright: only clear
+    # detections are used, and the fit of their losses takes that selection into account
+    min_amp = 2.0 * detect.threshold_sigma * found.noise_sigma
+    bright = found.has_bottom & (found.bottom_amplitude >= min_amp)
     strong = bright & whole  # (a clipped bottom's peak is not its amplitude)
     t_b, loss, ok_b = bottom_losses(
         samples[strong],
@@ -153,6 +153,12 @@ def chunk_inputs(
         "alpha_fit": alpha_fit,
         "t_b": t_b[ok_b],
         "loss": loss[ok_b],
+        # each loss's floor: the selection above in the loss's units (a bottom enters only
+        # with a peak >= 2 k sigma_f: ln(2 k sigma_f / A_b) below its own loss), the
+        # truncation the extra decay's fit undoes (pipeline.process.truncated_regression)
+        "floor": (
+            loss + np.log(min_amp[strong] / np.maximum(found.bottom_amplitude[strong], 1e-300))
+        )[ok_b],
         # the chunk rows of those bottoms (the survey-wide sample is by pulse)
         "b_row": np.flatnonzero(strong)[ok_b],
     }
@@ -194,9 +200,33 @@ def _column_starts(samples, found, det, ctx) -> tuple[np.ndarray, np.ndarray]:
     return first, clip_idx
 
 
+#: Bottoms the extra decay needs at least.
+MIN_BOTTOMS = 20
+
+
+def excess_decay_per_s(
+    t_after_surface_s: np.ndarray, log_loss: np.ndarray, floor: np.ndarray | None = None
+) -> float:
+    """``δ``: minus the slope of ``log_loss`` on time (≥ 0; 0 with < 20 bottoms).
+
+    ``floor`` (the losses' selection floors): the slope of the truncated-normal line
+    (:func:`~pipeline.process.truncated_regression.truncated_line_fit`); None: least squares.
+    """
+    t = np.asarray(t_after_surface_s, dtype=np.float64)
+    y = np.asarray(log_loss, dtype=np.float64)
+    if t.size < MIN_BOTTOMS or np.ptp(t) <= 0.0:
+        return 0.0
+    if floor is None:
+        slope = np.polyfit(t, y, 1)[0]
+    else:
+        slope = truncated_line_fit(t, y, floor)[1]
+    return float(max(-slope, 0.0))
+
+
 def excess_decay_summary(
     t_b: np.ndarray,
     loss: np.ndarray,
+    floor: np.ndarray | None,
     alpha_ok: np.ndarray,
     stack: ColumnStack | None,
     counts: dict[str, int],
@@ -208,10 +238,11 @@ def excess_decay_summary(
 
     Parameters
     ----------
-    t_b, loss : (m,) float
-        :func:`chunk_inputs`' bottom times after the surface and log losses (of every chunk,
-        or of a bounded sample of the pulses, :class:`pipeline.detection_store.
-        SurveyAggregates`), in pulse order.
+    t_b, loss, floor : (m,) float
+        :func:`chunk_inputs`' bottom times after the surface, log losses and the floors the
+        losses were selected above (of every chunk, or of a bounded sample of the pulses,
+        :class:`pipeline.detection_store.SurveyAggregates`), in pulse order. ``floor`` None:
+        not selected (an ordinary least-squares line).
     alpha_ok : (k,) float
         The measured column decays (1/s) of the pulses whose column was measured (same sample).
     stack, open_stack : ColumnStack or None
@@ -232,7 +263,7 @@ def excess_decay_summary(
         ``column_decay_median_fit_per_m`` the median of the per-pulse fits (biased
         high in clear water; kept for the record, the limits use the per-pulse fits).
     """
-    delta = excess_decay_per_s(t_b, loss)
+    delta = excess_decay_per_s(t_b, loss, floor)
     det = detector_model(ctx, detect)
     g = det.group_index
     # closed columns first: an open one may run past a seabed whose echo was too faint to be

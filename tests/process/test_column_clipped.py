@@ -84,7 +84,8 @@ def _summary(y, top_code=TOP):
     d = chunk_inputs(y, found, CTX, detect, NoBottomSettings())
     counts = {"bottoms": d["t_b"].size, "no_column": int(np.sum(d["none"] & ~d["ok"]))}
     _, s = excess_decay_summary(
-        d["t_b"], d["loss"], d["alpha"][d["ok"]], d["column_stack"], counts, CTX, detect,
+        d["t_b"], d["loss"], d["floor"], d["alpha"][d["ok"]], d["column_stack"], counts, CTX,
+        detect,
         d["column_stack_open"],
     )  # fmt: skip
     return found, d, s

@@ -101,7 +101,8 @@ def _survey(y, n_chunks=1):
         found = detect_full_waveform(part, DT_S, FWHM_S, detect, noise_samples=NOISE_SAMPLES)
         inputs.append(chunk_inputs(part, found, CTX, detect, NoBottomSettings()))
     cat = {
-        k: np.concatenate([d[k] for d in inputs]) for k in ("t_b", "loss", "alpha", "ok", "none")
+        k: np.concatenate([d[k] for d in inputs])
+        for k in ("t_b", "loss", "floor", "alpha", "ok", "none")
     }
     counts = {"bottoms": cat["t_b"].size, "no_column": int(np.sum(cat["none"] & ~cat["ok"]))}
     stack, open_ = (
@@ -110,7 +111,7 @@ def _survey(y, n_chunks=1):
     )
     alpha_ok = cat["alpha"][cat["ok"]]
     return excess_decay_summary(
-        cat["t_b"], cat["loss"], alpha_ok, stack, counts, CTX, detect, open_
+        cat["t_b"], cat["loss"], cat["floor"], alpha_ok, stack, counts, CTX, detect, open_
     )[1]
 
 

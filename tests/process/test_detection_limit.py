@@ -23,9 +23,9 @@ from pipeline.process.detection_limit import (
     NoBottomSettings,
     bottom_losses,
     column_margins,
-    excess_decay_per_s,
     no_bottom_limit_s,
 )
+from pipeline.process.no_bottom import excess_decay_per_s
 
 DT_S = 1e-9
 FWHM_S = 3e-9
@@ -44,13 +44,13 @@ SETTINGS = NoBottomSettings(
 )
 
 
-def _waveforms(n, m, seed=0, bottom_at=None, bottom_scale=1.0):
+def _waveforms(n, m, seed=0, bottom_at=None, bottom_scale=1.0, c0=C0_COUNTS):
     rng = np.random.default_rng(seed)
     tau = np.arange(m) - I_SURFACE  # samples after the surface
     s = SIGMA_SAMPLES
     a = ALPHA_PER_S * DT_S  # per sample
     # exp(−a τ) H(τ) blurred by the system Gaussian (exponentially modified Gaussian)
-    column = C0_COUNTS * np.exp(-a * tau + 0.5 * (a * s) ** 2) * ndtr(tau / s - a * s)
+    column = c0 * np.exp(-a * tau + 0.5 * (a * s) ** 2) * ndtr(tau / s - a * s)
     surface = 1000.0 * np.exp(-0.5 * (tau / s) ** 2)
     y = 50.0 + column + surface + rng.normal(0.0, NOISE_COUNTS, (n, m))
     if bottom_at is not None:
@@ -60,7 +60,7 @@ def _waveforms(n, m, seed=0, bottom_at=None, bottom_scale=1.0):
         sigma_t = SIGMA_SAMPLES * DT_S
         r = 0.15 / (math.pi**1.5 * 2e-3 * V_M_S * sigma_t)
         tb = np.asarray(bottom_at, dtype=float)[:, None]
-        total = r * C0_COUNTS * np.exp(-a * tb) * 2.0 * math.sqrt(math.pi) * s  # filtered peak r C
+        total = r * c0 * np.exp(-a * tb) * 2.0 * math.sqrt(math.pi) * s  # filtered peak r C
         scale = np.asarray(bottom_scale, dtype=float).reshape(-1, 1)
         y = y + scale * total / (math.sqrt(2.0 * math.pi) * s) * np.exp(
             -0.5 * ((tau[None, :] - tb) / s) ** 2
@@ -186,3 +186,34 @@ def test_an_echo_read_as_column_gives_no_limit():
     for add, measured in ((0.0, True), (1.0, False)):
         cm = column_margins(y + add * echo, d.t_surface_s, d.noise_sigma, DET, SETTINGS)
         assert np.all(cm.ok == measured)
+
+
+def test_column_sigma_at_the_bottom_is_the_fits_scatter_and_unsure_columns_are_left_out():
+    # the fitted log column carried to a bottom 60 samples after the surface, over 400 noise
+    # draws of one weak column: its scatter is the sigma the fit states, hypot(σ_mid, σ_α Δ)
+    from pipeline.process.detection_limit import _column_fit, column_first_index
+
+    # a column a few noise σ above the baseline: a short, noisy run
+    y = _waveforms(400, 200, seed=11, c0=15.0)
+    t_s = np.full(400, I_SURFACE * DT_S)
+    nf = np.full(400, _filtered_noise())
+    first = column_first_index(t_s, DET)
+    log_c0, alpha, ok, t_mid, s_a, s_mid = _column_fit(
+        y, t_s, np.full(400, 190), nf, DET, 3.0, first
+    )
+    assert ok.mean() > 0.9
+    dt = 60 * DT_S
+    at_bottom = (log_c0 - alpha * dt)[ok]
+    stated = np.hypot(s_mid, s_a * (dt - t_mid))[ok]
+    assert np.std(at_bottom) == pytest.approx(np.median(stated), rel=0.25)
+    assert np.median(stated) > 0.5  # unsure: such bottoms do not enter the extra decay
+    # the same bottoms over this column and over the usual bright one: only the latter count
+    for c0, want in ((15.0, False), (400.0, True)):
+        yb = _waveforms(64, 200, seed=12, bottom_at=np.full(64, 60.0), bottom_scale=30.0, c0=c0)
+        det = detect_full_waveform(yb, DT_S, FWHM_S, DetectSettings(), noise_samples=30)
+        assert det.has_bottom.all()
+        args = (yb, det.t_surface_s, det.t_bottom_s, det.bottom_amplitude, det.noise_sigma, DET)
+        _, _, ok_b = bottom_losses(*args, SETTINGS)
+        assert ok_b.mean() > 0.9 if want else ok_b.mean() < 0.1
+        loose = dataclasses.replace(SETTINGS, max_column_sigma=10.0)
+        assert bottom_losses(*args, loose)[2].mean() > 0.9
