@@ -157,7 +157,11 @@ def chunk_inputs(
         # with a peak >= 2 k sigma_f: ln(2 k sigma_f / A_b) below its own loss), the
         # truncation the extra decay's fit undoes (pipeline.process.truncated_regression)
         "floor": (
-            loss + np.log(min_amp[strong] / np.maximum(found.bottom_amplitude[strong], 1e-300))
+            loss
+            + np.log(
+                np.maximum(min_amp[strong], 1e-300)
+                / np.maximum(found.bottom_amplitude[strong], 1e-300)
+            )
         )[ok_b],
         # the chunk rows of those bottoms (the survey-wide sample is by pulse)
         "b_row": np.flatnonzero(strong)[ok_b],
