@@ -43,6 +43,18 @@ def test_without_truncation_it_is_least_squares():
         truncated_line_fit(np.ones(5), y[:5], y[:5] - 1.0)
 
 
+def test_points_all_on_their_floors_pin_no_line_and_give_least_squares(recwarn):
+    # each point its own floor: the likelihood grows without end as the line runs off below
+    # (every point a rarer survivor); the fit must not follow it, nor warn on the way
+    rng = np.random.default_rng(0)
+    t = rng.uniform(0.0, 10.0, 500)
+    y = 1.0 - 0.1 * t + rng.normal(0.0, 0.3, t.size)
+    b_ls, a_ls = np.polyfit(t, y, 1)
+    a, b, s = truncated_line_fit(t, y, y)
+    assert a == pytest.approx(a_ls, rel=1e-9) and b == pytest.approx(b_ls, rel=1e-9)
+    assert np.isfinite(s) and not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]
+
+
 def test_extra_decay_of_selected_bottoms():
     # losses falling at 0.02 per ns, selected above floors that deep bottoms sit near: the
     # truncated fit gives the decay, a least-squares line about two thirds of it
