@@ -176,17 +176,13 @@ def truth_at(fn: TruthFn, x: np.ndarray, y: np.ndarray, pulse_id: Any = None) ->
     per_pulse = pulse_id is not None and getattr(fn, "per_pulse", False)
     x = np.asarray(x, dtype=np.float64).ravel()
     y = np.asarray(y, dtype=np.float64).ravel()
+    pid = np.asarray(pulse_id).ravel() if per_pulse else None
+    order = np.arange(x.size) if pid is None else np.argsort(pid, kind="stable")
     out = np.empty(x.size)
-    if not per_pulse:
-        for a in range(0, x.size, TRUTH_BLOCK):
-            b = slice(a, a + TRUTH_BLOCK)
-            out[b] = np.asarray(fn(x[b], y[b]), dtype=np.float64).ravel()
-        return out
-    pid = np.asarray(pulse_id).ravel()
-    order = np.argsort(pid, kind="stable")
     for a in range(0, x.size, TRUTH_BLOCK):
         b = order[a : a + TRUTH_BLOCK]
-        out[b] = np.asarray(fn(x[b], y[b], pid[b]), dtype=np.float64).ravel()
+        v = fn(x[b], y[b]) if pid is None else fn(x[b], y[b], pid[b])
+        out[b] = np.asarray(v, dtype=np.float64).ravel()
     return out
 
 

@@ -230,7 +230,7 @@ def excess_decay_per_s(
 def excess_decay_summary(
     t_b: np.ndarray,
     loss: np.ndarray,
-    floor: np.ndarray | None,
+    floor: np.ndarray,
     alpha_ok: np.ndarray,
     stack: ColumnStack | None,
     counts: dict[str, int],
@@ -245,8 +245,7 @@ def excess_decay_summary(
     t_b, loss, floor : (m,) float
         :func:`chunk_inputs`' bottom times after the surface, log losses and the floors the
         losses were selected above (of every chunk, or of a bounded sample of the pulses,
-        :class:`pipeline.detection_store.SurveyAggregates`), in pulse order. ``floor`` None:
-        not selected (an ordinary least-squares line).
+        :class:`pipeline.detection_store.SurveyAggregates`), in pulse order.
     alpha_ok : (k,) float
         The measured column decays (1/s) of the pulses whose column was measured (same sample).
     stack, open_stack : ColumnStack or None
