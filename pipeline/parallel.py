@@ -23,13 +23,21 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import os
+import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterator
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from typing import Any
 
-__all__ = ["Executor", "choose_threading_layer", "default_workers", "kernel_threads"]
+__all__ = [
+    "Executor",
+    "choose_threading_layer",
+    "default_workers",
+    "kernel_threads",
+    "stage_threads",
+    "thread_map",
+]
 
 #: What each pool process received through the initializer (``None`` in the parent).
 _SHARED: Any = None
@@ -79,6 +87,52 @@ def kernel_threads(n: int) -> Iterator[int]:
         yield used
     finally:
         numba.set_num_threads(before)
+
+
+#: Threads :func:`thread_map` may use (set by :func:`stage_threads`; 1 outside it).
+_STAGE_THREADS = 1
+_LOCAL = threading.local()
+
+
+@contextlib.contextmanager
+def stage_threads(n: int) -> Iterator[int]:
+    """Let :func:`thread_map` run on ``n`` threads inside; yields the count.
+
+    Outside such a block :func:`thread_map` calls its function in turn (a library caller
+    gets no threads it did not ask for); ``bathy run`` opens one with its workers around the
+    survey's stages.
+    """
+    global _STAGE_THREADS
+    before, _STAGE_THREADS = _STAGE_THREADS, max(1, int(n))
+    try:
+        yield _STAGE_THREADS
+    finally:
+        _STAGE_THREADS = before
+
+
+def thread_map(fn: Callable[[Any], Any], items: Any) -> list[Any]:
+    """``[fn(x) for x in items]``, on the threads :func:`stage_threads` allows.
+
+    For blocks of rows that numpy (and scipy's k-d tree) work on with the GIL released:
+    their loops then run side by side. The results are in item order and, ``fn``'s calls
+    being independent, the same for any number of threads. A call made inside one of the
+    threads runs its items in turn (no nested pools). ``fn`` must not launch numba's
+    ``parallel`` kernels (see :func:`kernel_threads`).
+    """
+    items = list(items)
+    n = min(_STAGE_THREADS, len(items))
+    if n <= 1 or getattr(_LOCAL, "inside", False):
+        return [fn(x) for x in items]
+
+    def call(x: Any) -> Any:
+        _LOCAL.inside = True
+        try:
+            return fn(x)
+        finally:
+            _LOCAL.inside = False
+
+    with ThreadPoolExecutor(max_workers=n) as pool:
+        return list(pool.map(call, items))
 
 
 def _install(shared: Any) -> None:

@@ -103,10 +103,10 @@ def run_scene(
     evaluation = None
     execution = {"workers": 1, "scheduler": None, "engine": "serial", "map_wall_s": 0.0}
     if the_plan.runs("terrain"):
-        from pipeline.parallel import Executor
+        from pipeline.parallel import Executor, stage_threads
         from pipeline.run_survey import run_survey
 
-        with Executor(workers, scheduler) as executor:
+        with Executor(workers, scheduler) as executor, stage_threads(executor.local_threads):
             survey_files, evaluation = run_survey(
                 scene, the_plan, out, clock, log, progress, executor=executor
             )

@@ -40,6 +40,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from pipeline.config import setting
+from pipeline.parallel import thread_map
 from pipeline.process.classify import BATHYMETRIC_POINT, SUBMERGED_OBJECT
 from pipeline.process.returns import Points, ReturnKind
 
@@ -50,7 +51,7 @@ _TUKEY_C = 4.685
 #: MAD to standard deviation at the normal distribution
 _MAD_TO_SIGMA = 1.4826
 #: points tested at once (memory: ~3 kB per point of temporaries with 48 neighbours)
-_BLOCK_ROWS = 32768
+_BLOCK_ROWS = 8192
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -174,14 +175,12 @@ def detect_objects(xy_m, z_m, sigma_z_m, settings: ObjectSettings = ObjectSettin
         return ObjectDetections(np.zeros(n, bool), nan, nan.copy())
     ref = _reference(xy, z, settings.reference_cell_m)
     tree = cKDTree(xy[ref])
-    is_obj, height, sigma = np.zeros(n, bool), nan, nan.copy()
     # rows are independent: blocks keep the (rows, neighbours) temporaries bounded (a survey's
-    # points at once took ~3 kB each) and give the same figures
-    for lo in range(0, n, _BLOCK_ROWS):
-        rows = slice(lo, min(lo + _BLOCK_ROWS, n))
-        is_obj[rows], height[rows], sigma[rows] = _test_rows(
-            xy, z, sig[rows], ref, tree, rows, settings
-        )
+    # points at once took ~3 kB each), run side by side on the stage's threads and give the
+    # same figures
+    blocks = [slice(lo, min(lo + _BLOCK_ROWS, n)) for lo in range(0, n, _BLOCK_ROWS)]
+    parts = thread_map(lambda rows: _test_rows(xy, z, sig[rows], ref, tree, rows, settings), blocks)
+    is_obj, height, sigma = (np.concatenate([p[i] for p in parts]) for i in range(3))
     return ObjectDetections(is_obj, height, sigma)
 
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.parallel import thread_map
 from pipeline.process.refraction import RefractionSettings, seabed_xyz_depth
 from pipeline.process.returns import DetectedReturns
 from pipeline.process.surface_fit import WaterSurface
@@ -84,7 +85,7 @@ class _Inputs:
 
 
 def _take_inputs(inp: _Inputs, keep: np.ndarray) -> _Inputs:
-    """The rows ``keep`` (bool over the bottom rows) of every per-pulse input."""
+    """The rows ``keep`` (bool over the bottom rows, or their indices) of every per-pulse input."""
     return dataclasses.replace(
         inp,
         ret=inp.ret.select(keep),
@@ -254,8 +255,34 @@ def _forward_scatter_term(inp: _Inputs, n: int) -> np.ndarray:
     return _at_measured((scaled(1.0) - scaled(-1.0)) / (2.0 * h) * fs.relative_sigma, inp.grad)
 
 
-def _terms(inp: _Inputs, st: TpuSettings, names=None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """The nominal points ``(n, 4)`` and the one-sigma term rows ``(n, 4)`` asked for."""
+#: Bottom rows per block of :func:`_terms`: the ~35 refraction passes' temporaries stay
+#: bounded (~60 arrays of the block's rows each) and the blocks run on the stage's threads.
+TERMS_BLOCK = 16384
+
+
+def _terms(
+    inp: _Inputs, st: TpuSettings, names=None, block: int | None = None
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """The nominal points ``(n, 4)`` and the one-sigma term rows ``(n, 4)`` asked for.
+
+    Every row's terms are its own (each pass recomputes each point from its own inputs), so
+    the rows go in blocks of ``block`` (default :data:`TERMS_BLOCK`), side by side on
+    :func:`~pipeline.parallel.thread_map`'s threads: the same values for any block size and
+    thread count (``tests/uncertainty/test_tpu_survey_wide.py``).
+    """
+    n, block = len(inp.row), TERMS_BLOCK if block is None else block
+    if n <= block:
+        return _terms_rows(inp, st, names)
+    parts = thread_map(
+        lambda lo: _terms_rows(_take_inputs(inp, np.arange(lo, min(lo + block, n))), st, names),
+        range(0, n, block),
+    )
+    xyzd0 = np.concatenate([p[0] for p in parts])
+    return xyzd0, {k: np.concatenate([p[1][k] for p in parts]) for k in parts[0][1]}
+
+
+def _terms_rows(inp: _Inputs, st: TpuSettings, names=None):
+    """:func:`_terms` of all of ``inp``'s rows at once."""
     n = len(inp.row)
     xyzd0 = _xyzd(inp) if n else np.zeros((0, 4))
     want = set(RANDOM_TERMS + CORRELATED_TERMS) if names is None else set(names)

@@ -117,16 +117,20 @@ def test_settings_are_checked():
 
 def test_blocks_of_points_give_the_same_detections_as_all_at_once(monkeypatch):
     import pipeline.process.objects as objects
+    from pipeline.parallel import stage_threads
 
     rng = np.random.default_rng(11)
     x, y, z, sig, _, _ = swath_cloud(rng)
     whole = detect_objects(np.c_[x, y], z, sig)
     monkeypatch.setattr(objects, "_BLOCK_ROWS", 97)  # a prime: blocks cut anywhere
     blocks = detect_objects(np.c_[x, y], z, sig)
+    with stage_threads(3):  # and the blocks side by side on threads, finishing in any order
+        threaded = detect_objects(np.c_[x, y], z, sig)
     assert x.size > 50 * 97
-    np.testing.assert_array_equal(blocks.is_object, whole.is_object)
-    np.testing.assert_array_equal(blocks.height_m, whole.height_m)
-    np.testing.assert_array_equal(blocks.sigma_m, whole.sigma_m)
+    for got in (blocks, threaded):
+        np.testing.assert_array_equal(got.is_object, whole.is_object)
+        np.testing.assert_array_equal(got.height_m, whole.height_m)
+        np.testing.assert_array_equal(got.sigma_m, whole.sigma_m)
 
 
 def test_row_medians_are_nanmedians_bit_for_bit():

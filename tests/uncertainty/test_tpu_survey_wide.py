@@ -95,3 +95,21 @@ def test_a_tile_given_the_survey_figures_gets_the_survey_tpu(survey):
     assert alone.wide.scatter_rise_per_m2 != whole.wide.scatter_rise_per_m2 or not np.array_equal(
         alone.wide.turn_table[1], whole.wide.turn_table[1]
     )
+
+
+def test_blocks_of_rows_on_threads_give_the_whole_survey_tpu(survey, monkeypatch):
+    # the TPU's refraction passes in blocks of rows (a prime: blocks cut anywhere), the blocks
+    # side by side on threads: every term of every sounding as the survey's rows all at once
+    import pipeline.uncertainty.tpu_terms as tpu_terms
+    from pipeline.parallel import stage_threads
+
+    returns, processed, ctx, grid = survey
+    whole = survey_uncertainty(returns, processed, ctx, grid)
+    monkeypatch.setattr(tpu_terms, "TERMS_BLOCK", 397)
+    assert len(whole.tpu40.sigma_depth_m) > 10 * 397
+    with stage_threads(3):
+        blocks = survey_uncertainty(returns, processed, ctx, grid)
+    np.testing.assert_array_equal(blocks.tpu40.sigma_depth_m, whole.tpu40.sigma_depth_m)
+    assert blocks.tpu40.terms.keys() == whole.tpu40.terms.keys()
+    for name, term in whole.tpu40.terms.items():
+        np.testing.assert_array_equal(blocks.tpu40.terms[name], term, err_msg=name)
