@@ -47,6 +47,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from pipeline.constants import MAD_TO_SIGMA
+from pipeline.parallel import thread_map
 from pipeline.process.surface_land import masked_median
 from pipeline.uncertainty.tpu_settings import X, Y
 
@@ -169,12 +170,13 @@ def _bayes_planes(w, dx, dy, z, noise_var, prior_mean, prior_prec):
     return mean, cov
 
 
-def _robust_bayes(xy, dep, q, k, radius_m, prior_mean, prior_prec):
+def _robust_bayes(xy, dep, q, k, radius_m, prior_mean, prior_prec, tree=None):
     """:func:`_bayes_planes` through the ``k`` nearest of ``xy`` within ``radius_m`` of each row.
 
-    The noise is the residual scale of a first fit; refitted once without outliers.
+    The noise is the residual scale of a first fit; refitted once without outliers. ``tree``:
+    a :class:`~scipy.spatial.cKDTree` of ``xy`` already built (else built here).
     """
-    tree = cKDTree(xy)
+    tree = cKDTree(xy) if tree is None else tree
     k = min(k, len(xy))
     _, idx = tree.query(q, k=k, distance_upper_bound=radius_m, workers=-1)
     idx = np.asarray(idx).reshape(len(q), k)
@@ -222,7 +224,7 @@ def seabed_gradient(
     local_sigma: float | None = None,
     return_cov: bool = False,
     return_local_sigma: bool = False,
-    chunk: int = 200_000,
+    chunk: int = 32_768,
 ):
     """Depth gradient of the seabed from measured soundings, ``(m, 2)`` (m/m) (module notes).
 
@@ -253,6 +255,9 @@ def seabed_gradient(
     return_local_sigma : bool
         Also return the ``local_sigma`` used (measured or given; None without a regional
         step): a survey-wide figure a tile of the survey is given back.
+    chunk : int
+        Queries per block (bounds the temporaries; blocks run on
+        :func:`~pipeline.parallel.thread_map`'s threads; no effect on the values).
 
     Returns
     -------
@@ -295,7 +300,9 @@ def seabed_gradient(
             tree = cKDTree(cells[1])
             if local_sigma is None:
                 local_sigma = s0  # nothing measured it
-        for lo in range(0, len(q), chunk):
+        tree_xy = cKDTree(xy)
+
+        def block(lo):
             qq = q[lo : lo + chunk]
             if reg is None:  # no regional step: the slope prior itself
                 mean0 = np.zeros((len(qq), 2))
@@ -304,8 +311,12 @@ def seabed_gradient(
                 near = tree.query(qq, workers=-1)[1]
                 mean0, cov0 = reg[0][near], reg[1][near]
                 prec0 = np.linalg.inv(cov0 + np.eye(2) * local_sigma**2)
-            g, c = _robust_bayes(xy, dep, qq, neighbours, radius_m, mean0, prec0)
-            out[lo : lo + chunk], cov[lo : lo + chunk] = g, c
+            return _robust_bayes(xy, dep, qq, neighbours, radius_m, mean0, prec0, tree_xy)
+
+        # the queries are independent: blocks bound the (queries, neighbours) temporaries and
+        # run side by side on the stage's threads, the same values for any block size
+        parts = thread_map(block, range(0, len(q), chunk))
+        out, cov = np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
     res = (out, cov) if return_cov else (out,)
     if return_local_sigma:
         res = (*res, None if reg is None else float(local_sigma))

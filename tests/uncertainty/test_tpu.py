@@ -322,6 +322,21 @@ def test_seabed_gradient_of_a_noisy_plane_and_of_a_track():
     assert np.all(seabed_gradient(xy[:2], depth[:2]) == 0.0)
 
 
+def test_seabed_gradient_blocks_on_threads_give_the_same_values():
+    # blocks of queries (a prime: cut anywhere), side by side on threads: every gradient and
+    # covariance as all queries at once
+    from pipeline.parallel import stage_threads
+
+    rng = np.random.default_rng(4)
+    xy = rng.uniform(0, 80, (3000, 2))
+    depth = 5.0 + 0.08 * xy[:, 0] + 0.5 * np.sin(xy[:, 1] / 7.0) + rng.normal(0, 0.03, len(xy))
+    whole = seabed_gradient(xy, depth, return_cov=True, chunk=10**6)
+    with stage_threads(3):
+        blocks = seabed_gradient(xy, depth, return_cov=True, chunk=97)
+    for a, b in zip(blocks, whole, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_seabed_gradient_across_a_drifting_profiler_track():
     """A dense profiler track drifting slowly across a seabed that slopes across it only
     (depth = 5 + 0.3 x, none along y): locally the track is a line, blind across; over tens of
