@@ -9,7 +9,8 @@ scene and its meshes) that is sent once per worker, not once per task.
 * ``workers == 1`` and no scheduler: plain calls in this process (no pickling, no pool).
 * ``workers > 1``: a :class:`concurrent.futures.ProcessPoolExecutor` whose processes start with
   ``spawn`` (a clean interpreter: forking a process whose open3d/numba thread pools are running
-  can deadlock) and receive ``shared`` once, through the pool's initializer.
+  can deadlock) and receive ``shared`` once, through the pool's initializer, which reads it
+  from a file pickled once (:func:`_shared_handoff`: the workers start side by side).
 * ``scheduler`` given: a :class:`distributed.Client` on that address; ``shared`` is scattered to
   every worker once (``broadcast=True``).
 
@@ -23,6 +24,8 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import os
+import pickle
+import tempfile
 import threading
 import time
 from collections import deque
@@ -140,6 +143,34 @@ def _install(shared: Any) -> None:
     _SHARED = shared
 
 
+def _install_from(path: str) -> None:
+    global _SHARED
+    with open(path, "rb") as f:
+        _SHARED = pickle.load(f)
+
+
+@contextlib.contextmanager
+def _shared_handoff(shared: Any) -> Iterator[tuple[Callable[[Any], None], tuple[Any, ...]]]:
+    """The pool's initializer and its arguments: ``shared`` pickled once, read by each worker.
+
+    A spawned worker reads its initializer's arguments from a pipe only once it has imported
+    the parent's main module (seconds), and the pool starts its workers one after the other,
+    each start blocking on that pipe: with the scene's meshes (tens of MB) as the argument the
+    N-th worker would begin N import times late. So ``shared`` is written once to an unnamed
+    temporary file (``O_TMPFILE``: a killed run leaves nothing), and each worker gets only its
+    ``/proc/<pid>/fd/<n>`` path, which it opens itself. Where there is no ``/proc`` the
+    arguments go through the pipe as before.
+    """
+    proc = f"/proc/{os.getpid()}/fd"
+    if not os.path.isdir(proc):
+        yield _install, (shared,)
+        return
+    with tempfile.TemporaryFile() as f:
+        pickle.dump(shared, f, protocol=pickle.HIGHEST_PROTOCOL)
+        f.flush()
+        yield _install_from, (f"{proc}/{f.fileno()}",)
+
+
 def _pool_call(fn: Callable[[Any, int], Any], index: int) -> Any:
     return fn(_SHARED, index)
 
@@ -233,16 +264,18 @@ class Executor:
 
     def _map_pool(self, fn, shared, n_tasks: int) -> Iterator[Any]:
         ctx = multiprocessing.get_context("spawn")
-        pool = ProcessPoolExecutor(
-            max_workers=min(self.workers, n_tasks),
-            mp_context=ctx,
-            initializer=_install,
-            initargs=(shared,),
-        )
-        try:
-            yield from _ordered(lambda i: pool.submit(_pool_call, fn, i), n_tasks, self.ahead)
-        finally:
-            pool.shutdown(wait=True, cancel_futures=True)
+        # the file lives until the pool has shut down: every worker has read it by then
+        with _shared_handoff(shared) as (initializer, initargs):
+            pool = ProcessPoolExecutor(
+                max_workers=min(self.workers, n_tasks),
+                mp_context=ctx,
+                initializer=initializer,
+                initargs=initargs,
+            )
+            try:
+                yield from _ordered(lambda i: pool.submit(_pool_call, fn, i), n_tasks, self.ahead)
+            finally:
+                pool.shutdown(wait=True, cancel_futures=True)
 
     def _map_dask(self, fn, shared, n_tasks: int) -> Iterator[Any]:
         client = self._client

@@ -54,6 +54,29 @@ def test_serial_executor_maps_in_order():
         Executor(workers=0)
 
 
+def _shared_array(shared, i):
+    return float(shared[i])
+
+
+def test_pool_workers_read_shared_once_from_an_unnamed_file():
+    """The workers get ``shared`` from a file that has no name and is gone after the pool."""
+    import os
+
+    from pipeline.parallel import _install_from, _shared_handoff
+
+    big = np.arange(300_000, dtype=np.float64)  # 2.4 MB: far more than a pipe holds
+    with _shared_handoff(big) as (init, args):
+        assert init is _install_from
+        (path,) = args
+        assert path.startswith(f"/proc/{os.getpid()}/fd/")
+        # unnamed: the link names no file in any folder
+        assert "(deleted)" in os.readlink(path) or os.readlink(path).startswith("/memfd")
+    assert not os.path.exists(path)
+    with Executor(workers=2) as ex:
+        got = list(ex.map(_shared_array, big, 6))
+    assert got == [float(i) for i in range(6)]
+
+
 def _scene(chunk_pulses: int):
     data = tomllib.loads((ROOT / "data_synthetic" / "scenes" / "palmer_survey.toml").read_text())
     data["flight"]["area_m"] = [0.0, 60.0, 0.0, 60.0]
