@@ -201,3 +201,22 @@ def test_soundings_far_from_any_echo_are_kriged_alike_in_a_tile():
     got = _by_pulse(part.select(np.isin(part.pulse_id, ret.pulse_id[rows[own]])))
     assert len(want) > 100
     np.testing.assert_array_equal(got.depth_m, want.depth_m)
+
+
+@pytest.mark.slow
+def test_blocks_of_planes_and_kriging_on_threads_change_nothing(survey, monkeypatch):
+    # the local planes, the sea's pairs and the kriged sea in blocks cut anywhere (primes),
+    # side by side on three threads: every point as the whole survey at once gives it
+    import pipeline.process.sea_correlation as sea_correlation
+    import pipeline.process.sea_kriging as sea_kriging
+    import pipeline.process.surface_fit as surface_fit
+    from pipeline.parallel import stage_threads
+
+    scene, ctx, returns, whole = survey
+    monkeypatch.setattr(surface_fit, "FIT_BLOCK", 997)
+    monkeypatch.setattr(sea_kriging, "_CHUNK", 1009)
+    monkeypatch.setattr(sea_correlation, "_PAIR_BLOCK", 1013)
+    assert len(returns) > 10 * 997 and whole.surface.sea_field is not None
+    with stage_threads(3):
+        again = process_detections(returns, ctx, scene.process.classify, water_column=False)
+    _assert_same_points(again.points, whole.points)

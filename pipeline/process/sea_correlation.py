@@ -42,6 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.parallel import thread_map
 from pipeline.process.returns import DetectedReturns, PointFlag
 
 __all__ = [
@@ -208,9 +209,11 @@ def surface_pairs(
     s_own = z - z_own
     gz = surface.global_z_m(x, y)
     s_i, s_j, lag, rise = (np.empty(i.size) for _ in range(4))
+
     # the pairs in blocks: elementwise, so the same figures, and the temporaries (the anchors'
-    # planes gathered per pair) stay small instead of hundreds of MB for a survey's pairs
-    for lo in range(0, i.size, _PAIR_BLOCK):
+    # planes gathered per pair) stay small instead of hundreds of MB for a survey's pairs;
+    # side by side on the stage's threads (each block writes its own rows)
+    def block(lo: int) -> None:
         b = slice(lo, lo + _PAIR_BLOCK)
         a, p = i[b], j[b]
         x_i, y_i, x_j, y_j = x[a], y[a], x[p], y[p]
@@ -222,6 +225,8 @@ def surface_pairs(
         # plane's height at the anchor already in hand)
         rise[b] = plane_j - (z_own[a] + g_j - gz[a])
         lag[b] = np.hypot(x_i - x_j, y_i - y_j)
+
+    thread_map(block, range(0, i.size, _PAIR_BLOCK))
     return SurfacePairs(idx[i], idx[j], s_i, s_j, lag, rise)
 
 

@@ -40,6 +40,7 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial import cKDTree
 
+from pipeline.parallel import thread_map
 from pipeline.process.returns import DetectedReturns, PointFlag
 from pipeline.process.sea_correlation import LAG_EDGES_M, MIN_PAIRS, time_pairs
 
@@ -124,32 +125,43 @@ class SeaField:
         """
         xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
         t = np.asarray(t_s, dtype=np.float64).ravel()
-        n, k = len(t), min(self.neighbours, len(self.t_s))
+        n = len(t)
         height, sigma, used = np.zeros(n), np.zeros(n), np.zeros(n, dtype=np.int64)
+        tree = self._tree  # built here, once, not raced for by the blocks' threads
+
+        def block(lo: int) -> None:
+            s = slice(lo, lo + _CHUNK)
+            height[s], sigma[s], used[s] = self._predict_rows(tree, xy[s], t[s])
+
+        # blocks of rows, each kriged on its own (the same figures in any order): side by
+        # side on the stage's threads (pipeline.parallel.thread_map)
+        thread_map(block, range(0, n, _CHUNK))
+        return height, sigma, used
+
+    def _predict_rows(self, tree: cKDTree, xy: np.ndarray, t: np.ndarray):
+        """:meth:`predict` of one block of rows ``(b, 2)``, ``(b,)``."""
+        k = min(self.neighbours, len(self.t_s))
         c0 = self.sill_m2
-        ex, ey = (np.ascontiguousarray(c) for c in self.xy_m.T)
+        ex, ey = self.xy_m[:, 0], self.xy_m[:, 1]
         # each pair of neighbours once: the distance matrix is symmetric, exactly (a - b is
         # -(b - a) in floating point), and its diagonal is set below
         iu, ju = np.triu_indices(k, 1)
         diag = np.arange(k)
-        for lo in range(0, n, _CHUNK):
-            s = slice(lo, lo + _CHUNK)
-            q = np.column_stack([xy[s], self.speed_m_s * t[s]])
-            _, nn = self._tree.query(q, k=k, workers=-1)
-            nn = np.asarray(nn).reshape(len(q), k)
-            ok = np.abs(self.t_s[nn] - t[s, None]) <= self.window_s
-            x, y = ex[nn], ey[nn]
-            upper = self.covariance_m2(_distance(x[:, iu] - x[:, ju], y[:, iu] - y[:, ju]))
-            upper *= ok[:, iu] & ok[:, ju]
-            gram = np.empty((len(q), k, k))
-            gram[:, iu, ju] = gram[:, ju, iu] = upper
-            gram[:, diag, diag] = c0 + self.nugget_m2  # out-of-window echoes: decoupled
-            kv = self.covariance_m2(_distance(x - xy[s, 0, None], y - xy[s, 1, None])) * ok
-            w = np.linalg.solve(gram, kv[..., None])[..., 0]
-            height[s] = np.sum(w * self.height_m[nn] * ok, axis=1)
-            sigma[s] = np.sqrt(np.maximum(c0 - np.sum(w * kv, axis=1), 0.0))
-            used[s] = ok.sum(axis=1)
-        return height, sigma, used
+        q = np.column_stack([xy, self.speed_m_s * t])
+        _, nn = tree.query(q, k=k, workers=-1)
+        nn = np.asarray(nn).reshape(len(q), k)
+        ok = np.abs(self.t_s[nn] - t[:, None]) <= self.window_s
+        x, y = ex[nn], ey[nn]
+        upper = self.covariance_m2(_distance(x[:, iu] - x[:, ju], y[:, iu] - y[:, ju]))
+        upper *= ok[:, iu] & ok[:, ju]
+        gram = np.empty((len(q), k, k))
+        gram[:, iu, ju] = gram[:, ju, iu] = upper
+        gram[:, diag, diag] = c0 + self.nugget_m2  # out-of-window echoes: decoupled
+        kv = self.covariance_m2(_distance(x - xy[:, 0, None], y - xy[:, 1, None])) * ok
+        w = np.linalg.solve(gram, kv[..., None])[..., 0]
+        height = np.sum(w * self.height_m[nn] * ok, axis=1)
+        sigma = np.sqrt(np.maximum(c0 - np.sum(w * kv, axis=1), 0.0))
+        return height, sigma, ok.sum(axis=1)
 
 
 def _distance(dx_m: np.ndarray, dy_m: np.ndarray) -> np.ndarray:

@@ -58,6 +58,7 @@ from scipy.spatial import cKDTree
 
 from pipeline.constants import MAD_TO_SIGMA
 from pipeline.optics import SPEED_OF_LIGHT_M_S
+from pipeline.parallel import thread_map
 from pipeline.process.returns import DetectedReturns, PointFlag
 from pipeline.process.surface_land import land_surface_points, masked_median, own_echo_weight
 from pipeline.process.surface_settings import SurfaceFitSettings
@@ -73,6 +74,8 @@ __all__ = ["SurfaceFitSettings", "WaterSurface", "fit_water_surface", "surface_p
 
 #: |N . d| below this: the beam runs along the surface (no usable entry point).
 _GRAZING_COS = 1e-6
+#: Queries whose local planes are fitted at once (:func:`_local_fit`).
+FIT_BLOCK = 16384
 
 
 def _solve(w, dx, dy, z, lam):
@@ -102,7 +105,24 @@ def _local_fit(tree, spts, qxy, st, key=None, qkey=None):
 
     ``key`` / ``qkey``: the tree's and the queries' search coordinates when they are not the
     horizontal positions (``(x, y, v t)`` with a time window, :func:`_search_keys`).
+
+    Each query's plane is its own (row by row), so the queries are fitted in blocks of
+    :data:`FIT_BLOCK` (their ``(m, k)`` temporaries stay small), side by side on the stage's
+    threads (:func:`~pipeline.parallel.thread_map`): the same figures as all at once.
     """
+
+    def block(lo: int):
+        s = slice(lo, lo + FIT_BLOCK)
+        return _local_fit_rows(tree, spts, qxy[s], st, key, None if qkey is None else qkey[s])
+
+    parts = thread_map(block, range(0, max(len(qxy), 1), FIT_BLOCK))
+    if len(parts) == 1:
+        return parts[0]
+    return tuple(np.concatenate(c) for c in zip(*parts, strict=True))
+
+
+def _local_fit_rows(tree, spts, qxy, st, key, qkey):
+    """:func:`_local_fit` of one block of queries."""
     m, ns = len(qxy), len(spts)
     k = min(st.k_neighbours, ns)
     q = qxy if qkey is None else qkey

@@ -129,16 +129,21 @@ def _scan_start(y, system, cos_water, ts, bg, exposure=None):
         return None
     depths = taus * cos_water * _C / (2.0 * system.group_index)
     off = -700.0  # log area of an absent return
-    basis = []
-    for j in (2, 3, 4):
-        th = np.tile([0.0, ts * 1e9, off, off, off, math.log(0.1), 0.0, 0.0, 0.0], (taus.size, 1))
-        th[:, 0], th[:, j] = depths, 0.0
-        basis.append(expected_waveform(th, m, system, cos_water) - system.offset_counts)
-    a = np.stack([np.ones((taus.size, m)), *basis], axis=2)  # (K, m, 4)
+    # (K, m, 4): background, surface, column, bottom, each of unit area
+    a = np.empty((taus.size, m, 4))
+    a[:, :, 0] = 1.0
+    for col, j in ((1, 2), (2, 3), (3, 4)):
+        # the surface alone is the same at every depth: one row, broadcast (the absent
+        # column and bottom it carries at exp(-700) differ by ~1e-305 between depths, below
+        # any sum's last bit: the scan's sums, and so its start, are unchanged)
+        rows = 1 if j == 2 else taus.size
+        th = np.tile([0.0, ts * 1e9, off, off, off, math.log(0.1), 0.0, 0.0, 0.0], (rows, 1))
+        th[:, 0], th[:, j] = depths[:rows], 0.0
+        a[:, :, col] = expected_waveform(th, m, system, cos_water) - system.offset_counts
     if exposure is not None and system.poisson:
-        a = a * np.asarray(exposure, dtype=np.float64)[None, :, None]
+        a *= np.asarray(exposure, dtype=np.float64)[None, :, None]
     rhs = y - system.offset_counts
-    gram, proj = _normal_sums(a, rhs)
+    gram, proj = _scan_sums(a, rhs)
     ata = gram + 1e-9 * np.eye(4)
     coef = np.linalg.solve(ata, proj[:, :, None])[:, :, 0]
     resid = np.sum((np.einsum("kmi,ki->km", a, coef) - rhs) ** 2, axis=1)
@@ -183,6 +188,44 @@ def _normal_sums(a, rhs):
         for i in range(n):
             for j in range(i):
                 gram[k, i, j] = gram[k, j, i]  # a_i a_j = a_j a_i exactly
+    return gram, proj
+
+
+@numba.njit(cache=True, nogil=True)
+def _scan_sums(a, rhs):
+    """:func:`_normal_sums` of the scan's ``a`` (K, m, 4): its columns 0 and 1 shared by all K.
+
+    Columns 0 and 1 (background and surface) are the same for every candidate ``k``: the
+    sums among them and with the right-hand side are computed once, for ``k = 0``, and copied
+    (the same products in the same order give the same bits). Only the column's and the
+    bottom's entries are summed per candidate (7 of the 10 distinct Gram entries, 2 of 4
+    projections).
+    """
+    n_k, m, n = a.shape
+    gram = np.zeros((n_k, n, n))
+    proj = np.zeros((n_k, n))
+    if n_k == 0:
+        return gram, proj
+    g0, p0 = _normal_sums(a[:1], rhs)
+    gram[0], proj[0] = g0[0], p0[0]
+    for k in range(1, n_k):
+        for i in range(2):
+            proj[k, i] = p0[0, i]
+            for j in range(2):
+                gram[k, i, j] = g0[0, i, j]
+        for t in range(m):
+            for i in range(2, n):
+                ai = a[k, t, i]
+                proj[k, i] += ai * rhs[t]
+                for j in range(i, n):
+                    gram[k, i, j] += ai * a[k, t, j]
+            for i in range(2):
+                ai = a[k, t, i]
+                for j in range(2, n):
+                    gram[k, i, j] += ai * a[k, t, j]
+        for i in range(n):
+            for j in range(i):
+                gram[k, i, j] = gram[k, j, i]
     return gram, proj
 
 

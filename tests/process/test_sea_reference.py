@@ -188,17 +188,11 @@ def test_the_held_sea_is_the_one_the_points_were_made_with():
     assert with_held_sea(untimed, plane.surface, REFR) is plane.surface
 
 
-def test_kriging_predicts_what_the_dense_formula_gives_bit_for_bit():
-    # SeaField.predict fills each symmetric kriging matrix from its upper triangle, with the
-    # distances as sqrt(dx² + dy²): the values np.linalg.norm of every difference gives
-    from scipy.spatial import cKDTree
-
-    rng = np.random.default_rng(11)
-    m, n, k = 3000, 500, 12
-    xy, t = rng.uniform(0.0, 60.0, (m, 2)), np.sort(rng.uniform(0.0, 3.0, m))
-    field = SeaField(
-        xy_m=xy,
-        t_s=t,
+def _random_field(rng, m: int, k: int) -> SeaField:
+    """``m`` echoes over 60 x 60 m and 3 s, a 0.2 m sea, ``k`` neighbours, a 0.3 s window."""
+    return SeaField(
+        xy_m=rng.uniform(0.0, 60.0, (m, 2)),
+        t_s=np.sort(rng.uniform(0.0, 3.0, m)),
         height_m=rng.normal(0.0, 0.2, m),
         lag_m=np.zeros(0),
         cov_m2=np.zeros(0),
@@ -209,6 +203,17 @@ def test_kriging_predicts_what_the_dense_formula_gives_bit_for_bit():
         window_s=0.3,
         speed_m_s=5.0,
     )
+
+
+def test_kriging_predicts_what_the_dense_formula_gives_bit_for_bit():
+    # SeaField.predict fills each symmetric kriging matrix from its upper triangle, with the
+    # distances as sqrt(dx² + dy²): the values np.linalg.norm of every difference gives
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(11)
+    m, n, k = 3000, 500, 12
+    field = _random_field(rng, m, k)
+    xy, t = field.xy_m, field.t_s
     q, tq = rng.uniform(0.0, 60.0, (n, 2)), rng.uniform(0.0, 3.0, n)
     height, sigma, used = field.predict(q, tq)
     _, nn = cKDTree(np.column_stack([xy, 5.0 * t])).query(np.column_stack([q, 5.0 * tq]), k=k)
@@ -223,3 +228,19 @@ def test_kriging_predicts_what_the_dense_formula_gives_bit_for_bit():
     np.testing.assert_array_equal(height, np.sum(w * field.height_m[nn] * ok, axis=1))
     np.testing.assert_array_equal(sigma, np.sqrt(np.maximum(0.04 - np.sum(w * kv, axis=1), 0.0)))
     np.testing.assert_array_equal(used, ok.sum(axis=1))
+
+
+def test_kriging_in_blocks_on_threads_is_the_same_bit_for_bit(monkeypatch):
+    import pipeline.process.sea_kriging as sea_kriging
+    from pipeline.parallel import stage_threads
+
+    rng = np.random.default_rng(12)
+    n = 1500
+    field = _random_field(rng, 2000, 12)
+    q, tq = rng.uniform(0.0, 60.0, (n, 2)), rng.uniform(0.0, 3.0, n)
+    whole = field.predict(q, tq)
+    monkeypatch.setattr(sea_kriging, "_CHUNK", 97)  # a prime: blocks cut anywhere
+    with stage_threads(3):  # side by side, finishing in any order
+        blocks = field.predict(q, tq)
+    for got, want in zip(blocks, whole, strict=True):
+        np.testing.assert_array_equal(got, want)

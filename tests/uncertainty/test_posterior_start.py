@@ -6,7 +6,12 @@ import numpy as np
 import pytest
 
 from pipeline.uncertainty.posterior_settings import PosteriorSettings
-from pipeline.uncertainty.posterior_start import _normal_sums, _project, _project_all
+from pipeline.uncertainty.posterior_start import (
+    _normal_sums,
+    _project,
+    _project_all,
+    _scan_sums,
+)
 from pipeline.uncertainty.posterior_target import make_pulse_batch
 from pipeline.uncertainty.waveform_model import WaveformSystem
 
@@ -23,6 +28,23 @@ def test_normal_sums_are_einsums_bit_for_bit(m):
     gram, proj = _normal_sums(a, rhs)
     assert np.array_equal(gram, np.einsum("kmi,kmj->kij", a, a))
     assert np.array_equal(proj, np.einsum("kmi,m->ki", a, rhs))
+
+
+@pytest.mark.parametrize("m", [1, 9, 83, 611])
+def test_scan_sums_are_einsums_bit_for_bit(m):
+    # the scan's basis: background and surface columns shared by every candidate depth
+    rng = np.random.default_rng(m + 1)
+    k = 2 * m
+    surface = rng.gamma(0.3, 50.0, m) * (rng.random(m) < 0.5)
+    bases = [rng.gamma(0.3, 50.0, (k, m)) * (rng.random((k, m)) < 0.7) for _ in range(2)]
+    a = np.stack([np.ones((k, m)), np.broadcast_to(surface, (k, m)), *bases], axis=2)
+    a *= rng.uniform(0.5, 1.0, m)[None, :, None]  # an exposure per sample, as photon counting
+    rhs = rng.normal(100.0, 20.0, m)
+    gram, proj = _scan_sums(a, rhs)
+    assert np.array_equal(gram, np.einsum("kmi,kmj->kij", a, a))
+    assert np.array_equal(proj, np.einsum("kmi,m->ki", a, rhs))
+    g0, p0 = _scan_sums(a[:0], rhs)
+    assert g0.shape == (0, 4, 4) and p0.shape == (0, 4)
 
 
 def test_projection_of_all_pulses_is_the_per_pulse_one():
