@@ -224,11 +224,11 @@ def simulate_detections(
         log(f"  photon detection limits: {no_bottom}")
     if job.no_bottom:
         with clock.stage("no_bottom_limit"):
-            no_bottom = _no_bottom_limits(store, agg, ctx, ps.detect)
+            no_bottom = _no_bottom_limits(store, agg, ctx, ps.detect, ps.no_bottom)
         log(
             f"  no-bottom limits: {no_bottom['pulses_with_limit']} pulses; bottoms fade "
             f"{no_bottom['excess_decay_per_m']:.3f}/m (in-water path) faster than the column "
-            f"({no_bottom['bottoms_used']} bottoms)"
+            f"({no_bottom['bottoms_used']} bottoms: {no_bottom['excess_decay_from']})"
         )
     return SimulatedSurvey(
         returns=store.returns(),
@@ -247,14 +247,12 @@ def simulate_detections(
 _NB_FIELDS = ("none", "margin", "alpha", "t_max", "ok")
 
 
-def _no_bottom_limits(store: DetectionStore, agg: SurveyAggregates, ctx, detect) -> dict:
+def _no_bottom_limits(store: DetectionStore, agg: SurveyAggregates, ctx, detect, settings) -> dict:
     """Fit the bottoms' extra decay once, then set every stored chunk's ``t_no_bottom_s``."""
     from pipeline.process.no_bottom import excess_decay_summary, limit_times_s
 
-    t_b, loss, floor, alpha = agg.no_bottom_sample()
-    delta, summary = excess_decay_summary(
-        t_b, loss, floor, alpha, agg.nb_stack, agg.nb_counts, ctx, detect, agg.nb_stack_open
-    )
+    args = (agg.nb_stack, agg.nb_counts, ctx, detect, agg.nb_stack_open, settings)
+    delta, summary = excess_decay_summary(*agg.no_bottom_sample(), *args)
     n_limit = 0
     for c in range(len(store.chunks)):
         d = store.load_chunk(c, ["t_surface_s", *(f"nb_{k}" for k in _NB_FIELDS)])

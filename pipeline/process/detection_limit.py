@@ -49,8 +49,10 @@ the unknown ratio of the true to the assumed ``ρ/β_π``, is not used), and the
 ``ln(C0 / C*) / (α + δ)``. Deep down only the bottoms that came out bright pass the selection,
 so the line is the truncated-normal one, each loss seen only above its own floor
 (:mod:`pipeline.process.truncated_regression`; a least-squares line measured no extra decay
-in clear water where the limits lay metres under the seabed). ``δ = 0`` when the survey found
-too few bottoms (< 20; :func:`pipeline.process.no_bottom.excess_decay_per_s`).
+in clear water where the limits lay metres under the seabed). Where the survey found too few
+bottoms to fit it (< 20; :func:`pipeline.process.no_bottom.excess_decay_summary`), ``δ`` is
+``default_excess_decay_per_m`` of :class:`NoBottomSettings`, not 0 (the weakest fading, which
+put the limits of a clear-water survey over a 60 m seabed up to 30 m under it).
 """
 
 from __future__ import annotations

@@ -237,6 +237,7 @@ def excess_decay_summary(
     ctx: ProcessingContext,
     detect: DetectSettings,
     open_stack: ColumnStack | None = None,
+    settings: NoBottomSettings | None = None,
 ) -> tuple[float, dict[str, Any]]:
     """The bottoms' extra decay ``δ`` (1/s) fitted once per survey, and the survey's summary.
 
@@ -254,21 +255,30 @@ def excess_decay_summary(
         down to an echo), else, where they show none, the open columns'.
     counts : dict
         ``bottoms`` and ``no_column`` counted over every pulse.
+    settings : NoBottomSettings, optional
+        Its ``default_excess_decay_per_m`` is ``δ`` where fewer than :data:`MIN_BOTTOMS`
+        bottoms enter the fit (or they all lie at one time).
 
     Returns
     -------
     delta : float
     summary : dict
         Without ``pulses_with_limit`` (counted by :func:`limit_times_s` chunk by chunk).
+        ``excess_decay_from``: ``"fit"`` (the survey's bottoms) or ``"default"``.
         ``column_decay_per_m`` is the lidar decay of the survey's stacked column
         (:func:`~pipeline.process.column_stack.stacked_decay_per_m`, None without a measurable
         column) and ``column_decay_from`` which stack gave it (``closed``, ``open`` or None);
         ``column_decay_median_fit_per_m`` the median of the per-pulse fits (biased
         high in clear water; kept for the record, the limits use the per-pulse fits).
     """
-    delta = excess_decay_per_s(t_b, loss, floor)
     det = detector_model(ctx, detect)
     g = det.group_index
+    fitted = t_b.size >= MIN_BOTTOMS and np.ptp(t_b) > 0.0
+    if fitted:
+        delta = excess_decay_per_s(t_b, loss, floor)
+    else:  # nothing to fit: the stated default, not the weakest fading (0)
+        per_m = (settings or NoBottomSettings()).default_excess_decay_per_m
+        delta = per_m * SPEED_OF_LIGHT_M_S / (2.0 * g)
     # closed columns first: an open one may run past a seabed whose echo was too faint to be
     # found, where it stops (shoal tuning seed 7003, c 0.73 /m, a plane 0-4.9 m deep: 21 500
     # open columns ended there and fell at 0.74 /m against the water's 0.21 /m; c through
@@ -281,6 +291,7 @@ def excess_decay_summary(
             break
     summary = {
         "excess_decay_per_m": delta * 2.0 * g / SPEED_OF_LIGHT_M_S,
+        "excess_decay_from": "fit" if fitted else "default",
         "bottoms_used": int(t_b.size),
         "pulses_with_limit": 0,
         "pulses_without_measurable_column": int(counts["no_column"]),

@@ -26,6 +26,7 @@ from pipeline.process.detection_limit import (
     column_margins,
 )
 from pipeline.process.no_bottom import chunk_inputs, excess_decay_summary
+from pipeline.process.no_bottom_settings import DEFAULT_EXCESS_DECAY_PER_M
 from pipeline.process.returns import DetectorFlag
 
 DT_S = 1e-9
@@ -76,7 +77,7 @@ def _waveforms(n, seed=0, clip=True, bottom_counts=150.0):
     return np.minimum(y, TOP) if clip else y
 
 
-def _summary(y, top_code=TOP):
+def _summary(y, top_code=TOP, settings=None):
     detect = DetectSettings()
     found = detect_full_waveform(
         y, DT_S, FWHM_S, detect, noise_samples=NOISE_SAMPLES, top_code=top_code
@@ -87,6 +88,7 @@ def _summary(y, top_code=TOP):
         d["t_b"], d["loss"], d["floor"], d["alpha"][d["ok"]], d["column_stack"], counts, CTX,
         detect,
         d["column_stack_open"],
+        settings,
     )  # fmt: skip
     return found, d, s
 
@@ -124,6 +126,20 @@ def test_columns_above_clipped_bottoms_are_stacked_and_their_bottoms_left_out():
     assert s["column_decay_from"] == "closed"
     assert d["column_stack"].n_pulses[0] >= 0.9 * 500  # the bottoms' columns
     assert s["bottoms_used"] == 0
+    # no bottom to fit the extra decay with: the stated default, not 0 (the weakest fading)
+    assert s["excess_decay_from"] == "default"
+    assert s["excess_decay_per_m"] == pytest.approx(DEFAULT_EXCESS_DECAY_PER_M, rel=1e-12)
+    _, _, s2 = _summary(
+        _waveforms(1500, seed=1, bottom_counts=20.0 * TOP),
+        settings=NoBottomSettings(default_excess_decay_per_m=0.03),
+    )
+    assert s2["excess_decay_from"] == "default"
+    assert s2["excess_decay_per_m"] == pytest.approx(0.03, rel=1e-12)
+
+
+def test_bottoms_enough_to_fit_give_their_own_extra_decay(clipped):
+    _, _, s = clipped
+    assert s["excess_decay_from"] == "fit"
 
 
 def _per_pulse_k(y, found, first_s, rows):
