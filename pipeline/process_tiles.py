@@ -26,7 +26,12 @@ Measured from a pulse's position, processing looks
   water if it is not land, decided from land candidates within ``land_radius_m`` whose
   candidacy is decided within ``land_radius_m`` of them (``2 land_radius_m``).
 
-So ``halo = beam reach + kriging reach + sqrt 2 radius_m + 2 land_radius_m``.
+* a class-45 claim is tested against the class-40 soundings within ``no_bottom_radius_m`` of
+  it (:func:`~pipeline.process.survey_points.contradicted_claims`), each made as its own
+  pulse's processing made it: another beam reach, that radius and that pulse's own reach.
+
+So ``halo = beam reach + kriging reach + sqrt 2 radius_m + 2 land_radius_m`` (a pulse's own
+reach), plus ``beam reach + no_bottom_radius_m`` where the class-45 test runs.
 
 Not bounded by a setting
 ------------------------
@@ -49,6 +54,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S
+from pipeline.process.classify import ClassifySettings
 from pipeline.process.returns import Points
 from pipeline.process.survey_points import process_detections
 from pipeline.survey_tiles import TileLayout, returns_position_m
@@ -115,7 +121,9 @@ def beam_reach_m(returns, ctx, wide) -> float:
     return float(np.max((horiz * along + tan * band_m)[seen]))
 
 
-def processing_halo_m(ctx, beam_reach: float, kriging_reach_m: float | None = None) -> float:
+def processing_halo_m(
+    ctx, beam_reach: float, kriging_reach_m: float | None = None, classify=None
+) -> float:
     """How far past a tile's edges processing's searches reach (m; module notes).
 
     Parameters
@@ -127,11 +135,17 @@ def processing_halo_m(ctx, beam_reach: float, kriging_reach_m: float | None = No
     kriging_reach_m : float, optional
         How far the kriging's nearest echoes are allowed to lie (an allowance: module notes);
         default the surface fit's ``radius_m``.
+    classify : ClassifySettings, optional
+        Its ``no_bottom_radius_m`` (default the default's): the class-45 claims' test.
     """
     st = ctx.surface_fit
     fit = st.radius_m * (np.sqrt(2.0) if st.time_window_s is not None else 1.0)
     krige = st.radius_m if kriging_reach_m is None else float(kriging_reach_m)
-    return float(beam_reach + krige + fit + 2.0 * st.land_radius_m)
+    own = beam_reach + krige + fit + 2.0 * st.land_radius_m
+    # a class-45 claim (on its beam) reads the soundings within the test's radius, each made
+    # as its own pulse's processing made it (that pulse's own reach again)
+    r = (classify or ClassifySettings()).no_bottom_radius_m
+    return float(own + (beam_reach + r if r > 0.0 else 0.0))
 
 
 def tile_rows(

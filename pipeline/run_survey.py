@@ -365,6 +365,8 @@ def run_survey(
             processed, unc, grid, make_grid, ps, datum.water_level_m
         )
     log(f"  submerged objects: {n_obj} seabed points stand above the local seabed (class 43)")
+    n_held, r_m = processed.claims_withheld, ps.classify.no_bottom_radius_m
+    log(f"  class-45 claims withheld (a sounding within {r_m:g} m shallower): {n_held}")
     log(f"  rejected bathymetric points (class 7, withheld): {rejected}")
     post = None
     if plan.runs("posterior"):

@@ -160,6 +160,8 @@ def evaluate_survey(
             **extinction_depth_summary(processed.points),
             # their claims ("no bottom down to here") against the true seabed
             **class45_report(processed.points, truth.depth_at_pulses_m),
+            # claims not made: a class-40 sounding nearby lies shallower
+            "class45_withheld_by_soundings": processed.claims_withheld,
         },
         "water_column": water_column_report(processed.points, scene.water.layer_depth_m),
         "subray_flags": sim.subray_flags,

@@ -108,12 +108,16 @@ class ProcessedPoints:
         The kriged sea change the bottom points' depths used (:func:`kriged_sea_change` of the
         same returns, surface and settings, made once: the TPU holds it); None where the sea
         is not kriged.
+    claims_withheld : int
+        Class-45 claims not made: a nearby class-40 sounding lies shallower
+        (:func:`pipeline.process.survey_points.contradicted_claims`).
     """
 
     surface: WaterSurface
     points: Points
     uncorrected: Points
     sea_change_m: np.ndarray | None = None
+    claims_withheld: int = 0
 
 
 def seabed_points(

@@ -9,17 +9,18 @@ where the plan runs them).
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import numpy as np
 
-from pipeline.process.classify import NO_BOTTOM_FOUND_AT, ClassifySettings
+from pipeline.process.classify import BATHYMETRIC_POINT, NO_BOTTOM_FOUND_AT, ClassifySettings
 from pipeline.process.context import ProcessingContext
 from pipeline.process.refraction import ProcessedPoints, georeference, seabed_points
 from pipeline.process.return_order import number_all_returns
-from pipeline.process.returns import DetectedReturns, PointFlag, Points
+from pipeline.process.returns import DetectedReturns, PointFlag, Points, ReturnKind
 from pipeline.process.survey_wide import SurveyWide
 
-__all__ = ["process_detections", "no_bottom_points"]
+__all__ = ["process_detections", "no_bottom_points", "contradicted_claims"]
 
 
 def process_detections(
@@ -65,8 +66,12 @@ def process_detections(
     )
     # the class-45 points join their pulses' echo sequence: number every pulse again (LAS
     # return numbers 1..n in time order, the class-45 point after its surface)
-    points = Points.concatenate([processed.points, no_bottom_points(returns, processed, ctx)])
-    processed = dataclasses.replace(processed, points=number_all_returns(points))
+    claims = no_bottom_points(returns, processed, ctx)
+    withheld = contradicted_claims(claims, processed.points, classify)
+    points = Points.concatenate([processed.points, claims.select(~withheld)])
+    processed = dataclasses.replace(
+        processed, points=number_all_returns(points), claims_withheld=int(withheld.sum())
+    )
     if water_column:
         processed = add_water_column_points(processed, returns, ctx.refraction, classify)
     return processed
@@ -115,3 +120,33 @@ def no_bottom_points(
         flags=pts.flags | np.uint16(PointFlag.SYNTHETIC),
         amplitude=None if returns.bottom_amplitude is None else np.zeros(len(pts)),
     )
+
+
+def contradicted_claims(claims: Points, points: Points, classify: ClassifySettings) -> np.ndarray:
+    """``(n_claims,)`` bool: class-45 claims a nearby class-40 sounding contradicts.
+
+    A claim states that there is no bottom down to its depth. A class-40 sounding within
+    ``classify.no_bottom_radius_m`` (horizontally) that is shallower than the claim by more
+    than ``classify.no_bottom_margin_m`` shows a bottom above that depth: the claim is not
+    made. Such claims come from bottoms merged with the surface echo over a shoal, or from a
+    seabed darker than the one the limit assumes (:mod:`pipeline.process.detection_limit`).
+    All False where the radius is 0 or there is no sounding.
+    """
+    sea = (points.classification == BATHYMETRIC_POINT) & (points.kind == ReturnKind.BOTTOM)
+    out = np.zeros(len(claims), dtype=bool)
+    r = classify.no_bottom_radius_m
+    if r <= 0.0 or not sea.any() or not len(claims):
+        return out
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(points.xyz_m[sea, :2])
+    near = tree.query_ball_point(claims.xyz_m[:, :2], r, workers=-1)
+    counts = np.fromiter(map(len, near), dtype=np.int64, count=len(near))
+    has = counts > 0
+    if not has.any():
+        return out
+    flat = np.fromiter(itertools.chain.from_iterable(near), dtype=np.int64, count=counts.sum())
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])[has]
+    shallowest = np.minimum.reduceat(points.depth_m[sea][flat], starts)
+    out[has] = claims.depth_m[has] > shallowest + classify.no_bottom_margin_m
+    return out
