@@ -33,6 +33,8 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from typing import Any
 
+import numpy as np
+
 __all__ = [
     "Executor",
     "choose_threading_layer",
@@ -40,6 +42,7 @@ __all__ = [
     "kernel_threads",
     "stage_threads",
     "thread_map",
+    "thread_map_rows",
 ]
 
 #: What each pool process received through the initializer (``None`` in the parent).
@@ -136,6 +139,21 @@ def thread_map(fn: Callable[[Any], Any], items: Any) -> list[Any]:
 
     with ThreadPoolExecutor(max_workers=n) as pool:
         return list(pool.map(call, items))
+
+
+def thread_map_rows(fn: Callable[[slice], tuple], n: int, block: int) -> tuple:
+    """``fn`` over rows ``0 .. n - 1`` in blocks of ``block``, on :func:`thread_map`'s threads.
+
+    ``fn(rows)`` returns a tuple of arrays whose first axis is the block's rows; each is
+    concatenated over the blocks, in row order (one block, ``n <= block``: ``fn``'s own
+    tuple; ``n = 0``: one empty block). For rows computed each on its own: the same values for
+    any block size and thread count.
+    """
+    blocks = [slice(lo, min(lo + block, n)) for lo in range(0, max(n, 1), block)]
+    parts = thread_map(fn, blocks)
+    if len(parts) == 1:
+        return parts[0]
+    return tuple(np.concatenate(c) for c in zip(*parts, strict=True))
 
 
 def _install(shared: Any) -> None:

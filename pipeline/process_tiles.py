@@ -122,7 +122,10 @@ def beam_reach_m(returns, ctx, wide) -> float:
 
 
 def processing_halo_m(
-    ctx, beam_reach: float, kriging_reach_m: float | None = None, classify=None
+    ctx,
+    beam_reach: float,
+    kriging_reach_m: float | None = None,
+    classify: ClassifySettings | None = None,
 ) -> float:
     """How far past a tile's edges processing's searches reach (m; module notes).
 

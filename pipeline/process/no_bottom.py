@@ -208,6 +208,12 @@ def _column_starts(samples, found, det, ctx) -> tuple[np.ndarray, np.ndarray]:
 MIN_BOTTOMS = 20
 
 
+def _fittable(t_after_surface_s: np.ndarray) -> bool:
+    """Enough bottoms (:data:`MIN_BOTTOMS`), at more than one time, to fit ``δ``'s line."""
+    t = np.asarray(t_after_surface_s)
+    return t.size >= MIN_BOTTOMS and np.ptp(t) > 0.0
+
+
 def excess_decay_per_s(
     t_after_surface_s: np.ndarray, log_loss: np.ndarray, floor: np.ndarray | None = None
 ) -> float:
@@ -218,7 +224,7 @@ def excess_decay_per_s(
     """
     t = np.asarray(t_after_surface_s, dtype=np.float64)
     y = np.asarray(log_loss, dtype=np.float64)
-    if t.size < MIN_BOTTOMS or np.ptp(t) <= 0.0:
+    if not _fittable(t):
         return 0.0
     if floor is None:
         slope = np.polyfit(t, y, 1)[0]
@@ -273,7 +279,7 @@ def excess_decay_summary(
     """
     det = detector_model(ctx, detect)
     g = det.group_index
-    fitted = t_b.size >= MIN_BOTTOMS and np.ptp(t_b) > 0.0
+    fitted = _fittable(t_b)
     if fitted:
         delta = excess_decay_per_s(t_b, loss, floor)
     else:  # nothing to fit: the stated default, not the weakest fading (0)

@@ -40,7 +40,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from pipeline.config import setting
-from pipeline.parallel import thread_map
+from pipeline.parallel import thread_map_rows
 from pipeline.process.classify import BATHYMETRIC_POINT, SUBMERGED_OBJECT
 from pipeline.process.returns import Points, ReturnKind
 
@@ -178,9 +178,9 @@ def detect_objects(xy_m, z_m, sigma_z_m, settings: ObjectSettings = ObjectSettin
     # rows are independent: blocks keep the (rows, neighbours) temporaries bounded (a survey's
     # points at once took ~3 kB each), run side by side on the stage's threads and give the
     # same figures
-    blocks = [slice(lo, min(lo + _BLOCK_ROWS, n)) for lo in range(0, n, _BLOCK_ROWS)]
-    parts = thread_map(lambda rows: _test_rows(xy, z, sig[rows], ref, tree, rows, settings), blocks)
-    is_obj, height, sigma = (np.concatenate([p[i] for p in parts]) for i in range(3))
+    is_obj, height, sigma = thread_map_rows(
+        lambda rows: _test_rows(xy, z, sig[rows], ref, tree, rows, settings), n, _BLOCK_ROWS
+    )
     return ObjectDetections(is_obj, height, sigma)
 
 

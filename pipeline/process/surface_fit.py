@@ -58,7 +58,7 @@ from scipy.spatial import cKDTree
 
 from pipeline.constants import MAD_TO_SIGMA
 from pipeline.optics import SPEED_OF_LIGHT_M_S
-from pipeline.parallel import thread_map
+from pipeline.parallel import thread_map_rows
 from pipeline.process.returns import DetectedReturns, PointFlag
 from pipeline.process.surface_land import land_surface_points, masked_median, own_echo_weight
 from pipeline.process.surface_settings import SurfaceFitSettings
@@ -111,14 +111,10 @@ def _local_fit(tree, spts, qxy, st, key=None, qkey=None):
     threads (:func:`~pipeline.parallel.thread_map`): the same figures as all at once.
     """
 
-    def block(lo: int):
-        s = slice(lo, lo + FIT_BLOCK)
+    def block(s: slice):
         return _local_fit_rows(tree, spts, qxy[s], st, key, None if qkey is None else qkey[s])
 
-    parts = thread_map(block, range(0, max(len(qxy), 1), FIT_BLOCK))
-    if len(parts) == 1:
-        return parts[0]
-    return tuple(np.concatenate(c) for c in zip(*parts, strict=True))
+    return thread_map_rows(block, len(qxy), FIT_BLOCK)
 
 
 def _local_fit_rows(tree, spts, qxy, st, key, qkey):

@@ -12,6 +12,7 @@ import dataclasses
 import itertools
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from pipeline.process.classify import BATHYMETRIC_POINT, NO_BOTTOM_FOUND_AT, ClassifySettings
 from pipeline.process.context import ProcessingContext
@@ -137,8 +138,6 @@ def contradicted_claims(claims: Points, points: Points, classify: ClassifySettin
     r = classify.no_bottom_radius_m
     if r <= 0.0 or not sea.any() or not len(claims):
         return out
-    from scipy.spatial import cKDTree
-
     tree = cKDTree(points.xyz_m[sea, :2])
     near = tree.query_ball_point(claims.xyz_m[:, :2], r, workers=-1)
     counts = np.fromiter(map(len, near), dtype=np.int64, count=len(near))

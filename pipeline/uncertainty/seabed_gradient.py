@@ -47,7 +47,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from pipeline.constants import MAD_TO_SIGMA
-from pipeline.parallel import thread_map
+from pipeline.parallel import thread_map_rows
 from pipeline.process.surface_land import masked_median
 from pipeline.uncertainty.tpu_settings import X, Y
 
@@ -302,8 +302,8 @@ def seabed_gradient(
                 local_sigma = s0  # nothing measured it
         tree_xy = cKDTree(xy)
 
-        def block(lo):
-            qq = q[lo : lo + chunk]
+        def block(rows: slice):
+            qq = q[rows]
             if reg is None:  # no regional step: the slope prior itself
                 mean0 = np.zeros((len(qq), 2))
                 prec0 = np.tile(np.eye(2) / s0**2, (len(qq), 1, 1))
@@ -315,8 +315,7 @@ def seabed_gradient(
 
         # the queries are independent: blocks bound the (queries, neighbours) temporaries and
         # run side by side on the stage's threads, the same values for any block size
-        parts = thread_map(block, range(0, len(q), chunk))
-        out, cov = np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+        out, cov = thread_map_rows(block, len(q), chunk)
     res = (out, cov) if return_cov else (out,)
     if return_local_sigma:
         res = (*res, None if reg is None else float(local_sigma))
