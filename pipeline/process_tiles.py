@@ -31,7 +31,8 @@ Measured from a pulse's position, processing looks
   pulse's processing made it: another beam reach, that radius and that pulse's own reach.
 
 So ``halo = beam reach + kriging reach + sqrt 2 radius_m + 2 land_radius_m`` (a pulse's own
-reach), plus ``beam reach + no_bottom_radius_m`` where the class-45 test runs.
+reach), plus ``beam reach`` and the larger of ``no_bottom_radius_m`` and
+``no_bottom_land_radius_m`` where the class-45 test runs.
 
 Not bounded by a setting
 ------------------------
@@ -139,7 +140,8 @@ def processing_halo_m(
         How far the kriging's nearest echoes are allowed to lie (an allowance: module notes);
         default the surface fit's ``radius_m``.
     classify : ClassifySettings, optional
-        Its ``no_bottom_radius_m`` (default the default's): the class-45 claims' test.
+        Its ``no_bottom_radius_m`` and ``no_bottom_land_radius_m`` (default the defaults):
+        the class-45 claims' test.
     """
     st = ctx.surface_fit
     fit = st.radius_m * (np.sqrt(2.0) if st.time_window_s is not None else 1.0)
@@ -147,7 +149,8 @@ def processing_halo_m(
     own = beam_reach + krige + fit + 2.0 * st.land_radius_m
     # a class-45 claim (on its beam) reads the soundings within the test's radius, each made
     # as its own pulse's processing made it (that pulse's own reach again)
-    r = (classify or ClassifySettings()).no_bottom_radius_m
+    cl = classify or ClassifySettings()
+    r = max(cl.no_bottom_radius_m, cl.no_bottom_land_radius_m)
     return float(own + (beam_reach + r if r > 0.0 else 0.0))
 
 

@@ -33,7 +33,7 @@ from pipeline.process.context import (
 from pipeline.process.returns import DetectedReturns, DetectorFlag
 from pipeline.process.surface_echo_mix import mix_stored_echoes
 from pipeline.stages import Plan, StageClock
-from pipeline.survey_chunks import ChunkJob, run_chunk
+from pipeline.survey_chunks import NB_FIELDS, ChunkJob, no_bottom_limits, run_chunk
 from pipeline.survey_tiles import grid_by_tiles, tile_layout, write_points_by_tiles
 from pipeline.uncertainty.photon_posterior import KeptPhotons
 from pipeline.uncertainty.posterior_selection import KeptWaveforms, posterior_budget
@@ -208,7 +208,7 @@ def simulate_detections(
         agg.add(res.part, res.nb, ctx.refraction.group_index, beyond)
         part = res.part
         if res.nb is not None:  # the per-pulse inputs of the limits, until they are set
-            part = {**part, **{f"nb_{k}": res.nb[k] for k in _NB_FIELDS}}
+            part = {**part, **{f"nb_{k}": res.nb[k] for k in NB_FIELDS}}
         store.append(part)
         bar.update(res.n_pulses)
         del res, part
@@ -224,7 +224,7 @@ def simulate_detections(
         log(f"  photon detection limits: {no_bottom}")
     if job.no_bottom:
         with clock.stage("no_bottom_limit"):
-            no_bottom = _no_bottom_limits(store, agg, ctx, ps.detect, ps.no_bottom)
+            no_bottom = no_bottom_limits(store, agg, ctx, ps.detect, ps.no_bottom)
         log(
             f"  no-bottom limits: {no_bottom['pulses_with_limit']} pulses; bottoms fade "
             f"{no_bottom['excess_decay_per_m']:.3f}/m (in-water path) faster than the column "
@@ -241,29 +241,6 @@ def simulate_detections(
         no_bottom=no_bottom,
         median_surface_range_m=agg.median_surface_range_m(),
     )
-
-
-#: :func:`~pipeline.process.no_bottom.chunk_inputs`' per-pulse fields, stored with the chunk
-_NB_FIELDS = ("none", "margin", "alpha", "t_max", "ok")
-
-
-def _no_bottom_limits(store: DetectionStore, agg: SurveyAggregates, ctx, detect, settings) -> dict:
-    """Fit the bottoms' extra decay once, then set every stored chunk's ``t_no_bottom_s``."""
-    from pipeline.process.no_bottom import excess_decay_summary, limit_times_s
-
-    args = (agg.nb_stack, agg.nb_counts, ctx, detect, agg.nb_stack_open, settings)
-    delta, summary = excess_decay_summary(*agg.no_bottom_sample(), *args)
-    n_limit = 0
-    for c in range(len(store.chunks)):
-        d = store.load_chunk(c, ["t_surface_s", *(f"nb_{k}" for k in _NB_FIELDS)])
-        inputs = {k: d[f"nb_{k}"] for k in _NB_FIELDS}
-        t = limit_times_s(inputs, d["t_surface_s"], delta, ctx, detect)
-        n_limit += int(np.count_nonzero(t > 0.0))
-        store.replace_field(c, "t_no_bottom_s", t)
-    for k in _NB_FIELDS:
-        store.drop_field(f"nb_{k}")
-    summary["pulses_with_limit"] = n_limit
-    return summary
 
 
 def run_survey(
@@ -365,8 +342,11 @@ def run_survey(
             processed, unc, grid, make_grid, ps, datum.water_level_m
         )
     log(f"  submerged objects: {n_obj} seabed points stand above the local seabed (class 43)")
-    n_held, r_m = processed.claims_withheld, ps.classify.no_bottom_radius_m
-    log(f"  class-45 claims withheld (a sounding within {r_m:g} m shallower): {n_held}")
+    n_held, cl = processed.claims_withheld, ps.classify
+    log(
+        f"  class-45 claims withheld (a sounding within {cl.no_bottom_radius_m:g} m or land "
+        f"within {cl.no_bottom_land_radius_m:g} m shallower): {n_held}"
+    )
     log(f"  rejected bathymetric points (class 7, withheld): {rejected}")
     post = None
     if plan.runs("posterior"):

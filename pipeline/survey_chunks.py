@@ -17,12 +17,13 @@ from typing import Any
 import numpy as np
 
 from pipeline.constants import FWHM_TO_SIGMA
+from pipeline.detection_store import DetectionStore, SurveyAggregates
 from pipeline.process.context import ProcessingContext
 from pipeline.stages import StageClock
 from pipeline.uncertainty.photon_posterior import KeptPhotons, keep_windows
 from pipeline.uncertainty.posterior_selection import KeptWaveforms, kept_for_posterior
 
-__all__ = ["ChunkJob", "ChunkResult", "run_chunk"]
+__all__ = ["NB_FIELDS", "ChunkJob", "ChunkResult", "no_bottom_limits", "run_chunk"]
 
 
 @dataclass(frozen=True)
@@ -224,3 +225,33 @@ def _photon_chunk(job: ChunkJob, clock: StageClock, paths, pulses):
         scene.scene.seed,
     )
     return found, ev.flags, kept
+
+
+#: :func:`~pipeline.process.no_bottom.chunk_inputs`' per-pulse fields, stored with the chunk
+NB_FIELDS = (
+    *("none", "margin", "alpha", "t_max", "ok", "level"),
+    *("level_t_first", "level_count", "level_bins", "level_noise"),
+)
+
+
+def no_bottom_limits(store: DetectionStore, agg: SurveyAggregates, ctx, detect, settings) -> dict:
+    """Fit the bottoms' extra decay once, then set every stored chunk's ``t_no_bottom_s``."""
+    from pipeline.process.no_bottom import excess_decay_summary, limit_times_s
+
+    args = (agg.nb_stack, agg.nb_counts, ctx, detect, agg.nb_stack_open, settings)
+    delta, summary = excess_decay_summary(*agg.no_bottom_sample(), *args)
+    n_limit = n_level = 0
+    decay_k = summary["column_decay_per_m"]
+    for c in range(len(store.chunks)):
+        d = store.load_chunk(c, ["t_surface_s", *(f"nb_{k}" for k in NB_FIELDS)])
+        inputs = {k: d[f"nb_{k}"] for k in NB_FIELDS}
+        t, lv = limit_times_s(inputs, d["t_surface_s"], delta, ctx, detect, decay_k, settings)
+        n_limit += int(np.count_nonzero(t > 0.0))
+        n_level += int(np.count_nonzero(lv))
+        store.replace_field(c, "t_no_bottom_s", t)
+    for k in NB_FIELDS:
+        store.drop_field(f"nb_{k}")
+    summary["pulses_with_limit"] = n_limit
+    # of which at the survey's decay (pipeline.process.column_level)
+    summary["limits_from_survey_decay"] = n_level
+    return summary

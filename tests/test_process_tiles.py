@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from pipeline.detection_store import DetectionStore
+from pipeline.process.classify import NO_BOTTOM_FOUND_AT
 from pipeline.process.context import processing_context
 from pipeline.process.grid import snap_bounds_m
 from pipeline.process.refraction import georeference
@@ -130,7 +131,10 @@ def test_tiles_give_the_whole_survey_points(survey, tile_m):
 def test_without_a_halo_tiles_differ(survey):
     # the comparison above can fail: tiles that see no neighbours past their edges fit other
     # planes and krige from other echoes near those edges
+    # (and withhold other class-45 claims: a tile without a halo does not see the soundings and
+    # the ground that contradict a claim near its edge; the other points are compared)
     got, want = _tiled(survey, 25.0, halo=0.0), _by_pulse(survey[3].points)
+    got, want = (p.select(p.classification != NO_BOTTOM_FOUND_AT) for p in (got, want))
     assert np.array_equal(got.pulse_id, want.pulse_id)
     assert np.mean(got.depth_m != want.depth_m) > 0.1
 

@@ -146,6 +146,20 @@ class ClassifySettings:
         "shallower than it by more than no_bottom_margin_m (0: no test)",
     )
     no_bottom_margin_m: float = setting(0.5, ge=0.0, le=100.0, doc="see no_bottom_radius_m")
+    # land (class 2, its depth negative: above the water) says the same of a claim near the
+    # shore: the seabed rises to it. Claims drawn from a column's level at the survey's decay
+    # (pipeline.process.column_level) reached over land edges, where an echo's slow tail reads
+    # as column. 8 m, set on the suite's tuning half (0, 6, 24; benchmarks/RESULTS_suite.md):
+    # the smallest of 3, 5, 8, 10 and 15 m that withholds 90 % of the claims more than 0.5 m
+    # under the seabed within 15 m of land (79 of 82; 5 m: 54), at a cost of 23 of their
+    # 69 000 claims that hold
+    no_bottom_land_radius_m: float = setting(
+        8.0,
+        ge=0.0,
+        le=100.0,
+        doc="a class-45 claim is not made where a class-2 ground point within this distance is "
+        "shallower than it by more than no_bottom_margin_m (0: no test)",
+    )
     unreliable_detector_flags: tuple[str, ...] = setting(
         ("MERGED", "CLIPPED_MERGED", "BEYOND_DETECTION_LIMIT"),
         doc="detector flags that leave a bottom point unclassified (SATURATED alone does not: "

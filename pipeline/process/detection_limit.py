@@ -62,10 +62,14 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import special
-from scipy.ndimage import gaussian_filter1d
 
-from pipeline.constants import FWHM_TO_SIGMA
-from pipeline.optics import SPEED_OF_LIGHT_M_S
+from pipeline.process.column_level import ColumnBins, column_bins
+from pipeline.process.limit_model import (
+    DetectorModel,
+    bottom_to_column_ratio,
+    filtered_waveforms,
+    threshold_level,
+)
 from pipeline.process.no_bottom_settings import NoBottomSettings
 
 __all__ = [
@@ -86,30 +90,6 @@ __all__ = [
 BLOCK = 4096
 
 
-@dataclass(frozen=True, kw_only=True)
-class DetectorModel:
-    """What the limit needs of the full-waveform detector (all known to processing).
-
-    ``dt_s`` sample interval, ``pulse_fwhm_s`` system-response FWHM, ``noise_samples`` leading
-    noise-only samples, ``threshold_sigma`` and ``min_separation_fwhm`` the detector's
-    (:class:`~pipeline.process.detect.DetectSettings`), ``group_index`` of the water processing
-    assumes, ``shot_noise_counts`` the detector's ``F·G`` (0: signal-independent noise).
-    """
-
-    dt_s: float
-    pulse_fwhm_s: float
-    noise_samples: int
-    threshold_sigma: float
-    min_separation_fwhm: float
-    group_index: float
-    shot_noise_counts: float = 0.0
-
-    @property
-    def sigma_samples(self) -> float:
-        """σ of the system response, samples."""
-        return self.pulse_fwhm_s * FWHM_TO_SIGMA / self.dt_s
-
-
 @dataclass(frozen=True)
 class ColumnMargins:
     """Per pulse with no bottom, shapes ``(n,)``: what sets its detection limit.
@@ -118,7 +98,10 @@ class ColumnMargins:
     with the settings' ``detection_probability`` p) and ``alpha_per_s`` the decay of the line
     the limit is drawn from: the measured column's fit turned about the centre of its samples
     to its decay's upper bound at p (:func:`column_margins`); ``alpha_fit_per_s`` the fitted
-    decay itself (the record; None: not kept). ``t_max_s`` the last searched time after the
+    decay itself (the record; None: not kept), ``bins`` its column binned (None: not kept),
+    ``rises`` whether its run above the noise rose past its first sample (an echo the detector
+    did not report; None: not kept).
+    ``t_max_s`` the last searched time after the
     surface, ``ok`` whether the column was measurable; ``t_min_s`` the surface-bottom
     separation the detector resolves.
     """
@@ -129,16 +112,8 @@ class ColumnMargins:
     ok: np.ndarray
     t_min_s: float
     alpha_fit_per_s: np.ndarray | None = None
-
-
-def bottom_to_column_ratio(
-    settings: NoBottomSettings, group_index: float, system_sigma_s: float
-) -> float:
-    """``r = ρ / (π^{3/2} β_π v σ_t)``: filtered bottom peak over column level, same depth."""
-    v = SPEED_OF_LIGHT_M_S / group_index
-    return settings.bottom_reflectance / (
-        math.pi**1.5 * settings.backscatter_180_per_m_sr * v * system_sigma_s
-    )
+    bins: ColumnBins | None = None
+    rises: np.ndarray | None = None
 
 
 def column_first_s(
@@ -192,19 +167,6 @@ def _blocks(fn, n: int, *arrays):
     return tuple(np.concatenate([p[j] for p in parts]) for j in range(len(parts[0])))
 
 
-def filtered_waveforms(samples: np.ndarray, det: DetectorModel) -> np.ndarray:
-    """Baseline-free, matched-filtered waveforms, float64 (n, m).
-
-    The baseline is each pulse's median of its leading noise samples; the filter the system's
-    Gaussian (the detector's matched filter) over ``samples`` (n, m).
-    """
-    y = np.asarray(samples, dtype=np.float64)
-    m = y.shape[1]
-    k = min(max(int(det.noise_samples), 4), max(m - 1, 1))
-    base = np.median(y[:, :k], axis=1)[:, None]
-    return gaussian_filter1d(y - base, det.sigma_samples, axis=1, mode="nearest")
-
-
 def column_first_index(t_surface_s, det: DetectorModel, first_s=None) -> np.ndarray:
     """Sample index of each column's start, ``(n,)``.
 
@@ -216,16 +178,19 @@ def column_first_index(t_surface_s, det: DetectorModel, first_s=None) -> np.ndar
     return np.asarray(first_s, dtype=np.float64) / det.dt_s
 
 
-def _column_fit(samples, t_surface_s, t_end_idx, noise_sigma, det, min_snr, first):
-    """``(log C0, α, ok, t_mid, σ_α, σ_mid)`` of the filtered column, ``first`` to ``t_end_idx``.
+def _column_fit(samples, t_surface_s, t_end_idx, noise_sigma, det, min_snr, first, filt=None):
+    """``(log C0, α, ok, t_mid, σ_α, σ_mid, rises)`` of the filtered column, ``first`` on.
 
     ``log C0`` is the column carried back to the surface time; ``t_mid`` the samples' weighted
     centre after the surface (s); ``σ_α`` the slope's standard error, its white-noise value
     (``Σw / den``) times the filtered noise's correlation length, ``2 √π σ`` samples (adjacent
     filtered samples share their noise); ``σ_mid`` that of the fitted ``log C`` at ``t_mid``
-    (``1 / Σw`` times the same length), independent of the slope's there.
+    (``1 / Σw`` times the same length), independent of the slope's there; ``rises`` the run
+    rose past its first sample (an echo). The column runs to ``t_end_idx``; ``filt``: the
+    waveforms already filtered (:func:`filtered_waveforms`).
     """
-    filt = filtered_waveforms(samples, det)
+    if filt is None:
+        filt = filtered_waveforms(samples, det)
     n, m = filt.shape
     i_s = np.asarray(t_surface_s, dtype=np.float64) / det.dt_s
     cols = np.arange(m)[None, :]
@@ -254,7 +219,8 @@ def _column_fit(samples, t_surface_s, t_end_idx, noise_sigma, det, min_snr, firs
     top_y = np.max(np.where(use, filt, -np.inf), axis=1)
     # (an echo stands the detector's threshold above the column; two samples' noise differ by
     # √2 of one's)
-    ok &= ~(has & (top_y - first_y > det.threshold_sigma * math.sqrt(2.0) * nf[:, 0]))
+    rises = has & (top_y - first_y > det.threshold_sigma * math.sqrt(2.0) * nf[:, 0])
+    ok &= ~rises
     t_mid = np.where(ok, st / np.where(sw > 0, sw, 1.0), 0.0)
     corr = 2.0 * math.sqrt(math.pi) * det.sigma_samples  # the filtered noise's correlation
     var = sw / np.where(den > 0, den, 1.0) * corr
@@ -267,6 +233,7 @@ def _column_fit(samples, t_surface_s, t_end_idx, noise_sigma, det, min_snr, firs
         t_mid,
         np.where(ok, np.sqrt(var), 0.0),
         np.where(ok, np.sqrt(var_mid), 0.0),
+        rises,
     )
 
 
@@ -277,6 +244,7 @@ def column_margins(
     det: DetectorModel,
     settings: NoBottomSettings | None = None,
     first_s: np.ndarray | None = None,
+    keep_bins: bool = False,
 ) -> ColumnMargins:
     """The measured column of waveforms without a bottom, against the assumed bottom's echo.
 
@@ -294,6 +262,9 @@ def column_margins(
     first_s : (n,) ndarray, optional
         Where each column starts (:func:`column_first_s`); default one separation after the
         surface.
+    keep_bins : bool
+        Also keep each column binned (:func:`pipeline.process.column_level.column_bins`), for
+        its level at the survey's decay.
 
     Returns
     -------
@@ -310,9 +281,17 @@ def column_margins(
     first = column_first_index(t_s, det, first_s)
 
     def fit(y, ts, noise, f):
-        return _column_fit(y, ts, np.full(len(ts), m - gap), noise, det, s.min_column_snr, f)
+        filt = filtered_waveforms(y, det)
+        end = np.full(len(ts), m - gap)
+        out = _column_fit(y, ts, end, noise, det, s.min_column_snr, f, filt=filt)
+        if not keep_bins:
+            return out
+        b = column_bins(filt, f, end, ts, det)
+        return (*out, b.t_first_s, b.count, b.sums)
 
-    log_c0, alpha, ok, t_mid, sigma_alpha, _ = _blocks(fit, n, samples, t_s, nf, first)
+    log_c0, alpha, ok, t_mid, sigma_alpha, _, rises, *binned = _blocks(
+        fit, n, samples, t_s, nf, first
+    )
     # "no bottom down to here" is claimed at probability p twice over: the assumed bottom
     # detected with probability p (its peak z_p noise σ above the threshold, r C = (k + z_p)
     # √(σ_f² + F G C Σg²), solved for C), and the column decaying as fast as its fit allows at
@@ -322,11 +301,7 @@ def column_margins(
     alpha_claim = alpha + z * sigma_alpha
     # the same line through the same centre of its samples, turned to that decay
     log_c0_claim = log_c0 + (alpha_claim - alpha) * t_mid
-    r = bottom_to_column_ratio(s, det.group_index, det.sigma_samples * det.dt_s)
-    kern_sq = 1.0 / (2.0 * math.sqrt(math.pi) * det.sigma_samples)  # Σ of the kernel squared
-    k = det.threshold_sigma + z
-    q = k * k * det.shot_noise_counts * kern_sq
-    c_star = (q + np.sqrt(q * q + 4.0 * r * r * k * k * np.maximum(nf, 1e-300) ** 2)) / (2 * r * r)
+    c_star = threshold_level(nf, det, s, z)
     return ColumnMargins(
         log_margin=np.where(ok, log_c0_claim - np.log(c_star), 0.0),
         alpha_per_s=alpha_claim,  # (σ_α is 0 where not ok: the fit's placeholder)
@@ -334,6 +309,8 @@ def column_margins(
         ok=ok,
         t_min_s=det.min_separation_fwhm * det.pulse_fwhm_s,
         alpha_fit_per_s=alpha,
+        bins=ColumnBins(*binned) if keep_bins else None,
+        rises=rises,
     )
 
 
@@ -383,7 +360,7 @@ def bottom_losses(
         # the column up to one separation before the bottom echo
         return _column_fit(y, ts, tb / det.dt_s - sep, noise, det, s.min_column_snr, f)
 
-    log_c0, alpha, ok, t_mid, sigma_alpha, sigma_mid = _blocks(
+    log_c0, alpha, ok, t_mid, sigma_alpha, sigma_mid, _ = _blocks(
         fit, n, samples, t_s, t_b, np.asarray(noise_sigma, float), first
     )
     r = bottom_to_column_ratio(s, det.group_index, det.sigma_samples * det.dt_s)

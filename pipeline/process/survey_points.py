@@ -14,7 +14,12 @@ import itertools
 import numpy as np
 from scipy.spatial import cKDTree
 
-from pipeline.process.classify import BATHYMETRIC_POINT, NO_BOTTOM_FOUND_AT, ClassifySettings
+from pipeline.process.classify import (
+    BATHYMETRIC_POINT,
+    GROUND,
+    NO_BOTTOM_FOUND_AT,
+    ClassifySettings,
+)
 from pipeline.process.context import ProcessingContext
 from pipeline.process.refraction import ProcessedPoints, georeference, seabed_points
 from pipeline.process.return_order import number_all_returns
@@ -124,28 +129,42 @@ def no_bottom_points(
 
 
 def contradicted_claims(claims: Points, points: Points, classify: ClassifySettings) -> np.ndarray:
-    """``(n_claims,)`` bool: class-45 claims a nearby class-40 sounding contradicts.
+    """``(n_claims,)`` bool: class-45 claims a nearby class-40 sounding or ground contradicts.
 
     A claim states that there is no bottom down to its depth. A class-40 sounding within
     ``classify.no_bottom_radius_m`` (horizontally) that is shallower than the claim by more
     than ``classify.no_bottom_margin_m`` shows a bottom above that depth: the claim is not
     made. Such claims come from bottoms merged with the surface echo over a shoal, or from a
     seabed darker than the one the limit assumes (:mod:`pipeline.process.detection_limit`).
-    All False where the radius is 0 or there is no sounding.
+    A class-2 ground point within ``classify.no_bottom_land_radius_m`` is land: the seabed
+    rises to it, at its depth (negative, above the water), and contradicts a claim the same way
+    (a land echo's tail read as a column gave claims metres deep a few metres from the shore:
+    suite tuning seeds 0, 6 and 24, :mod:`pipeline.process.column_level`). All False where the
+    radii are 0 or there is no sounding and no ground.
     """
     sea = (points.classification == BATHYMETRIC_POINT) & (points.kind == ReturnKind.BOTTOM)
+    land = points.classification == GROUND
     out = np.zeros(len(claims), dtype=bool)
-    r = classify.no_bottom_radius_m
-    if r <= 0.0 or not sea.any() or not len(claims):
-        return out
-    tree = cKDTree(points.xyz_m[sea, :2])
-    near = tree.query_ball_point(claims.xyz_m[:, :2], r, workers=-1)
+    for rows, r in ((sea, classify.no_bottom_radius_m), (land, classify.no_bottom_land_radius_m)):
+        if r > 0.0 and rows.any() and len(claims):
+            shallowest = _shallowest_near(
+                claims.xyz_m[:, :2], points.xyz_m[rows, :2], points.depth_m[rows], r
+            )
+            out |= claims.depth_m > shallowest + classify.no_bottom_margin_m
+    return out
+
+
+def _shallowest_near(
+    xy: np.ndarray, at_xy: np.ndarray, depth_m: np.ndarray, r: float
+) -> np.ndarray:
+    """``(n,)``: the least of ``depth_m`` at ``at_xy`` within ``r`` of each ``xy`` (inf: none)."""
+    tree = cKDTree(at_xy)
+    near = tree.query_ball_point(xy, r, workers=-1)
     counts = np.fromiter(map(len, near), dtype=np.int64, count=len(near))
+    out = np.full(len(xy), np.inf)
     has = counts > 0
-    if not has.any():
-        return out
-    flat = np.fromiter(itertools.chain.from_iterable(near), dtype=np.int64, count=counts.sum())
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])[has]
-    shallowest = np.minimum.reduceat(points.depth_m[sea][flat], starts)
-    out[has] = claims.depth_m[has] > shallowest + classify.no_bottom_margin_m
+    if has.any():
+        flat = np.fromiter(itertools.chain.from_iterable(near), dtype=np.int64, count=counts.sum())
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])[has]
+        out[has] = np.minimum.reduceat(depth_m[flat], starts)
     return out

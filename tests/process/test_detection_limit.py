@@ -198,7 +198,7 @@ def test_column_sigma_at_the_bottom_is_the_fits_scatter_and_unsure_columns_are_l
     t_s = np.full(400, I_SURFACE * DT_S)
     nf = np.full(400, _filtered_noise())
     first = column_first_index(t_s, DET)
-    log_c0, alpha, ok, t_mid, s_a, s_mid = _column_fit(
+    log_c0, alpha, ok, t_mid, s_a, s_mid, _ = _column_fit(
         y, t_s, np.full(400, 190), nf, DET, 3.0, first
     )
     assert ok.mean() > 0.9

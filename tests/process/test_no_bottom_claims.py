@@ -1,10 +1,15 @@
-"""Class-45 claims that a nearby class-40 sounding contradicts are not made."""
+"""Class-45 claims that a nearby class-40 sounding or ground point contradicts are not made."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from pipeline.process.classify import BATHYMETRIC_POINT, NO_BOTTOM_FOUND_AT, ClassifySettings
+from pipeline.process.classify import (
+    BATHYMETRIC_POINT,
+    GROUND,
+    NO_BOTTOM_FOUND_AT,
+    ClassifySettings,
+)
 from pipeline.process.returns import Points, ReturnKind
 from pipeline.process.survey_points import contradicted_claims
 from tests.test_evaluate import make_points
@@ -49,3 +54,26 @@ def test_no_radius_no_test_and_no_soundings_no_test():
     empty = sea.select(np.zeros(1, bool))
     assert not contradicted_claims(claims, empty, ClassifySettings()).any()
     assert contradicted_claims(claims.select(np.zeros(3, bool)), sea, ClassifySettings()).size == 0
+
+
+def test_land_contradicts_a_claim_as_a_sounding_does():
+    # a shore: ground points (class 2, depth negative: above the water) for x < 0, claims at
+    # 0.3-4 m for x > 0; a claim within the land radius and deeper than the margin is not
+    # made (brute force over every claim and ground point)
+    rng = np.random.default_rng(5)
+    gxy = np.column_stack([rng.uniform(-20.0, 0.0, 400), rng.uniform(0.0, 50.0, 400)])
+    ground = _points(gxy, -rng.uniform(0.0, 2.0, 400), GROUND, ReturnKind.SURFACE)
+    cxy = np.column_stack([rng.uniform(0.0, 10.0, 300), rng.uniform(0.0, 50.0, 300)])
+    cdepth = rng.uniform(0.3, 4.0, 300)
+    claims = _points(cxy, cdepth, NO_BOTTOM_FOUND_AT)
+    # (land's own radius, not the soundings')
+    st = ClassifySettings(
+        no_bottom_radius_m=1.0, no_bottom_land_radius_m=5.0, no_bottom_margin_m=0.5
+    )
+    got = contradicted_claims(claims, ground, st)
+    d2 = ((cxy[:, None, :] - gxy[None, :, :]) ** 2).sum(axis=2)
+    shallowest = np.where(d2 <= 25.0, ground.depth_m[None, :], np.inf).min(axis=1)
+    np.testing.assert_array_equal(got, cdepth > shallowest + 0.5)
+    assert got[cxy[:, 0] > 3.0].any() and not got[cxy[:, 0] > 5.0].any()
+    off = ClassifySettings(no_bottom_land_radius_m=0.0)
+    assert not contradicted_claims(claims, ground, off).any()
