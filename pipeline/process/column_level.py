@@ -13,17 +13,18 @@ an extinction depth of 1.7 m in water where the assumed bottom would be seen at 
 pulse. With ``α`` known the column's level is linear in the samples: the weighted least squares
 of ``C_f e^{−α (t − t_f)} + b`` over every column sample, not only those above the noise, is
 unbiased whatever the pulse's noise, its standard error from the fit's covariance (the samples'
-noise correlated over ``L = 2 √π σ`` samples by the matched filter, plus the column's own shot
-noise). ``b`` is fitted, not read as column: the pulse's baseline (the median of its leading
-noise samples) is one error shared by every sample, and a bright echo off land leaves a slow
-tail of a noise σ or two; read as column over hundreds of samples either would be a deep claim
-(suite tuning seed 24: limits 4 m deep over land; a faint column's level was as unsure from the
-baseline as from its samples). Where the column does not decay within its bins, the two cannot
-be told apart and no limit is drawn. The limit is drawn as
+noise correlated over ``L = 2 √π σ`` samples by the matched filter, within a bin and across the
+edge to the next, plus the column's own shot noise; taken as independent, the bins gave a sigma
+5-8 % short, and claims less sure than stated). ``b`` is fitted, not read as column: the pulse's
+baseline (the median of its leading noise samples) is one error shared by every sample, and a
+bright echo off land leaves a slow tail of a noise σ or two; read as column over hundreds of
+samples either would be a deep claim (suite tuning seed 24: limits 4 m deep over land; a faint
+column's level was as unsure from the baseline as from its samples). Where the column does not
+decay within its bins, the two cannot be told apart and no limit is drawn. The limit is drawn as
 :mod:`pipeline.process.detection_limit` draws it, at the settings' detection probability ``p``:
 the level as low as the samples allow at ``p``, ``Ĉ_f − z_p σ``, carried back to the surface
-(``C0 = C_f e^{α t_f}``) meets the assumed bottom's threshold level ``C*`` after
-``ln(C0 / C*) / (α + δ)``.
+(``C0 = C_f e^{α t_f}``) meets the assumed bottom's threshold level ``C*`` after ``ln(C0 / C*) /
+(α + δ)``.
 
 **Kept per chunk, solved per survey.** The decay is known only once every chunk has been
 stacked, and the waveforms are gone by then. Each chunk keeps, per pulse without a bottom, its
@@ -148,7 +149,22 @@ def _bin_noise_factor(n_samples: np.ndarray, det: DetectorModel) -> np.ndarray:
     return np.sqrt(np.maximum(nn + 2.0 * (nn * c1[i] - c2[i]), 0.0))
 
 
-def _fit_level_offset(y, e, n_b, has, var_b):
+def _neighbour_covariance(n_b: np.ndarray, det: DetectorModel) -> np.ndarray:
+    """``Cov(bin b, bin b+1) / σ_f²`` of filtered noise, ``(n, B)`` (0 past the last pair).
+
+    Bins fill in order, so a bin followed by a non-empty one is whole (``w`` samples):
+    ``Σ_{i<w} Σ_{j<m} ρ(w − i + j)`` with ``m`` the next bin's samples.
+    """
+    w = bin_width(det)
+    s = det.sigma_samples
+    i, j = np.arange(w)[:, None, None], np.arange(w)[None, :, None]
+    m = np.arange(w + 1)[None, None, :]
+    pair = np.where(j < m, np.exp(-((w - i + j) ** 2) / (4.0 * s * s)), 0.0).sum(axis=(0, 1))
+    nxt = np.concatenate([n_b[:, 1:], np.zeros((len(n_b), 1), dtype=n_b.dtype)], axis=1)
+    return np.where(n_b == w, pair[np.clip(nxt, 0, w)], 0.0)
+
+
+def _fit_level_offset(y, e, n_b, has, var_b, cov_next):
     """The weighted least squares of ``y = level · e + offset · n_b`` per column, and its χ².
 
     The offset is the pulse's baseline error (shared by every sample: the median of its
@@ -174,7 +190,17 @@ def _fit_level_offset(y, e, n_b, has, var_b):
     dd = np.where(solvable, det, 1.0)
     level = np.where(solvable, (s22 * t1 - s12 * t2) / dd, 0.0)
     offset = np.where(solvable, (s11 * t2 - s12 * t1) / dd, 0.0)
-    sigma = np.where(solvable, np.sqrt(np.maximum(s22, 0.0) / dd), 0.0)
+    # the fit weighs the bins as independent; adjacent bins share the filtered noise across
+    # their edge (cov_next), which the fit's variance takes in: M⁻¹ + M⁻¹ C M⁻¹ with
+    # C = Σ_b cov(b, b+1) w_b w_{b+1} (x_b x_{b+1}ᵀ + x_{b+1} x_bᵀ), x_b = (e_b, n_b)
+    wc = (w * cov_next)[:, :-1] * w[:, 1:]
+    c11 = 2.0 * (wc * e[:, :-1] * e[:, 1:]).sum(1)
+    c22 = 2.0 * (wc * nb[:, :-1] * nb[:, 1:]).sum(1)
+    c12 = (wc * (e[:, :-1] * nb[:, 1:] + nb[:, :-1] * e[:, 1:])).sum(1)
+    # the first row of M⁻¹ is (s22, −s12) / det
+    a1, a2 = s22 / dd, -s12 / dd
+    var = a1 + a1 * a1 * c11 + 2.0 * a1 * a2 * c12 + a2 * a2 * c22
+    sigma = np.where(solvable, np.sqrt(np.maximum(var, 0.0)), 0.0)
     chi2 = (w * (y - level[:, None] * e - offset[:, None] * nb) ** 2).sum(1)
     dof = has.sum(1) - 2
     misfit = solvable & (dof >= 1) & (chi2 > stats.chi2.isf(FIT_P_VALUE, np.maximum(dof, 1)))
@@ -223,8 +249,12 @@ def column_level(
         det.shot_noise_counts / _correlation_samples(det) * np.maximum(rough[:, None] * e / nb, 0)
     )
     # a bin sum's variance: its samples' noise, correlated as the matched filter makes it
-    var_b = _bin_noise_factor(n_b, det) ** 2 * (nf**2 + shot)
-    level, sigma, offset, misfit, ok = _fit_level_offset(y, e, n_b, has, var_b)
+    var_sample = nf**2 + shot
+    var_b = _bin_noise_factor(n_b, det) ** 2 * var_sample
+    # (the shot noise of a bin pair: the geometric mean of theirs)
+    nxt = np.concatenate([var_sample[:, 1:], var_sample[:, -1:]], axis=1)
+    cov_next = _neighbour_covariance(n_b, det) * np.sqrt(var_sample * nxt)
+    level, sigma, offset, misfit, ok = _fit_level_offset(y, e, n_b, has, var_b, cov_next)
     # an echo the detector did not report: a bin above the fitted column by its threshold
     resid = (y - level[:, None] * e - offset[:, None] * nb) / np.sqrt(np.maximum(var_b, 1e-300))
     echo = ok & (np.any(has & (resid > det.threshold_sigma), axis=1) | misfit)
@@ -274,6 +304,8 @@ def level_limit_s(
     ok &= (claim > 0.0) & ~echo
     c_star = threshold_level(nf, det, s, z)
     log_c0 = np.log(np.where(ok, claim, 1.0)) + alpha_per_s * bins.t_first_s
+    if not alpha_per_s + excess_decay_per_s > 0.0:  # no decay (or NaN): nothing established
+        return np.zeros(len(nf)), echo
     t = (log_c0 - np.log(c_star)) / (alpha_per_s + excess_decay_per_s)
     t_min = det.min_separation_fwhm * det.pulse_fwhm_s
     hi = np.maximum(np.asarray(t_max_s, dtype=np.float64), t_min)
