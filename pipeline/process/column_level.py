@@ -128,10 +128,13 @@ def column_bins(
     start = np.floor(np.asarray(first_idx, dtype=np.float64)).astype(np.int64) + 1
     end = np.minimum(np.ceil(np.asarray(end_idx, dtype=np.float64)).astype(np.int64), m)
     count = np.clip(end - start, 0, MAX_BINS * w)
-    k = np.arange(MAX_BINS * w)
-    idx = np.clip(start[:, None] + k[None, :], 0, max(m - 1, 0))
-    vals = np.where(k[None, :] < count[:, None], np.take_along_axis(filt, idx, axis=1), 0.0)
-    sums = vals.reshape(n, MAX_BINS, w).sum(axis=2).astype(np.float32)
+    # each bin's sum as a difference of the running sum (a gather of 2 samples per bin, not
+    # of its w samples)
+    run = np.zeros((n, m + 1))
+    np.cumsum(filt, axis=1, out=run[:, 1:])
+    edges = start[:, None] + np.minimum(w * np.arange(MAX_BINS + 1)[None, :], count[:, None])
+    at = np.take_along_axis(run, np.clip(edges, 0, m), axis=1)
+    sums = (at[:, 1:] - at[:, :-1]).astype(np.float32)
     t_first = (start - np.asarray(t_surface_s, dtype=np.float64) / det.dt_s) * det.dt_s
     return ColumnBins(t_first_s=t_first, count=count.astype(np.int32), sums=sums)
 
@@ -203,7 +206,9 @@ def _fit_level_offset(y, e, n_b, has, var_b, cov_next):
     sigma = np.where(solvable, np.sqrt(np.maximum(var, 0.0)), 0.0)
     chi2 = (w * (y - level[:, None] * e - offset[:, None] * nb) ** 2).sum(1)
     dof = has.sum(1) - 2
-    misfit = solvable & (dof >= 1) & (chi2 > stats.chi2.isf(FIT_P_VALUE, np.maximum(dof, 1)))
+    # (the χ² law's quantile once per number of bins, not per pulse)
+    quantile = stats.chi2.isf(FIT_P_VALUE, np.arange(1, MAX_BINS + 1))
+    misfit = solvable & (dof >= 1) & (chi2 > quantile[np.clip(dof, 1, MAX_BINS) - 1])
     return level, sigma, offset, misfit, solvable
 
 
