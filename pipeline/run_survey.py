@@ -226,7 +226,9 @@ def simulate_detections(
         with clock.stage("no_bottom_limit"):
             no_bottom = no_bottom_limits(store, agg, ctx, ps.detect, ps.no_bottom)
         log(
-            f"  no-bottom limits: {no_bottom['pulses_with_limit']} pulses; bottoms fade "
+            f"  no-bottom limits: {no_bottom['pulses_with_limit']} pulses "
+            f"({no_bottom['limits_from_survey_decay']} from the column level at the survey's "
+            "decay); bottoms fade "
             f"{no_bottom['excess_decay_per_m']:.3f}/m (in-water path) faster than the column "
             f"({no_bottom['bottoms_used']} bottoms: {no_bottom['excess_decay_from']})"
         )
