@@ -53,7 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special, stats
 
-from pipeline.process.limit_model import DetectorModel, threshold_level
+from pipeline.process.limit_model import DetectorModel, limit_time_s, threshold_level
 from pipeline.process.no_bottom_settings import NoBottomSettings
 
 __all__ = [
@@ -73,14 +73,9 @@ MAX_BINS = 64
 FIT_P_VALUE = 1e-3
 
 
-def _correlation_samples(det: DetectorModel) -> float:
-    """``L = 2 √π σ``: the matched-filtered noise's correlation length, samples."""
-    return 2.0 * math.sqrt(math.pi) * det.sigma_samples
-
-
 def bin_width(det: DetectorModel) -> int:
     """Samples per bin: two of the filtered noise's correlation lengths (at least one)."""
-    return max(1, round(2.0 * _correlation_samples(det)))
+    return max(1, round(2.0 * det.correlation_samples))
 
 
 @dataclass(frozen=True)
@@ -250,9 +245,7 @@ def column_level(
     # a rough level (no offset) for the column's shot noise, which the bins' variances hold
     den = np.where(has, e * e / nb, 0.0).sum(axis=1)
     rough = np.where(has, y * e / nb, 0.0).sum(axis=1) / np.where(den > 0.0, den, 1.0)
-    shot = (
-        det.shot_noise_counts / _correlation_samples(det) * np.maximum(rough[:, None] * e / nb, 0)
-    )
+    shot = det.shot_noise_counts / det.correlation_samples * np.maximum(rough[:, None] * e / nb, 0)
     # a bin sum's variance: its samples' noise, correlated as the matched filter makes it
     var_sample = nf**2 + shot
     var_b = _bin_noise_factor(n_b, det) ** 2 * var_sample
@@ -299,7 +292,7 @@ def level_limit_s(
         0 where no limit is established: the level is not above zero at ``p``, or an echo
         stands in the column.
     echo : (n,) bool
-        A bin stood above the fitted column by the detector's threshold.
+        An echo or a misfit in the column (:func:`column_level`).
     """
     s = settings or NoBottomSettings()
     level, sigma, echo, ok = column_level(bins, noise_sigma, alpha_per_s, det)
@@ -311,7 +304,7 @@ def level_limit_s(
     log_c0 = np.log(np.where(ok, claim, 1.0)) + alpha_per_s * bins.t_first_s
     if not alpha_per_s + excess_decay_per_s > 0.0:  # no decay (or NaN): nothing established
         return np.zeros(len(nf)), echo
-    t = (log_c0 - np.log(c_star)) / (alpha_per_s + excess_decay_per_s)
     t_min = det.min_separation_fwhm * det.pulse_fwhm_s
-    hi = np.maximum(np.asarray(t_max_s, dtype=np.float64), t_min)
-    return np.where(ok, np.clip(t, t_min, hi), 0.0), echo
+    t_max = np.asarray(t_max_s, dtype=np.float64)
+    decay = alpha_per_s + excess_decay_per_s
+    return limit_time_s(log_c0 - np.log(c_star), decay, t_max, ok, t_min), echo

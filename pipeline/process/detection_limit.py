@@ -68,6 +68,7 @@ from pipeline.process.limit_model import (
     DetectorModel,
     bottom_to_column_ratio,
     filtered_waveforms,
+    limit_time_s,
     threshold_level,
 )
 from pipeline.process.no_bottom_settings import NoBottomSettings
@@ -222,7 +223,7 @@ def _column_fit(samples, t_surface_s, t_end_idx, noise_sigma, det, min_snr, firs
     rises = has & (top_y - first_y > det.threshold_sigma * math.sqrt(2.0) * nf[:, 0])
     ok &= ~rises
     t_mid = np.where(ok, st / np.where(sw > 0, sw, 1.0), 0.0)
-    corr = 2.0 * math.sqrt(math.pi) * det.sigma_samples  # the filtered noise's correlation
+    corr = det.correlation_samples  # the filtered noise's correlation
     var = sw / np.where(den > 0, den, 1.0) * corr
     # the fitted log C's own sigma at t_mid (the line's two parameters are independent there)
     var_mid = corr / np.where(sw > 0, sw, 1.0)
@@ -375,9 +376,9 @@ def bottom_losses(
 
 def limit_after_surface_s(margins: ColumnMargins, excess_decay_per_s: float = 0.0) -> np.ndarray:
     """Detection-limit time after the surface echo, ``(n,)``; 0 where not established."""
-    t = margins.log_margin / (margins.alpha_per_s + excess_decay_per_s)
-    hi = np.maximum(margins.t_max_s, margins.t_min_s)
-    return np.where(margins.ok, np.clip(t, margins.t_min_s, hi), 0.0)
+    m = margins
+    decay = m.alpha_per_s + excess_decay_per_s
+    return limit_time_s(m.log_margin, decay, m.t_max_s, m.ok, m.t_min_s)
 
 
 def no_bottom_limit_s(

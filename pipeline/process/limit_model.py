@@ -18,7 +18,13 @@ from pipeline.constants import FWHM_TO_SIGMA
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.no_bottom_settings import NoBottomSettings
 
-__all__ = ["DetectorModel", "bottom_to_column_ratio", "filtered_waveforms", "threshold_level"]
+__all__ = [
+    "DetectorModel",
+    "bottom_to_column_ratio",
+    "filtered_waveforms",
+    "limit_time_s",
+    "threshold_level",
+]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -43,6 +49,11 @@ class DetectorModel:
     def sigma_samples(self) -> float:
         """σ of the system response, samples."""
         return self.pulse_fwhm_s * FWHM_TO_SIGMA / self.dt_s
+
+    @property
+    def correlation_samples(self) -> float:
+        """``L = 2 √π σ``: the filtered noise's correlation length, samples (``1 / Σg²``)."""
+        return 2.0 * math.sqrt(math.pi) * self.sigma_samples
 
 
 def bottom_to_column_ratio(
@@ -78,8 +89,25 @@ def threshold_level(
     noise, ``Σg²`` the kernel's sum of squares), shape of ``noise_sigma``.
     """
     r = bottom_to_column_ratio(settings, det.group_index, det.sigma_samples * det.dt_s)
-    kern_sq = 1.0 / (2.0 * math.sqrt(math.pi) * det.sigma_samples)  # Σ of the kernel squared
+    kern_sq = 1.0 / det.correlation_samples  # Σ of the kernel squared
     k = det.threshold_sigma + z
     q = k * k * det.shot_noise_counts * kern_sq
     nf = np.maximum(np.asarray(noise_sigma, dtype=np.float64), 1e-300)
     return (q + np.sqrt(q * q + 4.0 * r * r * k * k * nf**2)) / (2 * r * r)
+
+
+def limit_time_s(
+    log_margin: np.ndarray,
+    decay_per_s: np.ndarray | float,
+    t_max_s: np.ndarray,
+    ok: np.ndarray,
+    t_min_s: float,
+) -> np.ndarray:
+    """Detection-limit time after the surface echo, ``(n,)``; 0 where not ``ok``.
+
+    ``log_margin / decay_per_s`` (``ln(C0 / C*)`` over the bottom's decay), clipped to the
+    detector's least separation ``t_min_s`` and the last searched time ``t_max_s``.
+    """
+    t = log_margin / decay_per_s
+    hi = np.maximum(t_max_s, t_min_s)
+    return np.where(ok, np.clip(t, t_min_s, hi), 0.0)
