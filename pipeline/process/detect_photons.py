@@ -5,9 +5,10 @@ accumulated along track. Each event is placed on its measured beam at the range 
 flight (``r = c t / (2 n_air)``, no refraction yet), and its height is histogrammed over a window
 of ``shots_per_window`` consecutive shots:
 
-1. **Background** per window (:func:`_background`): the larger of the mean of the bins below
-   the 90th percentile and the Poisson rate of the share of empty bins, both over the range
-   gate; the second keeps a sparse background (most bins empty) from being taken as zero.
+1. **Background** per window (:func:`~pipeline.process.photon_histogram.background`): the
+   larger of the mean of the bins below the 90th percentile and the Poisson rate of the share
+   of empty bins, both over the range gate; the second keeps a sparse background (most bins
+   empty) from being taken as zero.
 2. **Surface**: the FIRST significant return from above, not the strongest: at 532 nm a
    shallow, bright seabed returns more photons than the water surface (off nadir, or with a
    calm surface, many times more). A return is significant when the counts over its
@@ -45,13 +46,13 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import special, stats
 
 from pipeline import optics
 from pipeline.config import setting
 from pipeline.process.detect import WaveformDetections, flank_trend
 from pipeline.process.detection_limit import NoBottomSettings
 from pipeline.process.photon_echo_ml import surface_and_bottom_ml
+from pipeline.process.photon_histogram import background, echo_reach_bins, gate_span, significance
 from pipeline.process.photon_limit import photon_detection_limit
 from pipeline.process.photon_livetime import (
     bin_live_fraction,
@@ -97,64 +98,6 @@ class PhotonDetectSettings:
     )
 
 
-def _significance(k: np.ndarray, b: np.ndarray, n_bins) -> np.ndarray:
-    """Normal-σ equivalent of ``k`` Poisson counts over background ``b`` among ``n_bins`` bins.
-
-    ``n_bins``: int, or per window ``(n_windows, 1)`` (the bins of each window's range gate).
-    """
-    # log P(X >= k) underflows to -inf for strong returns (all would tie at infinite σ):
-    # log P(X = k), its dominant term, keeps it finite and ordered
-    log_p = np.maximum(stats.poisson.logsf(k - 1, b), stats.poisson.logpmf(k, b))
-    log_p = log_p + np.log(n_bins)
-    # ndtri_exp works on log p, so p-values far below float range keep a finite σ
-    return np.where(log_p < 0, -special.ndtri_exp(np.minimum(log_p, -1e-300)), 0.0)
-
-
-def _span(hist: np.ndarray) -> np.ndarray:
-    """(n_windows, n_bins) bool: the bins between each window's lowest and highest event."""
-    nb = hist.shape[1]
-    nz = hist > 0
-    first = np.argmax(nz, axis=1)
-    last = nb - 1 - np.argmax(nz[:, ::-1], axis=1)
-    col = np.arange(nb)[None, :]
-    return (col >= first[:, None]) & (col <= last[:, None])
-
-
-def _background(hist: np.ndarray) -> np.ndarray:
-    """Background counts per bin of each window's histogram, robust to its few return bins.
-
-    Parameters
-    ----------
-    hist : (n_windows, n_bins) float
-        Event counts per window and height bin.
-
-    Returns
-    -------
-    (n_windows,) float
-        The larger of two estimates over the bins between the window's lowest and highest
-        event (the range gate; bins outside it hold no events at all): the mean of the bins
-        at or below the 90th percentile (returns fill few bins, so they are left out), and the
-        Poisson rate of the share of empty bins, ``-ln P(0)``. The first alone is far too low
-        when the background is sparse (then the 90th percentile is 0 and every lone photon
-        would pass as a return); the second, unaffected by the few bins returns fill, is
-        reliable exactly then, and saturates (no empty bins) only when the first is reliable.
-    """
-    nz = hist > 0
-    span = _span(hist)
-    n_span = np.maximum(span.sum(axis=1), 1)
-    # the 90th percentile ("lower") of the span's bins alone: np.quantile over the NaN-padded
-    # rows gave NaN (then 0) for every window narrower than the chunk's histogram, so the
-    # estimate depended on the other windows of the chunk
-    ordered = np.sort(np.where(span, hist, np.inf), axis=1)
-    q90 = ordered[np.arange(hist.shape[0]), np.floor(0.9 * (n_span - 1)).astype(np.int64)]
-    q90 = np.where(np.isfinite(q90), q90, 0.0)  # windows without events
-    low = span & (hist <= q90[:, None])
-    trimmed = np.sum(np.where(low, hist, 0.0), axis=1) / np.maximum(low.sum(axis=1), 1)
-    empty = np.sum(span & ~nz, axis=1)
-    rate = -np.log(np.maximum(empty, 0.5) / n_span)
-    return np.maximum(trimmed, np.where(empty > 0, rate, 0.0))
-
-
 def detect_photon_events(
     offsets: np.ndarray,
     times_s: np.ndarray,
@@ -196,7 +139,9 @@ def detect_photon_events(
         With ``group_index`` (the water's, processing's assumption): each window's detection
         limit (:mod:`pipeline.process.photon_limit`, ``t_detection_limit_s``). A window without
         a bottom states "no bottom" (``t_no_bottom_s``) down to the shallower of it and the
-        column's extent, and a bottom found deeper than it, under
+        column's extent (the run of significant boxes from the surface, less the reach of an
+        echo past its reflector: a seabed merged into the surface echo ends the run that far
+        below itself), and a bottom found deeper than it, under
         twice the threshold, is flagged BEYOND_DETECTION_LIMIT (a bottom of the assumed
         reflectance would not be seen there: it cannot be told from an upward fluctuation).
     pulse_sigma_s : float
@@ -243,10 +188,10 @@ def detect_photon_events(
     live = bin_live_fraction(ev_win, z, tau_h, k0 * s.bin_m, s.bin_m, nb, shots_w, n_channels)
     raw = np.bincount(ev_win * nb + b, minlength=n_win * nb).reshape(n_win, nb).astype(float)
     hist = np.bincount(ev_win * nb + b, weights=w_ev, minlength=n_win * nb).reshape(n_win, nb)
-    bg = _background(hist)
+    bg = background(hist)
     # the look-elsewhere count of each window: the bins of its own range gate (its events'
     # span, as the background's), not the chunk's histogram
-    span = _span(hist)
+    span = gate_span(hist)
     n_searched = np.maximum(span.sum(axis=1), 1)[:, None]
     bg_safe = np.maximum(bg, 1e-3)  # an empty background still has a finite p-value scale
     rows = np.arange(n_win)
@@ -270,7 +215,7 @@ def detect_photon_events(
     full = np.broadcast_to(col, (n_win, nb))
     box = box_sum(full - cb, full + cb)
     box_live = box_sum(full - cb, full + cb, 2)
-    sig_box = _significance(
+    sig_box = significance(
         box_sum(full - cb, full + cb, 1), bg_safe[:, None] * box_live, n_searched
     )
     # Surface: the FIRST significant return from above (the highest bin), not the strongest:
@@ -329,9 +274,7 @@ def detect_photon_events(
     valley_min = np.take_along_axis(suffix_min, np.clip(hi_b + 1, 0, nb), axis=1)
     local = np.maximum(local, valley_min)
     told = np.isfinite(local)
-    sig_all = np.where(
-        told, _significance(box_b, np.where(told, local, 1.0) * n_b, n_searched), 0.0
-    )
+    sig_all = np.where(told, significance(box_b, np.where(told, local, 1.0) * n_b, n_searched), 0.0)
     i_b = np.argmax(np.where(below, sig_all, -np.inf), axis=1)
     sig_s = np.where(has_s, sig_box[rows, i_s], 0.0)
     sig_b = np.where(has_s & below[rows, i_b], sig_all[rows, i_b], 0.0)
@@ -364,6 +307,11 @@ def detect_photon_events(
     # surface echo's tail alone makes the boxes overlapping it significant).
     weak_below = (sig_box < s.threshold_sigma) & (col < i_s[:, None])
     i_lim = np.where(weak_below, col, -1).max(axis=1) + 1
+    # ... but the run's lowest box may owe its counts to its upper bins alone, and an echo's
+    # significant boxes reach past the reflector that made it: a bottom too near the surface
+    # to be told apart (merged into its echo) ends the run that far below itself. Light is
+    # established, and with it the absence of any bottom, only that far above the run's end
+    i_lim = i_lim + echo_reach_bins(top - i_s, cb, pulse_sigma_s, n_air, s.bin_m)
     # the detection limit (a bottom of the assumed reflectance seen down to it), where the
     # window's column is measurable. Class 45 takes the shallower of it and the column's
     # extent: the limit rests on assumed ρ and β_π and on a column decay that forward scatter

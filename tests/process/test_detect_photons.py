@@ -132,8 +132,40 @@ def test_no_bottom_limit_is_where_the_column_is_last_seen():
     offsets, times, o, d, t_s, t_end = _column_events(2000, 3.0, seed=3)
     det = detect_photon_events(offsets, times, o, d, N_AIR)
     assert det.has_surface.all() and not det.has_bottom.any()
-    # the last box (±2 bins of 0.67 ns) still significant straddles the column's end
-    assert np.all(np.abs(det.t_no_bottom_s - t_end) < 1.5e-9)
+    # the last box (±2 bins of 0.67 ns) still significant straddles the column's end (by
+    # < 0.4 ns here); the claim stands above it by the echo's reach, at least the box's half
+    # (2 bins) and at most the surface echo's own (its 7.5 cm sigma: <= 2 + 3 bins): it
+    # never passes the light's end, and lies within 6 bins (4 ns) of it
+    short = t_end - det.t_no_bottom_s
+    assert np.all((short > 0.0) & (short < 4.0e-9))
+
+
+def _merged_under_column(n_shots, depth_m, lam_b, lam_col=2.0, seed=0):
+    """A seabed ``depth_m`` under the surface, the column's photons between them, none below."""
+    offsets, times, o, d, t_s, t_b = _events(n_shots, depth_m, lam_s=0.5, lam_b=lam_b, seed=seed)
+    rng = np.random.default_rng(seed + 100)
+    k = rng.poisson(lam_col * depth_m / 3.0, n_shots)  # _column_events' photons per metre
+    shot = np.concatenate(
+        [np.repeat(np.arange(n_shots), np.diff(offsets)), np.repeat(np.arange(n_shots), k)]
+    )
+    t = np.concatenate([times, rng.uniform(t_s, t_b, k.sum())])
+    order = np.lexsort((t, shot))
+    offsets = np.r_[0, np.cumsum(np.bincount(shot, minlength=n_shots))]
+    return offsets, t[order], o, d, t_s, t_b
+
+
+@pytest.mark.parametrize("depth_m, lam_b", [(0.2, 5.0), (0.25, 1.5), (0.3, 0.3), (0.4, 0.3)])
+def test_no_claim_past_a_seabed_merged_into_the_surface_echo(depth_m, lam_b):
+    # a seabed too near the surface to be told apart (or too dim to be found) ends the run of
+    # significant boxes the box's half and its echo's tail below itself: a claim at the run's
+    # end says "no bottom" 0.15-0.28 m past it (the code before this test: 20-100 % of these
+    # windows). No window may claim the absence of a bottom deeper than the seabed it has
+    offsets, times, o, d, t_s, t_b = _merged_under_column(
+        4000, depth_m, lam_b, seed=int(1000 * depth_m + 10 * lam_b)
+    )
+    det = detect_photon_events(offsets, times, o, d, N_AIR, pulse_sigma_s=0.5e-9)
+    claimed = det.t_no_bottom_s > 0.0
+    assert np.all(det.t_no_bottom_s[claimed] <= t_b)
 
 
 def test_opaque_water_establishes_no_bottom_depth():
