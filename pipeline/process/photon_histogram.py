@@ -24,13 +24,19 @@ __all__ = ["ECHO_TAIL_SIGMAS", "background", "echo_reach_bins", "gate_span", "si
 ECHO_TAIL_SIGMAS = 3.0
 
 
-def echo_reach_bins(lead: np.ndarray, cb: int, pulse_sigma_s: float, n_air: float, bin_m: float):
+def echo_reach_bins(
+    lead: np.ndarray, cb: int, pulse_sigma_s: float, n_air: float, bin_m: float
+) -> np.ndarray:
     """``(n_windows,)`` bins an echo's significant boxes reach past its reflector's peak.
 
     The larger of the box's half-width plus ``ECHO_TAIL_SIGMAS`` response sigmas (a lone
     echo of the system's response) and ``lead``, how far the window's own surface echo reaches
-    above its peak (the same response, box and footprint spread, measured: a trailing edge
-    reaches as far as a leading one).
+    above its peak (``top - i_s``: the same response, box and footprint spread; a trailing
+    edge reaches as far as a leading one). The surface peak's search keeps ``lead`` within
+    ``[-cb, 2 cb]``, so the reach lies in ``[cb + 3 sigma, max(2 cb, cb + 3 sigma)]``: with
+    the photon-counting preset (0.7 ns FWHM, 0.1 m bins, ``cb`` 2) it is 4 bins in every
+    window, and ``lead`` matters only for a response sharper than about 0.55 ns FWHM.
+    Not included: the seabed's own relief across a window's shots (one claim per window).
     """
     sigma_bins = pulse_sigma_s * optics.SPEED_OF_LIGHT_M_S / (2.0 * n_air) / bin_m
     own = cb + int(math.ceil(ECHO_TAIL_SIGMAS * sigma_bins))
