@@ -302,9 +302,9 @@ def level_limit_s(
     ok &= (claim > 0.0) & ~echo
     c_star = threshold_level(nf, det, s, z)
     log_c0 = np.log(np.where(ok, claim, 1.0)) + alpha_per_s * bins.t_first_s
-    if not alpha_per_s + excess_decay_per_s > 0.0:  # no decay (or NaN): nothing established
+    decay = alpha_per_s + excess_decay_per_s
+    if not decay > 0.0:  # no decay (or NaN): nothing established
         return np.zeros(len(nf)), echo
     t_min = det.min_separation_fwhm * det.pulse_fwhm_s
     t_max = np.asarray(t_max_s, dtype=np.float64)
-    decay = alpha_per_s + excess_decay_per_s
     return limit_time_s(log_c0 - np.log(c_star), decay, t_max, ok, t_min), echo
