@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from pipeline.suite.chance_tpu import simulated_tpu_failures
+from pipeline.suite.chance_tpu import beyond_chance, simulated_tpu_failures
 from pipeline.suite.generate import draw, suite_seeds
-from pipeline.suite.strata import pool_rows
+from pipeline.suite.strata import all_strata, pool_rows
 
 N_PTS = 4000
 
@@ -90,3 +90,54 @@ def test_a_fully_shared_error_fails_every_stratum():
     # coverage is 0 or 1 in every replicate: never inside a band
     for name in ("tpu68", "tpu95"):
         assert got[name]["mean"] == got[name]["strata"] == got[name]["p10"]
+
+
+def _coverage_given(xi: float, s: float, o: float, k: float) -> float:
+    """Coverage of many points ``+-s xi + o eta`` at ``k`` sigmas (even in ``xi``)."""
+    return float(norm.cdf((k - s * xi) / o) - norm.cdf((-k - s * xi) / o))
+
+
+@pytest.mark.parametrize("s", [0.0, 0.5])
+def test_a_strata_range_is_where_its_coverage_falls_95_percent_of_the_time(s):
+    o = float(np.sqrt(1.0 - s * s))
+    rows = [_row(s, o)]
+    got = simulated_tpu_failures(pool_rows(rows), rows, "tuning", n_rep=2000, seed=5)
+    for name, k in (("tpu68", 1.0), ("tpu95", 1.96)):
+        ranges = got[name]["ranges"]
+        assert len(ranges) == got[name]["strata"]
+        lo, hi = ranges["all", "all"]
+        p = _coverage_given(0.0, s, o, k)
+        # binomial scatter of N_PTS points about the coverage a draw gives
+        sd = float(np.sqrt(p * (1.0 - p) / N_PTS))
+        if s == 0.0:  # no shared term: the binomial range alone
+            assert lo == pytest.approx(p - 1.96 * sd, abs=0.3 * sd)
+            assert hi == pytest.approx(p + 1.96 * sd, abs=0.3 * sd)
+        else:
+            # the coverage falls as |xi| grows: its 2.5 % quantile is the coverage at the
+            # 97.5 % quantile of |xi| (normal: 2.2414); its 97.5 % one is near xi = 0, where
+            # the coverage is flat and the binomial scatter sets the top
+            want_lo = _coverage_given(norm.ppf(1.0 - 0.025 / 2.0), s, o, k)
+            # the quantile of 2000 replicates: ~0.012 at 68 %, less at 95 %
+            assert lo == pytest.approx(want_lo, abs=0.03)
+            assert p - 2.0 * sd <= hi <= p + 3.0 * sd
+        for key in ranges:
+            assert ranges[key] == (lo, hi)  # every stratum holds the same points
+
+
+@pytest.mark.parametrize(("xi", "want"), [(0.3, ""), (3.0, "low"), (None, "high")])
+def test_an_observed_coverage_is_read_against_its_range(xi, want):
+    s, o = 0.6, 0.8
+    row = _row(s, o)
+    n = N_PTS
+    sign = np.where(np.arange(n) % 2, -1.0, 1.0)
+    if xi is not None:  # errors drawn from the TPU's own model, the shared draw fixed at xi
+        eta = np.random.default_rng(11).standard_normal(n)
+        row["arrays"]["tpu_error_m"] = sign * s * xi + o * eta
+    # (None: the errors are 0, every point inside its sigma: a TPU far too large)
+    rows = [row]
+    pool = pool_rows(rows)
+    got = simulated_tpu_failures(pool, rows, "tuning", n_rep=400, seed=2)
+    observed = next(x for x in all_strata(pool) if x["dimension"] == "all")["tuning"]["tpu"]
+    for name, q in (("tpu68", "cov68"), ("tpu95", "cov95")):
+        mark = beyond_chance(observed[q], got[name]["ranges"]["all", "all"])
+        assert mark == want

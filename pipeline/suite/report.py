@@ -29,6 +29,11 @@ from typing import Any
 import numpy as np
 
 from pipeline.suite.chance import expected_failures
+from pipeline.suite.report_chance import chance_section, shared_chance
+from pipeline.suite.report_format import f as _f
+from pipeline.suite.report_format import head as _head
+from pipeline.suite.report_format import pct as _pct
+from pipeline.suite.report_format import row as _row
 from pipeline.suite.strata import DEPTH_BANDS_M, Pool, shallowest_unbiased_m
 
 __all__ = [
@@ -112,14 +117,6 @@ def write_csv(path: str | Path, strata: list[dict[str, Any]]) -> Path:
     return path
 
 
-def _f(v, fmt="{:+.3f}") -> str:
-    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else fmt.format(v)
-
-
-def _pct(v) -> str:
-    return _f(None if v is None else 100.0 * v, "{:.1f}")
-
-
 def _detected_cell(cs: list[dict]) -> str:
     """``detected / n (points, grid, class 43)`` of a list of cubes."""
     if not cs:
@@ -175,16 +172,6 @@ def cube_depth_table(pool: Pool) -> list[str]:
     edges = DEPTH_BANDS_M
     bands = tuple(zip(edges[:-1], edges[1:], strict=True))
     return _cube_band_table(pool, "depth m", "depth_m", bands)
-
-
-def _row(cells) -> str:
-    """One Markdown table row."""
-    return "| " + " | ".join(str(c) for c in cells) + " |"
-
-
-def _head(cells) -> list[str]:
-    """A Markdown table's header and rule."""
-    return [_row(cells), "|" + "---|" * len(cells)]
 
 
 def _error_table(strata) -> list[str]:
@@ -323,24 +310,6 @@ def _scene_table(pool: Pool, times: list[tuple[float, float]]) -> list[str]:
     return lines
 
 
-def _shared_chance(chance: dict[str, dict[str, dict[str, float]]]) -> str:
-    """The sentence on the TPU floors' chance with the shared terms drawn once per scene."""
-
-    def half(h: str) -> str:
-        return ", ".join(
-            f"{k} {v['mean']:.1f} ({v['p10']:.0f}-{v['p90']:.0f}) of {v['strata']}"
-            for k, v in chance[h].items()
-        )
-
-    return (
-        ": with the TPU's own terms as the truth's model, those shared by a scene (navigation,"
-        " attitude, heading, forward scattering, temperature, salinity) drawn once per scene"
-        " and the rest per point (`pipeline/suite/chance_tpu.py`), a TPU exactly right would"
-        f" fail on average {half('heldout')} held-out strata (10-90 % of the simulated suites"
-        f" in brackets; tuning: {half('tuning')})."
-    )
-
-
 def write_markdown(
     path: str | Path,
     command: str,
@@ -394,10 +363,11 @@ def write_markdown(
         + ", ".join(f"{k} {v:.1f}" for k, v in expected_failures(strata, "tuning").items())
         + "): the bands are as narrow as a coverage's binomial scatter at the strata's n."
         " Errors shared by many points (a survey's attitude, its water) make the real chance"
-        " larger" + (_shared_chance(tpu_chance) if tpu_chance else "."),
+        " larger" + (shared_chance(tpu_chance) if tpu_chance else "."),
         "",
         *floor_lines,
         "",
+        *(chance_section(strata, tpu_chance) if tpu_chance else []),
         "## Class-40 points and grid cells",
         "",
         *_error_table(strata),
