@@ -27,9 +27,10 @@ where the beam met the actual sea at ``E``, the depth is read against the sea ab
 ``Delta = |B - E|`` away (about a quarter of the depth at 20° off nadir), predicted from the
 sea met at ``E`` as ``rho(Delta) w s_E`` above the plane
 (:mod:`pipeline.process.sea_correlation`); the predictor's error variance is
-``(gamma(Delta) - gamma(h_0)) (1 + rho)``, the wave part of the variogram beyond its shortest
-lag ``h_0`` (``2 (gamma(Delta) - gamma(h_0))``, the variance of the difference of the heights,
-when the depth reads the sea at ``E`` itself) (Westfeld et al. 2017, "Analysis and correction
+``gamma_w(Delta) (1 + rho)``, ``gamma_w`` the wave part of the variogram (``gamma`` less the
+nugget of its pooled fit, rising as ``h²`` below the shortest lag; ``2 gamma_w(Delta)``, the
+variance of the difference of the heights, when the depth reads the sea at ``E`` itself)
+(:func:`wave_entry_sigma_m`; Westfeld et al. 2017, "Analysis and correction
 of ocean wave pattern induced systematic coordinate errors in airborne LiDAR bathymetry", ISPRS
 J. Photogramm. Remote Sens. 128; the water-surface terms of the TPU of Eren et al. 2019,
 "Total vertical uncertainty (TVU)
@@ -107,6 +108,10 @@ class SurfaceVariogram:
     raw_rise_per_m2 : float
         The same of the heights above the survey's global plane instead: half the mean-square
         slope of the whole sea along the pairs (what a plane that follows nothing misses).
+    pooled_nugget_m2 : float
+        ``gamma(0)`` of the shortest pooled lags (:func:`_sea_nugget`: with their bend): the
+        variogram's ranging part, what :func:`wave_entry_sigma_m` takes off; NaN: not measured
+        (the shortest lag's ``gamma`` is taken off instead).
     """
 
     lag_m: np.ndarray
@@ -115,6 +120,7 @@ class SurfaceVariogram:
     pairs: int
     rise_per_m2: float = 0.0
     raw_rise_per_m2: float = 0.0
+    pooled_nugget_m2: float = float("nan")
 
     @classmethod
     def empty(cls) -> SurfaceVariogram:
@@ -150,6 +156,26 @@ def _nugget_and_rise(h: np.ndarray, g: np.ndarray) -> tuple[float, float]:
         if a >= 0.0:
             return float(np.clip(n, 0.0, g[0])), float(a)
     return float(np.mean(g)) if g.size else float("nan"), 0.0
+
+
+def _sea_nugget(h: np.ndarray, g: np.ndarray) -> float:
+    """``gamma(0)`` of ``n + a h² + b h⁴`` through the three shortest lags (``a >= 0``).
+
+    What the sea's part of the variogram is measured from (:func:`wave_entry_sigma_m`). A
+    scan's shortest lags can reach where the sea's rise bends (successive Palmer soundings
+    1.7 m apart, 10-40 m waves: the ``h²`` line through lags 1.7-5.1 m puts ``n`` at 8 times
+    the ranging variance, and the sea's part at half its own); the ``h⁴`` term follows the
+    bend. Fewer lags: :func:`_nugget_and_rise`. A fit that does not rise from the origin
+    (``a < 0``: no sea measured at the shortest lags, e.g. a calm sea's variogram flat there and
+    rising only farther out, where a line through all three put ``n`` under ``g[0]`` and read
+    that as waves; suite tuning seed 20, 1.5 m/s): ``g[0]``. Clipped to ``[0, g[0]]``.
+    """
+    if h.size >= 3:
+        n, a, _ = np.linalg.solve(np.column_stack([np.ones(3), h[:3] ** 2, h[:3] ** 4]), g[:3])
+        if not (a >= 0.0 and np.isfinite(n)):
+            return float(g[0])
+        return float(np.clip(n, 0.0, g[0]))
+    return _nugget_and_rise(h, g)[0]
 
 
 def _nugget(h: np.ndarray, g: np.ndarray) -> float:
@@ -229,6 +255,7 @@ def surface_variogram(
     # whole sea's (what a plane blind along some axis misses there)
     h0 = np.array(lags[:_NUGGET_BINS])
     rise = _nugget_and_rise(h0, np.array(gammas[:_NUGGET_BINS]))[1]
+    pooled = _sea_nugget(h0, np.array(gammas[:_NUGGET_BINS])) if lags else float("nan")
     raw_rise = _nugget_and_rise(h0, np.array(gammas_raw[:_NUGGET_BINS]))[1]
     bands = np.asarray(INCIDENCE_BANDS_DEG)
     inc_bin = np.digitize(inc_pair, bands) - 1
@@ -249,7 +276,7 @@ def surface_variogram(
         if hs:
             nugget[b] = _nugget(np.array(hs), np.array(gs))
     return SurfaceVariogram(
-        np.array(lags), np.array(gammas), nugget, int(pairs.row_i.size), rise, raw_rise
+        np.array(lags), np.array(gammas), nugget, int(pairs.row_i.size), rise, raw_rise, pooled
     )
 
 
@@ -288,13 +315,20 @@ def wave_entry_sigma_m(vg: SurfaceVariogram, delta_m, rho=None) -> np.ndarray:
 
     The sea above the sounding is read as the plane plus ``rho w s_E``
     (:mod:`pipeline.process.sea_correlation`): with a wave variance ``sigma²`` about the
-    plane and ``rho = 1 - (gamma(Delta) - gamma(h_0)) / sigma²``, the predictor's error
-    variance is ``sigma² (1 - rho²) = (gamma(Delta) - gamma(h_0)) (1 + rho)`` (simple kriging
-    from one observation). ``rho = None`` reads the sea above the sounding as the sea at the
-    entry (``rho = 1`` in the depth): ``2 (gamma(Delta) - gamma(h_0))``. ``Delta``: the
-    sounding's offset from its entry; ``h_0`` the shortest lag with enough pairs (what the sea
-    adds within ``h_0`` is left out: the shortest lags are a fraction of a metre to a few
-    metres, where a wind sea's height changes least).
+    plane and ``rho = 1 - gamma_w(Delta) / sigma²``, the predictor's error variance is
+    ``sigma² (1 - rho²) = gamma_w(Delta) (1 + rho)`` (simple kriging from one observation).
+    ``rho = None`` reads the sea above the sounding as the sea at the entry (``rho = 1`` in
+    the depth): ``2 gamma_w(Delta)``. ``Delta``: the sounding's offset from its entry.
+
+    ``gamma_w`` is the sea's part of the variogram, ``gamma`` less its ranging part (the
+    pooled nugget ``n``, :func:`_sea_nugget`). From the shortest lag ``h_0`` down it is not
+    measured: a smooth sea rises as ``h²`` from the origin, so it is
+    ``gamma_w(h_0) (Delta / h_0)²`` there. A scan's
+    shortest lag is often longer than ``Delta`` (successive Palmer soundings 1-2 m apart, a
+    shallow sounding's ``Delta`` a few decimetres): read as 0 below ``h_0``, the term vanished
+    over shallow water under waves, where the sea's change from entry to sounding (suite
+    tuning seed 6: 0.03 m sd at 1-2 m) then had no sigma. Without a pooled nugget,
+    ``n = gamma(h_0)`` (nothing below ``h_0``).
 
     Parameters
     ----------
@@ -307,7 +341,9 @@ def wave_entry_sigma_m(vg: SurfaceVariogram, delta_m, rho=None) -> np.ndarray:
     delta = np.asarray(delta_m, dtype=np.float64)
     if vg.lag_m.size == 0:
         return np.zeros(delta.shape)
-    wave = vg.gamma_at(delta) - vg.gamma_m2[0]
+    h0, g0 = vg.lag_m[0], vg.gamma_m2[0]
+    n = vg.pooled_nugget_m2 if np.isfinite(vg.pooled_nugget_m2) else g0
+    wave = np.where(delta >= h0, vg.gamma_at(delta) - n, max(g0 - n, 0.0) * (delta / h0) ** 2)
     factor = 2.0 if rho is None else 1.0 + np.clip(np.asarray(rho, dtype=np.float64), 0.0, 1.0)
     return np.sqrt(factor * np.maximum(np.nan_to_num(wave), 0.0))
 

@@ -110,6 +110,28 @@ def test_random_phase_sea_wave_term_is_its_height_difference():
         assert wave_entry_sigma_m(vg, [delta])[0] == pytest.approx(want, rel=0.1)
 
 
+def test_wave_term_below_the_shortest_lag_rises_from_the_origin():
+    """Successive soundings 1.7 m apart (a Palmer scan's): every lag bin lies past a shallow
+    sounding's ``Delta`` (0.3-1.2 m). The sea's height difference there (random-phase sea of
+    10-40 m waves: ``sum a_i² (1 - cos k_i Delta)``, within 8 % of its ``Delta²`` rise up to
+    the shortest lag) is the term's, not 0; past the shortest lag it is as before."""
+    rng = np.random.default_rng(9)
+    lam = rng.uniform(10.0, 40.0, 40)
+    k = 2 * math.pi / lam
+    a = np.full(40, 0.10 * math.sqrt(2.0 / 40))
+    phi = rng.uniform(0.0, 2 * math.pi, 40)
+
+    def sea(x):
+        return np.sum(a * np.sin(np.outer(x, k) + phi), axis=1)
+
+    ret, surf = track(sea, 0.01, n=12000, spacing_m=1.7)
+    vg = surface_variogram(ret, surf)
+    assert vg.lag_m[0] > 1.5  # nothing measured below a shallow sounding's offset
+    for delta in (0.3, 0.6, 1.2, 3.4, 5.1):
+        want = math.sqrt(np.sum(a**2 * (1.0 - np.cos(k * delta))))
+        assert wave_entry_sigma_m(vg, [delta])[0] == pytest.approx(want, rel=0.1)
+
+
 def test_pairs_too_far_apart_in_time_are_not_used():
     """A sea that changed between two passes (here: all of it, by pulse parity in time)
     is not paired across more than ``max_dt_s``."""
@@ -300,7 +322,7 @@ def test_wave_facet_across_a_profiler_whose_planes_follow_the_track():
     tpu = with_wave_facet(tpu, ret.direction_meas, surf, vg, grad[tpu.row], 1.34, track_xy=along)
     want = _snell_depth_sd(math.sqrt(mss_axis), 5.0, g, 1.34 / N_AIR)
     facet = np.sqrt(sum(tpu.terms[t][:, DEPTH] ** 2 for t in FACET_TERMS))
-    assert np.median(facet) == pytest.approx(want, rel=0.15)
+    assert np.median(facet) == pytest.approx(want, rel=0.1)
 
 
 def test_no_wave_facet_on_a_flat_sea():
