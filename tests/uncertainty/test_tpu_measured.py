@@ -74,6 +74,24 @@ def track(sea, noise_m, n=6000, spacing_m=0.05, seed=3, inc_deg=0.0):
     return ret, level
 
 
+def random_phase_sea(seed: int, lam_m: tuple[float, float], sigma_m: float):
+    """A random-phase sea of 40 waves with wavelengths in ``lam_m`` and height sigma
+    ``sigma_m``: ``(sea(x), height_difference_sd(Delta))``, the latter
+    ``sqrt(sum_i a_i² (1 - cos k_i Delta))``."""
+    rng = np.random.default_rng(seed)
+    k = 2 * math.pi / rng.uniform(*lam_m, 40)
+    a = np.full(40, sigma_m * math.sqrt(2.0 / 40))
+    phi = rng.uniform(0.0, 2 * math.pi, 40)
+
+    def sea(x):
+        return np.sum(a * np.sin(np.outer(x, k) + phi), axis=1)
+
+    def diff_sd(delta):
+        return math.sqrt(np.sum(a**2 * (1.0 - np.cos(k * delta))))
+
+    return sea, diff_sd
+
+
 def test_flat_sea_nugget_is_the_ranging_variance_and_no_wave():
     """On a flat sea the variogram is flat at the ranging variance, at every incidence band
     with pairs; the wave term is zero."""
@@ -92,22 +110,13 @@ def test_random_phase_sea_wave_term_is_its_height_difference():
     """A random-phase sea ``sum_i a_i sin(k_i x + phi_i)`` (Gaussian, as a linear sea is):
     the height difference over ``Delta`` has the variance ``sum_i a_i² (1 - cos k_i Delta)``;
     the nugget stays the noise (the wave rise is removed)."""
-    rng = np.random.default_rng(5)
-    lam = rng.uniform(5.0, 20.0, 40)
-    k = 2 * math.pi / lam
-    a = np.full(40, 0.10 * math.sqrt(2.0 / 40))  # sigma of the sea 0.10 m
-    phi = rng.uniform(0.0, 2 * math.pi, 40)
+    sea, diff_sd = random_phase_sea(5, (5.0, 20.0), 0.10)
     noise = 0.01
-
-    def sea(x):
-        return np.sum(a * np.sin(np.outer(x, k) + phi), axis=1)
-
     ret, surf = track(sea, noise, n=12000)
     vg = surface_variogram(ret, surf)
     assert math.sqrt(vg.nugget_m2[0]) == pytest.approx(noise, abs=0.004)
     for delta in vg.lag_m[(vg.lag_m > 0.7) & (vg.lag_m < 3.5)]:
-        want = math.sqrt(np.sum(a**2 * (1.0 - np.cos(k * delta))))
-        assert wave_entry_sigma_m(vg, [delta])[0] == pytest.approx(want, rel=0.1)
+        assert wave_entry_sigma_m(vg, [delta])[0] == pytest.approx(diff_sd(delta), rel=0.1)
 
 
 def test_wave_term_below_the_shortest_lag_rises_from_the_origin():
@@ -115,21 +124,12 @@ def test_wave_term_below_the_shortest_lag_rises_from_the_origin():
     sounding's ``Delta`` (0.3-1.2 m). The sea's height difference there (random-phase sea of
     10-40 m waves: ``sum a_i² (1 - cos k_i Delta)``, within 8 % of its ``Delta²`` rise up to
     the shortest lag) is the term's, not 0; past the shortest lag it is as before."""
-    rng = np.random.default_rng(9)
-    lam = rng.uniform(10.0, 40.0, 40)
-    k = 2 * math.pi / lam
-    a = np.full(40, 0.10 * math.sqrt(2.0 / 40))
-    phi = rng.uniform(0.0, 2 * math.pi, 40)
-
-    def sea(x):
-        return np.sum(a * np.sin(np.outer(x, k) + phi), axis=1)
-
+    sea, diff_sd = random_phase_sea(9, (10.0, 40.0), 0.10)
     ret, surf = track(sea, 0.01, n=12000, spacing_m=1.7)
     vg = surface_variogram(ret, surf)
     assert vg.lag_m[0] > 1.5  # nothing measured below a shallow sounding's offset
     for delta in (0.3, 0.6, 1.2, 3.4, 5.1):
-        want = math.sqrt(np.sum(a**2 * (1.0 - np.cos(k * delta))))
-        assert wave_entry_sigma_m(vg, [delta])[0] == pytest.approx(want, rel=0.1)
+        assert wave_entry_sigma_m(vg, [delta])[0] == pytest.approx(diff_sd(delta), rel=0.1)
 
 
 def test_pairs_too_far_apart_in_time_are_not_used():
