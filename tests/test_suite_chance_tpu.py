@@ -23,12 +23,12 @@ from pipeline.suite.strata import all_strata, pool_rows
 N_PTS = 4000
 
 
-def _row(shared_sigma: float, own_sigma: float):
+def _row(shared_sigma: float, own_sigma: float, wind_m_s: float = 3.0):
     d = dataclasses.replace(
         draw(suite_seeds(1, "tuning")[0]),
         receiver="full_waveform",
         attenuation_per_m=0.15,
-        wind_m_s=3.0,
+        wind_m_s=wind_m_s,
         cubes=(),
     )
     n = N_PTS
@@ -141,3 +141,22 @@ def test_an_observed_coverage_is_read_against_its_range(xi, want):
     for name, q in (("tpu68", "cov68"), ("tpu95", "cov95")):
         mark = beyond_chance(observed[q], got[name]["ranges"]["all", "all"])
         assert mark == want
+
+
+def test_each_stratum_gets_the_range_of_its_own_scenes():
+    """Two scenes in different wind strata, one whose error is shared through (s = 0.8), one
+    whose errors are all its points' own: each wind stratum's range is its own scene's law
+    (the shared draw's, the binomial), the strata holding both lie between."""
+    s, o = 0.8, 0.6
+    rows = [_row(s, o, wind_m_s=1.0), _row(0.0, 1.0, wind_m_s=10.0)]
+    got = simulated_tpu_failures(pool_rows(rows), rows, "tuning", n_rep=2000, seed=4)
+    ranges = got["tpu68"]["ranges"]
+    lo_a, hi_a = ranges["wind m/s", "0-2"]
+    lo_b, hi_b = ranges["wind m/s", "8-12"]
+    p = _coverage_given(0.0, 0.0, 1.0, 1.0)
+    sd = float(np.sqrt(p * (1.0 - p) / N_PTS))
+    assert lo_b == pytest.approx(p - 1.96 * sd, abs=0.3 * sd)
+    assert hi_b == pytest.approx(p + 1.96 * sd, abs=0.3 * sd)
+    assert lo_a == pytest.approx(_coverage_given(norm.ppf(1.0 - 0.025 / 2.0), s, o, 1.0), abs=0.03)
+    lo_all, hi_all = ranges["all", "all"]  # half the points shared: a range between the two
+    assert lo_a < lo_all < lo_b and hi_b < hi_all

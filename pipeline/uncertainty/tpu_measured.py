@@ -108,10 +108,6 @@ class SurfaceVariogram:
     raw_rise_per_m2 : float
         The same of the heights above the survey's global plane instead: half the mean-square
         slope of the whole sea along the pairs (what a plane that follows nothing misses).
-    pooled_nugget_m2 : float
-        ``gamma(0)`` of the shortest pooled lags (:func:`_sea_nugget`: with their bend): the
-        variogram's ranging part, what :func:`wave_entry_sigma_m` takes off; NaN: not measured
-        (the shortest lag's ``gamma`` is taken off instead).
     """
 
     lag_m: np.ndarray
@@ -120,13 +116,24 @@ class SurfaceVariogram:
     pairs: int
     rise_per_m2: float = 0.0
     raw_rise_per_m2: float = 0.0
-    pooled_nugget_m2: float = float("nan")
 
     @classmethod
     def empty(cls) -> SurfaceVariogram:
         """No pairs: no lag bins, no nugget (the terms then add nothing)."""
         nb = len(INCIDENCE_BANDS_DEG) - 1
         return cls(np.zeros(0), np.zeros(0), np.full(nb, np.nan), 0)
+
+    @property
+    def pooled_nugget_m2(self) -> float:
+        """``gamma(0)`` of the shortest pooled lags (:func:`_sea_nugget`: with their bend).
+
+        The variogram's ranging part, what :func:`wave_entry_sigma_m` takes off; NaN without
+        lag bins. A function of ``lag_m`` and ``gamma_m2`` alone, so a variogram handed to a
+        tile (:mod:`pipeline.uncertainty.tpu_survey_wide`) or built by hand has it too.
+        """
+        if self.lag_m.size == 0:
+            return float("nan")
+        return _sea_nugget(self.lag_m[:_NUGGET_BINS], self.gamma_m2[:_NUGGET_BINS])
 
     def gamma_at(self, lag_m) -> np.ndarray:
         """``gamma`` interpolated at ``lag_m`` (clamped at the ends; 0 without bins)."""
@@ -165,17 +172,21 @@ def _sea_nugget(h: np.ndarray, g: np.ndarray) -> float:
     scan's shortest lags can reach where the sea's rise bends (successive Palmer soundings
     1.7 m apart, 10-40 m waves: the ``h²`` line through lags 1.7-5.1 m puts ``n`` at 8 times
     the ranging variance, and the sea's part at half its own); the ``h⁴`` term follows the
-    bend. Fewer lags: :func:`_nugget_and_rise`. A fit that does not rise from the origin
-    (``a < 0``: no sea measured at the shortest lags, e.g. a calm sea's variogram flat there and
-    rising only farther out, where a line through all three put ``n`` under ``g[0]`` and read
-    that as waves; suite tuning seed 20, 1.5 m/s): ``g[0]``. Clipped to ``[0, g[0]]``.
+    bend. Two lags: the line :func:`_nugget_and_rise`. A fit that does not rise from the
+    origin (``a <= 0``: no sea measured at the shortest lags, e.g. a calm sea's variogram flat
+    there and rising only farther out, where a line through all three put ``n`` under
+    ``g[0]`` and read that as waves; suite tuning seed 20, 1.5 m/s), or one lag: ``g[0]``.
+    Clipped to ``[0, g[0]]``.
     """
     if h.size >= 3:
         n, a, _ = np.linalg.solve(np.column_stack([np.ones(3), h[:3] ** 2, h[:3] ** 4]), g[:3])
-        if not (a >= 0.0 and np.isfinite(n)):
-            return float(g[0])
-        return float(np.clip(n, 0.0, g[0]))
-    return _nugget_and_rise(h, g)[0]
+    elif h.size == 2:
+        n, a = _nugget_and_rise(h, g)
+    else:
+        return float(g[0]) if g.size else float("nan")
+    if not (a > 0.0 and np.isfinite(n)):
+        return float(g[0])
+    return float(np.clip(n, 0.0, g[0]))
 
 
 def _nugget(h: np.ndarray, g: np.ndarray) -> float:
@@ -255,7 +266,6 @@ def surface_variogram(
     # whole sea's (what a plane blind along some axis misses there)
     h0 = np.array(lags[:_NUGGET_BINS])
     rise = _nugget_and_rise(h0, np.array(gammas[:_NUGGET_BINS]))[1]
-    pooled = _sea_nugget(h0, np.array(gammas[:_NUGGET_BINS])) if lags else float("nan")
     raw_rise = _nugget_and_rise(h0, np.array(gammas_raw[:_NUGGET_BINS]))[1]
     bands = np.asarray(INCIDENCE_BANDS_DEG)
     inc_bin = np.digitize(inc_pair, bands) - 1
@@ -276,7 +286,7 @@ def surface_variogram(
         if hs:
             nugget[b] = _nugget(np.array(hs), np.array(gs))
     return SurfaceVariogram(
-        np.array(lags), np.array(gammas), nugget, int(pairs.row_i.size), rise, raw_rise, pooled
+        np.array(lags), np.array(gammas), nugget, int(pairs.row_i.size), rise, raw_rise
     )
 
 

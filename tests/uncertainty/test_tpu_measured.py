@@ -132,6 +132,29 @@ def test_wave_term_below_the_shortest_lag_rises_from_the_origin():
         assert wave_entry_sigma_m(vg, [delta])[0] == pytest.approx(diff_sd(delta), rel=0.1)
 
 
+@pytest.mark.parametrize(
+    ("lags", "gammas"),
+    [
+        # suite tuning seed 20 (1.5 m/s, flat sea): flat at the shortest lags, rising farther out
+        ((2.41, 4.83, 7.24, 9.68), (2.61e-3, 2.74e-3, 3.84e-3, 4.71e-3)),
+        # two lags, falling: no rise at all
+        ((1.0, 2.0), (1.0e-3, 6.0e-4)),
+    ],
+)
+def test_no_sea_rise_at_the_shortest_lags_gives_no_wave_term_below_them(lags, gammas):
+    """A variogram that does not rise as a sea does from the origin measures no sea there: the
+    term stays 0 below the shortest lag (a line's intercept under ``gamma(h_0)`` would read
+    the ranging noise as waves), and past it is the variogram's rise over ``gamma(h_0)``."""
+    nb = len(SurfaceVariogram.empty().nugget_m2)
+    vg = SurfaceVariogram(np.array(lags), np.array(gammas), np.full(nb, gammas[0]), 1000)
+    assert vg.pooled_nugget_m2 == gammas[0]
+    below = np.array([0.3, 0.6, 0.99]) * lags[0]
+    assert np.all(wave_entry_sigma_m(vg, below) == 0.0)
+    past = lags[1]
+    want = math.sqrt(2.0 * max(gammas[1] - gammas[0], 0.0))
+    assert wave_entry_sigma_m(vg, [past])[0] == pytest.approx(want, rel=1e-12)
+
+
 def test_pairs_too_far_apart_in_time_are_not_used():
     """A sea that changed between two passes (here: all of it, by pulse parity in time)
     is not paired across more than ``max_dt_s``."""
