@@ -166,7 +166,7 @@ def _nugget_and_rise(h: np.ndarray, g: np.ndarray) -> tuple[float, float]:
 
 
 def _sea_nugget(h: np.ndarray, g: np.ndarray) -> float:
-    """``gamma(0)`` of ``n + a h² + b h⁴`` through the three shortest lags (``a >= 0``).
+    """``gamma(0)`` of ``n + a h² + b h⁴`` through the three shortest lags (``a > 0``).
 
     What the sea's part of the variogram is measured from (:func:`wave_entry_sigma_m`). A
     scan's shortest lags can reach where the sea's rise bends (successive Palmer soundings
@@ -333,12 +333,11 @@ def wave_entry_sigma_m(vg: SurfaceVariogram, delta_m, rho=None) -> np.ndarray:
     ``gamma_w`` is the sea's part of the variogram, ``gamma`` less its ranging part (the
     pooled nugget ``n``, :func:`_sea_nugget`). From the shortest lag ``h_0`` down it is not
     measured: a smooth sea rises as ``h²`` from the origin, so it is
-    ``gamma_w(h_0) (Delta / h_0)²`` there. A scan's
-    shortest lag is often longer than ``Delta`` (successive Palmer soundings 1-2 m apart, a
-    shallow sounding's ``Delta`` a few decimetres): read as 0 below ``h_0``, the term vanished
-    over shallow water under waves, where the sea's change from entry to sounding (suite
-    tuning seed 6: 0.03 m sd at 1-2 m) then had no sigma. Without a pooled nugget,
-    ``n = gamma(h_0)`` (nothing below ``h_0``).
+    ``gamma_w(h_0) (Delta / h_0)²`` there. A scan's shortest lag is often longer than
+    ``Delta`` (successive Palmer soundings 1-2 m apart, a shallow sounding's ``Delta`` a few
+    decimetres): read as 0 below ``h_0``, the term vanished over shallow water under waves,
+    where the sea's change from entry to sounding (suite tuning seed 6: 0.03 m sd at 1-2 m)
+    then had no sigma.
 
     Parameters
     ----------
@@ -351,8 +350,7 @@ def wave_entry_sigma_m(vg: SurfaceVariogram, delta_m, rho=None) -> np.ndarray:
     delta = np.asarray(delta_m, dtype=np.float64)
     if vg.lag_m.size == 0:
         return np.zeros(delta.shape)
-    h0, g0 = vg.lag_m[0], vg.gamma_m2[0]
-    n = vg.pooled_nugget_m2 if np.isfinite(vg.pooled_nugget_m2) else g0
+    h0, g0, n = vg.lag_m[0], vg.gamma_m2[0], vg.pooled_nugget_m2
     wave = np.where(delta >= h0, vg.gamma_at(delta) - n, max(g0 - n, 0.0) * (delta / h0) ** 2)
     factor = 2.0 if rho is None else 1.0 + np.clip(np.asarray(rho, dtype=np.float64), 0.0, 1.0)
     return np.sqrt(factor * np.maximum(np.nan_to_num(wave), 0.0))
