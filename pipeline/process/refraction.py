@@ -200,6 +200,8 @@ def _seabed_points(returns, surface, settings, correct_refraction, *, xyz_depth_
     own = returns.has_surface[idx] & ((flags & PointFlag.SURFACE_OUTLIER) == 0)
     cos_i = np.abs(np.sum(d * nrm, axis=1))
     r_s = _C * ts / (2.0 * na)
+    if surface.own_shift_m is not None:  # a photon window's height carried to its shot
+        r_s = r_s + surface.own_shift_m[idx]
     # where the pulse met the water: between the fitted plane and its own echo, by how much of
     # the echo's offset from the plane is wave rather than ranging noise (module docstring)
     weight = np.ones(len(idx)) if surface.own_weight is None else surface.own_weight[idx]
@@ -356,8 +358,8 @@ def georeference(
     measuring them from ``returns`` (a tile of the survey and its halo).
     """
     st = surface_settings or SurfaceFitSettings()
-    surface = fit_water_surface(returns, st, None if wide is None else wide.surface)
     group = None if shots_per_window is None else returns.pulse_id // shots_per_window
+    surface = fit_water_surface(returns, st, None if wide is None else wide.surface, group)
     sea = sea_wide(returns, surface, st, refraction_settings, group) if wide is None else wide.sea
     field = None
     if sea.covariance is not None:  # photon windows: one detection each, never kriged

@@ -44,6 +44,19 @@ Method
    scan periods, < 0.3 s, apart at 20 Hz) and drops the other look (``2 H tan(theta) / v``
    later, ~5 s at 400 m and 60 m/s), during which a 5 m/s sea's peak waves (period ~4 s,
    speed ~6 m/s) have moved by tens of metres; and adjacent lines (minutes).
+   Photon-counting windows (``group``) share one detection: every shot of a window carries the
+   window's one surface height, so its nearest surface points are its own window's copies of
+   that height, which span a few centimetres to decimetres and fix no slope (on suite tuning
+   seed 79, a profiler under an 11 m/s sea, the planes took 0.25 % of the sea's along-track
+   slope; where the sea rose along the track at 0.2 the soundings sat 3-8 cm deep and 28 %
+   of them lay beyond 3 sigma). Each window is therefore one surface sample, at its shots'
+   mean position, height and emission time, and the planes are fitted to those samples; a
+   shot's own return (the window's height, measured at the window's centre) is carried along
+   its plane's slope from the centre to the shot (``WaterSurface.own_shift_m``). Windows along
+   a profiler's track spread centimetres across it: where the neighbours spread less than
+   ``min_spread_m`` across their major axis, the slope is fitted along that axis only and the
+   global slope kept across it (the ridge alone, an equivalent spread and not a slope prior,
+   let the sea's scatter about the planes through as across-track slopes of +-0.3 there).
 4. The beam meets its local plane at the entry point; the plane's upward unit normal is the
    surface normal for Snell's law. A plane over ``k`` neighbours smooths waves shorter than
    about twice the neighbourhood radius; longer waves and any tilt are kept.
@@ -61,6 +74,7 @@ from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.parallel import thread_map_rows
 from pipeline.process.returns import DetectedReturns, PointFlag
 from pipeline.process.surface_land import land_surface_points, masked_median, own_echo_weight
+from pipeline.process.surface_plane import major_axis, solve_along, solve_plane, window_samples
 from pipeline.process.surface_settings import SurfaceFitSettings
 from pipeline.process.surface_wide import (
     SurfaceWide,
@@ -78,33 +92,13 @@ _GRAZING_COS = 1e-6
 FIT_BLOCK = 16384
 
 
-def _solve(w, dx, dy, z, lam):
-    """Batched weighted least squares with a ridge ``lam`` on the slopes; params and inverse."""
-    sw = w.sum(1)
-    sx, sy = (w * dx).sum(1), (w * dy).sum(1)
-    sxx, syy, sxy = (w * dx * dx).sum(1), (w * dy * dy).sum(1), (w * dx * dy).sum(1)
-    m = len(sw)
-    a = np.empty((m, 3, 3))
-    a[:, 0, 0] = sw
-    a[:, 0, 1] = a[:, 1, 0] = sx
-    a[:, 0, 2] = a[:, 2, 0] = sy
-    a[:, 1, 1] = sxx + lam
-    a[:, 2, 2] = syy + lam
-    a[:, 1, 2] = a[:, 2, 1] = sxy
-    bad = sw <= 0
-    a[bad] = np.eye(3)
-    rhs = np.stack([(w * z).sum(1), (w * dx * z).sum(1), (w * dy * z).sum(1)], axis=1)
-    rhs[bad] = 0.0
-    inv = np.linalg.inv(a)
-    params = np.einsum("mij,mj->mi", inv, rhs)
-    return params, inv, (sw, sx, sy, sxx, syy, sxy)
-
-
-def _local_fit(tree, spts, qxy, st, key=None, qkey=None):
+def _local_fit(tree, spts, qxy, st, key=None, qkey=None, along_only=False):
     """Robust local planes of the residual heights ``spts[:, 2]`` around queries ``qxy``.
 
     ``key`` / ``qkey``: the tree's and the queries' search coordinates when they are not the
     horizontal positions (``(x, y, v t)`` with a time window, :func:`_search_keys`).
+    ``along_only``: where the neighbours spread less than ``min_spread_m`` across their major
+    axis, the plane's slope is fitted along that axis only (across it: the global slope).
 
     Each query's plane is its own (row by row), so the queries are fitted in blocks of
     :data:`FIT_BLOCK` (their ``(m, k)`` temporaries stay small), side by side on the stage's
@@ -112,12 +106,13 @@ def _local_fit(tree, spts, qxy, st, key=None, qkey=None):
     """
 
     def block(s: slice):
-        return _local_fit_rows(tree, spts, qxy[s], st, key, None if qkey is None else qkey[s])
+        qk = None if qkey is None else qkey[s]
+        return _local_fit_rows(tree, spts, qxy[s], st, key, qk, along_only)
 
     return thread_map_rows(block, len(qxy), FIT_BLOCK)
 
 
-def _local_fit_rows(tree, spts, qxy, st, key, qkey):
+def _local_fit_rows(tree, spts, qxy, st, key, qkey, along_only=False):
     """:func:`_local_fit` of one block of queries."""
     m, ns = len(qxy), len(spts)
     k = min(st.k_neighbours, ns)
@@ -141,10 +136,23 @@ def _local_fit_rows(tree, spts, qxy, st, key, qkey):
         thresh = np.maximum(st.outlier_sigma * scale, st.outlier_floor_m)
         return (valid & (np.abs(r) <= thresh[:, None])).astype(np.float64)
 
+    along = None
+    if along_only:
+        # window samples along a track (a photon profiler's): the few centimetres they spread
+        # across it fix no slope there, while the ridge (an equivalent spread, not a slope)
+        # lets the sea's scatter about the plane through as wild across-track slopes (on suite
+        # tuning seed 79, +-0.3 where the sea's own is 0.15)
+        axis, minor = major_axis(valid * 1.0, dx, dy)
+        along = np.flatnonzero(minor < st.min_spread_m**2)
+        t_along = axis[along, :1] * dx[along] + axis[along, 1:] * dy[along]
     # robust start: residuals from the global slope through the neighbours' median height
     w = inliers(z - masked_median(z, valid)[:, None]) if st.robust_iterations else valid * 1.0
     for it in range(st.robust_iterations + 1):
-        params, inv, sums = _solve(w, dx, dy, z, lam)
+        params, inv, sums = solve_plane(w, dx, dy, z, lam)
+        if along is not None and along.size:
+            params[along], inv[along] = solve_along(
+                w[along], t_along, z[along], lam[along], axis[along]
+            )
         r = z - (params[:, :1] + params[:, 1:2] * dx + params[:, 2:3] * dy)
         if it == st.robust_iterations:
             break
@@ -186,6 +194,7 @@ def fit_water_surface(
     returns: DetectedReturns,
     settings: SurfaceFitSettings | None = None,
     wide: SurfaceWide | None = None,
+    group=None,
 ) -> WaterSurface:
     """Fit the water surface under every pulse from the surface returns.
 
@@ -199,6 +208,9 @@ def fit_water_surface(
         The survey-wide figures (water level, sea sigma, dry or wet) to use instead of
         measuring them from ``returns`` (:func:`~pipeline.process.surface_wide.surface_wide`
         of the whole survey, when ``returns`` are a tile of it).
+    group : (n,) array_like, optional
+        Pulses sharing one detection (photon-counting windows, ``pulse_id //
+        shots_per_window``): one surface sample per window (module notes, step 3).
 
     Returns
     -------
@@ -272,7 +284,14 @@ def fit_water_surface(
     qxy = np.where(water_s[q, None], ps[q, :2], entry[q, :2])
     spts = np.column_stack([ps[water_s, :2], res_s[water_s]])
     t_emit = returns.t_emit_s
-    key = _search_keys(spts[:, :2], None if t_emit is None else t_emit[water_s], st)
+    t_s = None if t_emit is None else t_emit[water_s]
+    own_shift = centre = None
+    if group is not None and len(spts):
+        spts, t_s, centre_w = window_samples(np.asarray(group)[water_s], spts, t_s)
+        centre = np.zeros((n, 2))
+        centre[water_s] = centre_w
+        own_shift = np.zeros(n)
+    key = _search_keys(spts[:, :2], t_s, st)
     qkey = _search_keys(qxy, None if t_emit is None else t_emit[q], st)
     fallback = np.ones(len(q), dtype=bool)
     if len(spts) >= 1 and len(q):
@@ -281,7 +300,7 @@ def fit_water_surface(
             sl = slice(lo, lo + st.chunk_size)
             qi, xy = q[sl], qxy[sl]
             params, ok, used, sig, hsig, nsig, ill = _local_fit(
-                tree, spts, xy, st, key, None if qkey is None else qkey[sl]
+                tree, spts, xy, st, key, None if qkey is None else qkey[sl], centre is not None
             )
             fallback[sl] = ~ok
             qi, xy, params = qi[ok], xy[ok], params[ok]
@@ -298,7 +317,15 @@ def fit_water_surface(
             n_used[qi] = used[ok]
             flags[qi[ill[ok]]] |= np.uint16(PointFlag.SURFACE_ILL_CONDITIONED)
             own = water_s[qi]
-            rs = np.sum(nrm * (ps[qi] - p0), axis=1)
+            own_ps = ps[qi]
+            if centre is not None:
+                # the window's height, measured at its centre, carried along the plane to the
+                # shot: a range along the beam (its height changes by d_z per metre of range)
+                rise = np.sum(np.column_stack([sx, sy]) * (xy - centre[qi]), axis=1)
+                dz = np.where(np.abs(d[qi, 2]) > _GRAZING_COS, d[qi, 2], -1.0)
+                own_shift[qi] = np.where(own, rise / dz, 0.0)
+                own_ps = own_ps + d[qi] * own_shift[qi, None]
+            rs = np.sum(nrm * (own_ps - p0), axis=1)
             resid[qi] = np.where(own, rs, 0.0)
             tol = np.maximum(st.own_outlier_sigma * sig[ok], st.outlier_floor_m)
             out = own & (np.abs(rs) > tol)
@@ -342,4 +369,5 @@ def fit_water_surface(
         air_index=float(st.air_index),
         time_window_s=st.time_window_s if returns.t_emit_s is not None else None,
         own_weight=own_weight,
+        own_shift_m=own_shift,
     )

@@ -118,6 +118,6 @@ def survey_wide(
     """
     st = surface_settings or SurfaceFitSettings()
     level = surface_wide(returns, st)
-    surface = fit_water_surface(returns, st, level)
     group = None if shots_per_window is None else returns.pulse_id // shots_per_window
+    surface = fit_water_surface(returns, st, level, group)
     return SurveyWide(level, sea_wide(returns, surface, st, refraction_settings, group))

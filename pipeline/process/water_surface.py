@@ -51,6 +51,11 @@ class WaterSurface:
         Weight in [0, 1] of the pulse's own surface echo against its local plane in the height
         the pulse met (:func:`~pipeline.process.surface_land.own_echo_weight`): 1 where the
         detector gives no timing sigma. None (older objects): 1.
+    own_shift_m : (n,) or None
+        Range added along the beam to the pulse's own surface return before it is read as the
+        sea the pulse met: photon-counting windows, whose shots share one height measured at
+        the window's centre, carry it along the local plane's slope to each shot
+        (:mod:`pipeline.process.surface_fit`, step 3). None: 0.
     sea_correlation : SeaCorrelation or None
         How far the own echo's sea tells the sea above the sounding
         (:mod:`pipeline.process.sea_correlation`); None: not at all (the plane alone).
@@ -85,6 +90,7 @@ class WaterSurface:
     air_index: float
     time_window_s: float | None = None
     own_weight: np.ndarray | None = None
+    own_shift_m: np.ndarray | None = None
     sea_correlation: object | None = None
     sea_field: object | None = None
     sea_change_m: np.ndarray | None = None

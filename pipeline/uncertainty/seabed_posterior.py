@@ -78,6 +78,7 @@ _SURFACE_ROWS = (
     "n_used",
     "flags",
     "own_weight",
+    "own_shift_m",
     "facet_slope_var",
     "track_xy",
 )

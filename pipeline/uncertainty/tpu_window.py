@@ -15,14 +15,17 @@ that the local plane of ``g`` does not follow (roughness) is not in it: one dept
 cannot show it.
 
 The window's water surface is one detection too: every shot enters the sea at the window's
-height, and its depth is read below the fitted plane, while the sea under each shot differs
-from both by the sea's slope that the plane does not follow (a wind sea under a photon
-profiler, whose planes follow almost none of it). With that slope random of covariance ``C``
-(the wave facet's, :func:`~pipeline.uncertainty.tpu_facet.unresolved_slope_sigma_rad`), the
-depth spread gains ``mean_window((p_i - p_mean)^T C (p_i - p_mean))`` in variance (depth only:
-the sounding's elevation does not see the sea above it). On suite tuning seed 79 (photon
-profiler, 11.1 m/s, 0.375 m windows over a 2.5° seabed) the errors' spread within the windows
-is 0.0126 m rms; the term was 0.0050 m (the seabed's part alone) and is 0.0105 m with the sea's.
+height carried along its fitted plane's slope from the window's centre
+(:mod:`pipeline.process.surface_fit`, step 3), and its depth is read below that plane, while
+the sea under each shot differs from both by the sea's slope that the plane does not follow.
+With that slope random of covariance ``C`` (the wave facet's,
+:func:`~pipeline.uncertainty.tpu_facet.unresolved_slope_sigma_rad`, measured about the same
+planes), the depth spread gains ``mean_window((p_i - p_mean)^T C (p_i - p_mean))`` in variance
+(depth only: the sounding's elevation does not see the sea above it). On suite tuning seed 79
+(photon profiler, 11.1 m/s, 0.375 m windows over a 2.5° seabed), when the planes were still
+fitted shot by shot and followed almost none of the sea's slope, the errors' spread within the
+windows was 0.0126 m rms; the term was 0.0050 m (the seabed's part alone) and 0.0105 m with
+the sea's.
 """
 
 from __future__ import annotations
