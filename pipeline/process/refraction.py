@@ -200,15 +200,20 @@ def _seabed_points(returns, surface, settings, correct_refraction, *, xyz_depth_
     own = returns.has_surface[idx] & ((flags & PointFlag.SURFACE_OUTLIER) == 0)
     cos_i = np.abs(np.sum(d * nrm, axis=1))
     r_s = _C * ts / (2.0 * na)
-    if surface.own_shift_m is not None:  # a photon window's height carried to its shot
-        r_s = r_s + surface.own_shift_m[idx]
+    tb_range = _C * tb / 2.0  # the bottom's air-equivalent range, times n_air
+    if surface.own_shift_m is not None:  # a photon window's heights carried to its shot
+        shift = surface.own_shift_m[idx]
+        r_s = r_s + shift
+        # its one bottom height too: where the sea stands higher over the shot than at the
+        # window's centre, the shot's path runs as much longer in water as shorter in air
+        tb_range = tb_range - (ng - na) * shift
     # where the pulse met the water: between the fitted plane and its own echo, by how much of
     # the echo's offset from the plane is wave rather than ranging noise (module docstring)
     weight = np.ones(len(idx)) if surface.own_weight is None else surface.own_weight[idx]
     weight = np.where(own & water & (r_s > 0.0), weight, 0.0)
     r_in = r_e + weight * (r_s - r_e)
     if correct_refraction:
-        length = (_C * tb / 2.0 - na * r_in) / ng
+        length = (tb_range - na * r_in) / ng
         flags[water & ~own] |= np.uint16(PointFlag.SURFACE_INTERPOLATED)
         above = water & (length <= 0.0)
         flags[above] |= np.uint16(PointFlag.ABOVE_SURFACE)

@@ -357,7 +357,8 @@ def fit_water_surface(
         normal=normal,
         is_water=is_water,
         is_land=is_land,
-        surface_point_m=ps,
+        # photon windows: each shot's point carried along its plane from the window's centre
+        surface_point_m=ps if own_shift is None else ps + d * own_shift[:, None],
         surface_residual_m=resid,
         fit_sigma_m=fit_sigma,
         height_sigma_m=height_sigma,

@@ -25,7 +25,8 @@ class WaterSurface:
     is_water, is_land : (n,) bool
         The pulse enters water / hits land. Neither: no valid entry (grazing).
     surface_point_m : (n, 3)
-        Measured surface-return point (zeros where there is no surface return).
+        Measured surface-return point (zeros where there is no surface return); photon
+        windows: the window's one height carried to the shot (``own_shift_m``).
     surface_residual_m : (n,)
         Signed distance of the pulse's own surface point above its local plane (0 if none).
     fit_sigma_m : (n,)

@@ -32,6 +32,7 @@ from pipeline.process.returns import DetectedReturns
 from pipeline.uncertainty.cell_uncertainty import select_posterior_pulses
 from pipeline.uncertainty.photon_posterior import (
     KeptPhotons,
+    at_detected_surface,
     photon_starts,
     photon_system,
     window_candidates,
@@ -213,7 +214,7 @@ def _photon_posteriors(scene, returns, kept, processed, ctx, unc, grid, n, progr
         ins.air_index,
         scene.detector.n_channels,
     )
-    surface = take_surface(processed.surface, rows)
+    surface = at_detected_surface(take_surface(processed.surface, rows), returns.select(rows))
     cosw = water_cosine(
         returns.direction_meas[rows], surface.normal, surface.air_index, ctx.refraction.phase_index
     )

@@ -34,8 +34,9 @@ def window_profile(length_m=80.0):
     """Returns of the profiler's shots (window heights), the truth, and the shots' windows.
 
     :func:`~tests.process.test_wave_entry.sine_sea_pulses` (a nadir track along ``x``, exact
-    times) with each shot's surface time replaced by its window's: the mean of the sea under
-    the window's shots, what the window's histogram measures.
+    times) with each shot's surface and bottom times replaced by its window's: the mean of
+    the sea under the window's shots and the mean of their bottom times, what the window's
+    histogram measures.
     """
     x = np.arange(0.0, length_m, SHOT_SPACING_M)
     ret, bottom = sine_sea_pulses(
@@ -45,7 +46,11 @@ def window_profile(length_m=80.0):
     zs, slope = AMP_M * np.cos(k * x), -AMP_M * k * np.sin(k * x)  # height, dz/dx
     window = np.arange(x.size) // SHOTS_PER_WINDOW
     z_window = (np.bincount(window, weights=zs) / np.bincount(window))[window]
-    ret = dataclasses.replace(ret, t_surface_s=2.0 * (ALTITUDE_M - z_window) * N_AIR / C)
+    # the bottom too: one apparent (air-equivalent) range per window, its shots' mean
+    t_bottom = (np.bincount(window, weights=ret.t_bottom_s) / np.bincount(window))[window]
+    ret = dataclasses.replace(
+        ret, t_surface_s=2.0 * (ALTITUDE_M - z_window) * N_AIR / C, t_bottom_s=t_bottom
+    )
     return ret, bottom, slope, window
 
 
@@ -89,3 +94,20 @@ def test_windows_along_a_jittering_track_fix_no_slope_across_it():
     # along: the curvature bound above plus 3 sigma of 1 cm over 16 windows spread 1.8 m rms
     along = -surf.normal[inner, 0] / surf.normal[inner, 2]
     assert np.max(np.abs(along - slope[inner])) < 0.0082 + 3 * 0.01 / (1.8 * 4.0)
+
+
+def test_posterior_surface_reads_the_depth_below_the_windows_sea_over_the_sounding():
+    # the photon posterior's surface (pipeline.uncertainty.photon_posterior.at_detected_surface):
+    # each plane moved to its own detected return, the plane alone read above the sounding
+    # (its tilt carried whole): at the detected times the depth is the sine's sea over the
+    # sounding down to the seabed, to the sine's curvature over the refracted beam's offset
+    # (a k² (0.4 m)² / 2 = 2 mm) and the fitted slope's error times that offset (3 mm)
+    from pipeline.uncertainty.photon_posterior import at_detected_surface
+
+    ret, bottom, slope, window = window_profile()
+    surf = at_detected_surface(fit_water_surface(ret, FIT, group=window), ret)
+    assert surf.sea_correlation is None
+    pts = seabed_points(ret, surf, REFR)
+    inner = (bottom[:, 0] > 10.0) & (bottom[:, 0] < 70.0)
+    sea_m = AMP_M * np.cos(2.0 * np.pi * pts.xyz_m[:, 0] / WAVELENGTH_M)
+    assert np.max(np.abs(pts.depth_m[inner] - (sea_m[inner] - SEABED_Z_M))) < 5e-3
