@@ -148,7 +148,7 @@ def _local_fit_rows(tree, spts, qxy, st, key, qkey, along_only=False):
     # robust start: residuals from the global slope through the neighbours' median height
     w = inliers(z - masked_median(z, valid)[:, None]) if st.robust_iterations else valid * 1.0
     for it in range(st.robust_iterations + 1):
-        params, inv, sums = solve_plane(w, dx, dy, z, lam)
+        params, inv = solve_plane(w, dx, dy, z, lam)
         if along is not None and along.size:
             params[along], inv[along] = solve_along(
                 w[along], t_along, z[along], lam[along], axis[along]
@@ -159,14 +159,7 @@ def _local_fit_rows(tree, spts, qxy, st, key, qkey, along_only=False):
         w = inliers(r)
     n_used = w.sum(1)
     sigma = np.sqrt((w * r * r).sum(1) / np.maximum(n_used - 3.0, 1.0))
-    sw, sx, sy, sxx, syy, sxy = sums
-    swp = np.maximum(sw, 1.0)
-    cxx = sxx / swp - (sx / swp) ** 2
-    cyy = syy / swp - (sy / swp) ** 2
-    cxy = sxy / swp - (sx / swp) * (sy / swp)
-    half = 0.5 * (cxx + cyy)
-    lam_min = half - np.sqrt(np.maximum(0.25 * (cxx - cyy) ** 2 + cxy**2, 0.0))
-    ill = lam_min < st.min_spread_m**2
+    ill = major_axis(w, dx, dy)[1] < st.min_spread_m**2
     h_sigma = sigma * np.sqrt(np.maximum(inv[:, 0, 0], 0.0))
     n_sigma = sigma * np.sqrt(np.maximum(inv[:, 1, 1] + inv[:, 2, 2], 0.0))
     ok = count >= st.min_neighbours

@@ -33,7 +33,7 @@ def solve_plane(w, dx, dy, z, lam):
     rhs[bad] = 0.0
     inv = np.linalg.inv(a)
     params = np.einsum("mij,mj->mi", inv, rhs)
-    return params, inv, (sw, sx, sy, sxx, syy, sxy)
+    return params, inv
 
 
 def major_axis(w, dx, dy):
