@@ -79,6 +79,7 @@ def _check_survey(scene) -> None:
             f" `flight.run_in_m` = {fl.run_in_m:g}, `flight.altitude_m` = {fl.altitude_m:g}"
             " (the swath sets the number of lines); lower the pulse rate or the area."
         ) from None
+    _check_photon_windows(scene)
     mem = MEMORY_SHARE * machine_memory_bytes()
     n = lines.n_pulses_total
     need = BASE_BYTES + BYTES_PER_PULSE * n
@@ -104,4 +105,32 @@ def _check_survey(scene) -> None:
             f" over the {xmax - xmin:.0f} x {ymax - ymin:.0f} m survey extent is"
             f" {with_nodes:.3g} nodes: about {need / 1e9:.3g} GB, more than {mem / 1e9:.3g} GB;"
             " use a coarser resolution (or a longer `seabed.roughness_correlation_m`)."
+        )
+
+
+#: Ground a photon-counting window of consecutive shots may sweep under a scanner, m: beyond
+#: it the window's one surface and one bottom stand for a strip of changing sea and seabed
+#: (a Palmer circle of 134 m radius sweeps 84 m per 200 shots at 32 kHz and 20 Hz).
+MAX_WINDOW_SWEEP_M = 10.0
+
+
+def _check_photon_windows(scene) -> None:
+    """Refuse a photon-counting scanner's windows of consecutive shots (they sweep the scan)."""
+    sc, pd = scene.scanner, scene.process.photon_detect
+    if scene.detector.mode != "photon_counting" or pd.window_cell_m != 0.0:
+        return  # cells given, or sized from the plan (None)
+    if sc.kind == "profiler" or sc.scan_rate_hz == 0.0:
+        return
+    h = scene.flight.altitude_m
+    if sc.kind == "palmer":  # the beam's ground speed on its circle
+        per_s = 2.0 * math.pi * h * math.tan(math.radians(sc.off_nadir_deg)) * sc.scan_rate_hz
+    else:  # a mirror sweeping the swath there and back each cycle
+        per_s = 4.0 * h * math.tan(math.radians(sc.scan_half_angle_deg)) * sc.scan_rate_hz
+    sweep = per_s * pd.shots_per_window / sc.prf_hz
+    if sweep > MAX_WINDOW_SWEEP_M:
+        raise SceneError(
+            f"`process.photon_detect.window_cell_m` = 0 with `scanner.kind` = {sc.kind!r}: each"
+            f" window of `shots_per_window` = {pd.shots_per_window} consecutive shots sweeps"
+            f" {sweep:.0f} m of the scan (at most {MAX_WINDOW_SWEEP_M:g}); set window_cell_m > 0"
+            " or leave it unset (cells sized from the plan)."
         )

@@ -155,8 +155,11 @@ def simulate_detections(
     trace_settings = resolved_trace_settings(scene)
     # a chunk holds at most a million sub-rays (memory); results do not depend on the chunking
     chunk = max(1, min(scene.run.chunk_pulses, 1_000_000 // trace_settings.subrays))
-    if ins.photon_counting:  # whole accumulation windows per chunk, so chunking cannot change them
-        chunk = max(ins.shots_per_window, chunk // ins.shots_per_window * ins.shots_per_window)
+    # whole accumulation windows (or slabs of cell windows) per chunk, so chunking cannot
+    # change them
+    if ins.photon_counting:
+        unit = ins.windows.chunk_unit
+        chunk = max(unit, chunk // unit * unit)
     # waveforms of a bounded share of the pulses are kept for posteriors (a few times the
     # pulses sampled, so the cells that matter can be chosen among them)
     # (photon counting: the events of a share of the windows, one posterior per window)
@@ -166,6 +169,7 @@ def simulate_detections(
         n_post = posterior_budget(ps, (xmax - xmin) * (ymax - ymin) / 1e6)
         n_units = lines.n_pulses_total
         if ins.photon_counting:
+            # about shots_per_window shots per window, consecutive or a cell's
             n_units = -(-n_units // ins.shots_per_window)
         keep_fraction = min(1.0, 4.0 * n_post / max(n_units, 1))
     job = ChunkJob(
@@ -186,6 +190,13 @@ def simulate_detections(
     n_chunk = survey.n_chunks(lines, chunk)
     executor = executor or Executor(workers=1)
     log(f"  chunks of {chunk} pulses on {executor.workers} worker(s)")
+    win = ins.windows
+    if win is not None and win.cell_m > 0.0:
+        log(
+            f"  photon windows: cells of {win.cell_m:g} m (~{win.shots_per_window} shots of one"
+            f" look each) in slabs of {win.slab_shots} shots; bottoms read below the waves'"
+            f" {win.sea_band_m:.2f} m band (process.photon_detect.window_cell_m)"
+        )
     bar = tqdm(
         total=lines.n_pulses_total,
         unit="pulse",

@@ -211,6 +211,8 @@ def _photon_chunk(job: ChunkJob, clock: StageClock, paths, pulses):
             group_index=job.ctx.refraction.group_index,
             # the system response processing assumes (pulse and detector): the surface's pulse
             pulse_sigma_s=job.ctx.instrument.system_fwhm_s * FWHM_TO_SIGMA,
+            # the survey's windows: consecutive shots, or cells of a scan
+            windows=job.ctx.instrument.windows,
         )
     kept = keep_windows(
         pulses.pulse_id,
@@ -219,7 +221,7 @@ def _photon_chunk(job: ChunkJob, clock: StageClock, paths, pulses):
         pulses.origin_meas_m,
         pulses.direction_meas,
         job.ctx.instrument.air_index,
-        scene.process.photon_detect.shots_per_window,
+        job.ctx.instrument.windows,
         scene.detector.dead_time_s,
         job.keep_fraction,
         scene.scene.seed,

@@ -109,7 +109,7 @@ def evaluate_survey(
     # true depth there; a photon-counting window's shots share one detection (one draw)
     group = None
     if ctx.instrument.photon_counting:
-        group = unc.points40.pulse_id // ctx.instrument.shots_per_window
+        group = ctx.instrument.windows.of_points(unc.points40.pulse_id, sim.returns)
     coverage = tpu_coverage(
         unc.points40, unc.tpu40.sigma_depth_m, truth_depth_m=truth.depth_at_pulses_m, group=group
     )

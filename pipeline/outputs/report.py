@@ -162,7 +162,7 @@ def write_survey_report(
         )
     )
     s.append(_error_section(truth, pts, grid, level_m, fl.area_m, evaluation))
-    s.append(_calibration_section(unc, ctx, truth, evaluation))
+    s.append(_calibration_section(unc, ctx, truth, evaluation, sim.returns))
     s.append(_limits_section(pts, evaluation))
     s.append(_features_section(scene, evaluation))
     s.append(view3d_section(views))
@@ -218,10 +218,10 @@ def _error_section(truth, pts, grid, level_m, area_m, evaluation) -> str:
     )
 
 
-def _calibration_section(unc, ctx, truth, evaluation) -> str:
+def _calibration_section(unc, ctx, truth, evaluation, returns) -> str:
     group = None
     if ctx.instrument.photon_counting:  # as the evaluate stage: a window's shots are one draw
-        group = unc.points40.pulse_id // ctx.instrument.shots_per_window
+        group = ctx.instrument.windows.of_points(unc.points40.pulse_id, returns)
     cov = tpu_coverage(
         unc.points40,
         unc.tpu40.sigma_depth_m,

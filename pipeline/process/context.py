@@ -30,6 +30,7 @@ from typing import Any
 from pipeline import optics
 from pipeline.errors import SceneError
 from pipeline.lidar_equation import COX_MUNK_SLOPE_PER_M_S, cox_munk_mean_square_slope
+from pipeline.process.photon_windows import PhotonWindows, resolve_windows, sea_band_m
 from pipeline.process.refraction import RefractionSettings
 from pipeline.process.scatter_bias import bias_model
 from pipeline.process.surface_fit import SurfaceFitSettings
@@ -93,7 +94,17 @@ class Instrument:
     air_index : float
         Index of air for the air range (the surface fit's).
     shots_per_window : int
-        Photon counting: shots accumulated per detection window (one sounding).
+        Photon counting: shots accumulated per detection window (one sounding), or per slab
+        that ``window_cell_m`` splits.
+    window_cell_m : float
+        Photon counting: side of the cells that group a scan's shots into windows (0:
+        consecutive shots), as given or sized from the plan
+        (:func:`~pipeline.process.photon_windows.resolve_windows`).
+    window_slab_shots : int
+        Photon counting with cells: consecutive shots per slab of time the cells split.
+    window_sea_band_m : float
+        Photon counting with cells: the waves' height band at the logged wind below which a
+        cell's bottom must lie (:func:`~pipeline.process.photon_windows.sea_band_m`).
     amplitude_full_scale : float
         The receiver's dynamic range in the detections' amplitude units, what LAS 1.4 scales
         intensity by (``65536 / dynamic range``): full waveform, the digitiser's
@@ -110,11 +121,26 @@ class Instrument:
     air_index: float
     shots_per_window: int
     amplitude_full_scale: float = 65536.0
+    window_cell_m: float = 0.0
+    window_slab_shots: int = 0
+    window_sea_band_m: float = 0.0
 
     @property
     def photon_counting(self) -> bool:
         """True for a photon-counting receiver."""
         return self.mode == "photon_counting"
+
+    @property
+    def windows(self) -> PhotonWindows | None:
+        """How the photon-counting detector grouped the shots; None for full waveforms."""
+        if not self.photon_counting:
+            return None
+        return PhotonWindows(
+            self.shots_per_window,
+            self.window_cell_m,
+            self.window_slab_shots,
+            self.window_sea_band_m,
+        )
 
 
 def instrument(scene, air_index: float) -> Instrument:
@@ -122,6 +148,12 @@ def instrument(scene, air_index: float) -> Instrument:
     det = scene.detector
     fwhm = math.hypot(scene.system.pulse_fwhm_s, det.impulse_response_fwhm_s)
     quiet_s = det.pre_trigger_s - 2.0 * fwhm
+    pd, fl = scene.process.photon_detect, scene.flight
+    win = PhotonWindows(pd.shots_per_window)
+    if det.mode == "photon_counting" and fl is not None:
+        win = resolve_windows(
+            pd.shots_per_window, pd.window_cell_m, scene.scanner, fl.altitude_m, fl.speed_m_s
+        )
     return Instrument(
         mode=det.mode,
         system_fwhm_s=fwhm,
@@ -131,7 +163,9 @@ def instrument(scene, air_index: float) -> Instrument:
         window_s=det.window_s,
         pre_trigger_s=det.pre_trigger_s,
         air_index=air_index,
-        shots_per_window=scene.process.photon_detect.shots_per_window,
+        shots_per_window=win.shots_per_window,
+        window_cell_m=win.cell_m,
+        window_slab_shots=win.slab_shots,
         amplitude_full_scale=(
             65536.0 if det.mode == "photon_counting" else float(2**det.bit_depth)
         ),
@@ -241,6 +275,8 @@ def processing_context(scene) -> ProcessingContext:
         "user" if wind is not None else "water.wind_speed_m_s (the survey's wind log)"
     )
     wind = float(wind if wind is not None else scene.water.wind_speed_m_s)
+    if inst.photon_counting and inst.window_cell_m > 0.0:  # a scan's cells: the waves' band
+        inst = dataclasses.replace(inst, window_sea_band_m=sea_band_m(wind))
     c_assumed = att if att is not None else fs.fallback_attenuation_per_m
     sources["process.facet_decay_per_m"] = (
         f"K_d = 0.2 c + 0.04 at c = {c_assumed:g}/m (process.forward_scatter)"

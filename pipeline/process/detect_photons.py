@@ -51,6 +51,7 @@ from pipeline import optics
 from pipeline.config import setting
 from pipeline.process.detect import WaveformDetections, flank_trend
 from pipeline.process.detection_limit import NoBottomSettings
+from pipeline.process.photon_carry import second_pass
 from pipeline.process.photon_echo_ml import surface_and_bottom_ml
 from pipeline.process.photon_histogram import background, echo_reach_bins, gate_span, significance
 from pipeline.process.photon_limit import photon_detection_limit
@@ -61,6 +62,7 @@ from pipeline.process.photon_livetime import (
     event_live_fraction,
     surface_pileup_pe,
 )
+from pipeline.process.photon_windows import PhotonWindows, crossing_xy
 from pipeline.process.returns import DetectorFlag
 
 __all__ = ["PhotonDetectSettings", "detect_photon_events"]
@@ -74,7 +76,22 @@ MEASURED_LIVE_FRACTION = 0.5
 class PhotonDetectSettings:
     """Along-track accumulation and thresholds of the photon-counting detector."""
 
-    shots_per_window: int = setting(200, ge=1, le=10_000_000, doc="shots accumulated per window")
+    shots_per_window: int = setting(
+        200,
+        ge=1,
+        le=10_000_000,
+        doc="shots accumulated per window: consecutive shots, or about as many per cell of a "
+        "scan (window_cell_m)",
+    )
+    window_cell_m: float | None = setting(
+        None,
+        ge=0.0,
+        le=1000.0,
+        doc="side of the square cells (where the beam meets z = 0) that group a scan's shots "
+        "into windows; 0: windows of consecutive shots; default: 0 under a profiler, under a "
+        "scanner the side holding about shots_per_window shots of one look at the plan's shot "
+        "density (pipeline.process.photon_windows)",
+    )
     bin_m: float = setting(0.1, gt=0.0, le=10.0, doc="height histogram bin")
     threshold_sigma: float = setting(
         5.0, gt=0.0, le=100.0, doc="surface and bottom significance, Poisson σ"
@@ -111,6 +128,8 @@ def detect_photon_events(
     no_bottom: NoBottomSettings | None = None,
     group_index: float | None = None,
     pulse_sigma_s: float = 0.0,
+    windows: PhotonWindows | None = None,
+    _detrend: tuple[np.ndarray, np.ndarray] | bool | None = None,
 ) -> WaveformDetections:
     """Surface and bottom per shot from photon events accumulated along track.
 
@@ -126,8 +145,9 @@ def detect_photon_events(
         Phase index of air (ranges from times of flight).
     settings : PhotonDetectSettings, optional
     pulse_id : (n_shots,) int, optional
-        Global shot numbers; windows are then ``pulse_id // shots_per_window``, so a survey
-        split into chunks (of whole windows) gives the same windows as one piece.
+        Global shot numbers; windows are then ``pulse_id // shots_per_window`` (or cells of
+        slabs: ``windows``), so a survey split into chunks (of whole windows or slabs) gives
+        the same windows as one piece.
     n_channels : int
         Detector channels per beam (the datasheet's): each records one event per dead time.
     dead_time_s : float
@@ -150,19 +170,55 @@ def detect_photon_events(
         heights of that pulse under the dead time (:mod:`pipeline.process.photon_echo_ml`); 0:
         the live-time corrected centroids.
 
+    windows : PhotonWindows, optional
+        How the shots are grouped (the survey's, :func:`~pipeline.process.photon_windows.
+        resolve_windows`); default ``settings.shots_per_window`` consecutive shots, split by
+        ``settings.window_cell_m`` cells if given.
+
     Returns
     -------
     WaveformDetections
         Round-trip times per shot (absolute, after emission); amplitudes are window counts.
+
+    Notes
+    -----
+    A scan's cell windows are detected twice (:mod:`pipeline.process.photon_carry`): the
+    first pass gives each window's bottom height, from which each window's seabed slope is
+    fitted over its neighbours; the second histograms the events below the surface with
+    that slope taken out (a cell over a sloping seabed spreads its bottom echo over the
+    slope times the cell: 1.9 m for 12 m cells at 9°, where a pulse fitted to it finds a
+    peak anywhere in that band), and carries each window's bottom to its shots along it.
     """
     s = settings or PhotonDetectSettings()
     n = origin_m.shape[0]
     c = optics.SPEED_OF_LIGHT_M_S
-    shot, z = event_heights_m(offsets, times_s, origin_m, direction, n_air)
     ids = np.arange(n) if pulse_id is None else np.asarray(pulse_id)
-    _, window = np.unique(ids // s.shots_per_window, return_inverse=True)
+    if windows is None:  # the settings' own: cells (if given) of slabs of shots_per_window
+        cell = s.window_cell_m or 0.0
+        windows = PhotonWindows(s.shots_per_window, cell, s.shots_per_window)
+    args = (offsets, times_s, origin_m, direction, n_air, s, ids, n_channels, dead_time_s)
+    kw = {"no_bottom": no_bottom, "group_index": group_index, "pulse_sigma_s": pulse_sigma_s}
+    kw["windows"] = windows
+    if windows.cell_m > 0.0 and _detrend is None and n:
+        first = detect_photon_events(*args, **kw, _detrend=False)
+        second = second_pass(first, windows, ids, origin_m, direction, n_air, s.min_separation_m)
+        return detect_photon_events(*args, **kw, _detrend=second)
+    shot, z = event_heights_m(offsets, times_s, origin_m, direction, n_air)
+    keys = windows.of(ids, origin_m, direction)
+    keys_w, window = np.unique(keys, return_inverse=True)
     n_win = int(window.max()) + 1 if n else 0
     ev_win = window[shot]
+    carry = np.zeros(n)  # each shot's bottom height over its window's (the second pass)
+    if isinstance(_detrend, tuple):
+        slope_w, split_w = _detrend
+        xy = crossing_xy(origin_m, direction)
+        cnt = np.maximum(np.bincount(window, minlength=n_win), 1)
+        centre = np.column_stack(
+            [np.bincount(window, weights=xy[:, k], minlength=n_win) / cnt for k in range(2)]
+        )
+        carry = np.sum(slope_w[window] * (xy - centre[window]), axis=1)
+        # the events below the surface band with the seabed's slope taken out
+        z = np.where(z < split_w[ev_win], z - carry[shot], z)
     empty = WaveformDetections(
         *(
             np.zeros(n, dtype=b)
@@ -238,7 +294,9 @@ def detect_photon_events(
     # Bottom: a return below the surface's box and at least min_separation_m below its peak.
     # Closer (very shallow water), surface and bottom merge within the system response and
     # dead time: no bottom is reported rather than a split of the surface echo.
-    sep_bins = max(int(math.ceil(s.min_separation_m / s.bin_m)), cb + 1)
+    # (a scan's cell: and below the band its waves spread the surface echo over)
+    sep_m = max(s.min_separation_m, windows.sea_band_m)
+    sep_bins = max(int(math.ceil(sep_m / s.bin_m)), cb + 1)
     s_lo = i_s - cb  # lowest bin of the surface box
     below = col <= (i_s - sep_bins)[:, None]
     # the water-column return decays smoothly below the surface: a bottom must stand out of
@@ -362,7 +420,7 @@ def detect_photon_events(
     with np.errstate(divide="ignore"):
         scale = np.where(dz < 0, 2.0 * n_air / (c * -dz), 0.0)
     t_s = (origin_m[:, 2] - z_s[window]) * scale
-    t_b = (origin_m[:, 2] - z_b[window]) * scale
+    t_b = (origin_m[:, 2] - (z_b[window] + carry)) * scale
     hs = has_s[window] & (t_s > 0)
     hb = has_b[window] & hs & (t_b > t_s)
     t_lim = (origin_m[:, 2] - z_lim[window]) * scale

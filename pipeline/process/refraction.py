@@ -70,6 +70,7 @@ import numpy as np
 from pipeline.optics import SPEED_OF_LIGHT_M_S, refract_direction
 from pipeline.process.classify import ClassifySettings, classify_points
 from pipeline.process.facet_excess import apply_facets, expected_depth_excess_m
+from pipeline.process.photon_windows import PhotonWindows
 from pipeline.process.refraction_settings import RefractionSettings
 from pipeline.process.returns import DetectedReturns, PointFlag, Points, ReturnKind
 from pipeline.process.scatter_bias import range_bias_m
@@ -345,7 +346,7 @@ def georeference(
     refraction_settings: RefractionSettings | None = None,
     classify_settings: ClassifySettings | None = None,
     include_derived_surface: bool = False,
-    shots_per_window: int | None = None,
+    windows: PhotonWindows | None = None,
     wide: SurveyWide | None = None,
 ) -> ProcessedPoints:
     """Detected returns to classified points: surface fit, refraction, classification.
@@ -357,13 +358,13 @@ def georeference(
         bottom returns, optional derived surface points) and the classified uncorrected bottom
         points.
 
-    ``shots_per_window``: photon counting, the shots of one accumulation window (they share
-    one detection: the sea correlation does not pair them). ``wide``: the survey-wide figures
+    ``windows``: photon counting, how the shots were accumulated (a window's shots share one
+    detection: the sea correlation does not pair them). ``wide``: the survey-wide figures
     (:func:`~pipeline.process.survey_wide.survey_wide` of the whole survey) to use instead of
     measuring them from ``returns`` (a tile of the survey and its halo).
     """
     st = surface_settings or SurfaceFitSettings()
-    group = None if shots_per_window is None else returns.pulse_id // shots_per_window
+    group = None if windows is None else windows.of_returns(returns)
     surface = fit_water_surface(returns, st, None if wide is None else wide.surface, group)
     sea = sea_wide(returns, surface, st, refraction_settings, group) if wide is None else wide.sea
     field = None

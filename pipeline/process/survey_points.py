@@ -67,7 +67,7 @@ def process_detections(
         surface_settings=ctx.surface_fit,
         refraction_settings=ctx.refraction,
         classify_settings=classify,
-        shots_per_window=ins.shots_per_window if ins.photon_counting else None,
+        windows=ins.windows,
         wide=wide,
     )
     # the class-45 points join their pulses' echo sequence: number every pulse again (LAS

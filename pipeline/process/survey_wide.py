@@ -39,6 +39,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from pipeline.process.facet_excess import FacetWide, facet_wide
+from pipeline.process.photon_windows import PhotonWindows
 from pipeline.process.refraction_settings import RefractionSettings
 from pipeline.process.sea_correlation import SeaCorrelation, sea_correlation
 from pipeline.process.sea_kriging import SeaCovariance, survey_sea_covariance
@@ -109,7 +110,7 @@ def survey_wide(
     *,
     surface_settings: SurfaceFitSettings | None = None,
     refraction_settings: RefractionSettings | None = None,
-    shots_per_window: int | None = None,
+    windows: PhotonWindows | None = None,
 ) -> SurveyWide:
     """Measure :class:`SurveyWide` from every pulse of a survey (``georeference``'s arguments).
 
@@ -118,6 +119,6 @@ def survey_wide(
     """
     st = surface_settings or SurfaceFitSettings()
     level = surface_wide(returns, st)
-    group = None if shots_per_window is None else returns.pulse_id // shots_per_window
+    group = None if windows is None else windows.of_returns(returns)
     surface = fit_water_surface(returns, st, level, group)
     return SurveyWide(level, sea_wide(returns, surface, st, refraction_settings, group))

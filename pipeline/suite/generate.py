@@ -16,8 +16,9 @@ depths                 depth at the line centre from the shoreline (land 0-3 m h
                        to past the extinction depth (planning guess 4.5 / c, capped at 60 m)
 altitude               200-800 m
 scanner / receiver     full waveform (3 in 4): Palmer 1/2, oscillating 3/10, profiler 1/5;
-                       photon counting (1 in 4): nadir profiler (its preset accumulates windows of
-                       consecutive shots, which a scan would smear over hundreds of metres)
+                       photon counting (1 in 4): nadir profiler, windows of consecutive shots
+                       (a scanner, with the preset's cell windows, only when ``force`` asks:
+                       the draws of the suite's seeds stay those its tables were made from)
 features               one IHO cube each of 0.5, 1 and 2 m, under the scan (a Palmer circle's
                        trailing arc) where the plane is 1.5 m to half the planning extinction
                        depth deep, when the slope allows (:func:`_cube_xy`); seabed mesh 0.5 m
@@ -220,8 +221,8 @@ def draw(seed: int, size: str = "suite", force: dict[str, str] | None = None) ->
     ext_guess = min(4.5 / c, 60.0)
     if surface == "waves":
         wind = max(wind, 1.0)  # a wind sea needs wind
-    if receiver == "photon_counting":
-        scanner = "profiler"
+    if receiver == "photon_counting" and "scanner" not in force:
+        scanner = "profiler"  # a scan's cell windows are drawn only when forced (below)
     ci = size == "ci"
     line = (40.0 + 20.0 * u_line) if ci else (120.0 + 80.0 * u_line)
     if receiver == "photon_counting":

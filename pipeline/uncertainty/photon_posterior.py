@@ -45,6 +45,7 @@ import numpy as np
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.photon_livetime import bin_live_fraction, dead_height_m, event_heights_m
+from pipeline.process.photon_windows import PhotonWindows
 from pipeline.uncertainty.posterior_selection import kept_for_posterior
 from pipeline.uncertainty.waveform_model import WaveformSystem, in_water_delay_s
 
@@ -79,7 +80,7 @@ class KeptPhotons:
     Attributes
     ----------
     window : (k,) int64
-        Window number (``pulse_id // shots_per_window``).
+        Window key (:mod:`pipeline.process.photon_windows`).
     n_shots : (k,) int64
         Shots of each window.
     offsets : (k + 1,) int64
@@ -121,7 +122,7 @@ def keep_windows(
     origin_m: np.ndarray,
     direction: np.ndarray,
     n_air: float,
-    shots_per_window: int,
+    windows: PhotonWindows,
     dead_time_s: float,
     fraction: float,
     seed: int,
@@ -140,7 +141,8 @@ def keep_windows(
         Measured laser position and unit beam of each shot.
     n_air : float
         Phase index of air.
-    shots_per_window : int
+    windows : PhotonWindows
+        How the detector grouped the shots.
     dead_time_s : float
         Dead time per channel (the datasheet's).
     fraction : float
@@ -149,7 +151,7 @@ def keep_windows(
     """
     if fraction <= 0.0 or pulse_id.size == 0:
         return None
-    win = np.asarray(pulse_id, dtype=np.int64) // shots_per_window
+    win = windows.of(pulse_id, origin_m, direction)
     uniq, n_shots = np.unique(win, return_counts=True)
     keep = uniq[kept_for_posterior(uniq, fraction, seed)]
     if keep.size == 0:
@@ -184,7 +186,13 @@ def photon_system(bin_m: float, n_air: float, pulse_fwhm_s: float, group_index: 
     )
 
 
-def window_candidates(point_pulse_id: np.ndarray, kept: KeptPhotons, shots_per_window: int):
+def window_candidates(
+    point_pulse_id: np.ndarray,
+    kept: KeptPhotons,
+    windows: PhotonWindows,
+    point_window: np.ndarray | None = None,
+    point_xy_m: np.ndarray | None = None,
+):
     """Rows of the points that may be sampled: one per kept window, the shot nearest its centre.
 
     Parameters
@@ -192,7 +200,12 @@ def window_candidates(point_pulse_id: np.ndarray, kept: KeptPhotons, shots_per_w
     point_pulse_id : (n,) int
         Pulse of each bathymetric point.
     kept : KeptPhotons
-    shots_per_window : int
+    windows : PhotonWindows
+    point_window : (n,) int64, optional
+        Each point's window (:meth:`PhotonWindows.of_points`); needed with cells.
+    point_xy_m : (n, 2) float, optional
+        Each point's position; needed with cells, whose centre is the mean of its points'
+        (consecutive shots' centre is the middle shot).
 
     Returns
     -------
@@ -200,11 +213,19 @@ def window_candidates(point_pulse_id: np.ndarray, kept: KeptPhotons, shots_per_w
         Point rows, sorted, at most one per kept window.
     """
     pid = np.asarray(point_pulse_id, dtype=np.int64)
-    win = pid // shots_per_window
+    spw = windows.shots_per_window
+    win = windows.of(pid) if point_window is None else np.asarray(point_window)
     cand = np.flatnonzero(np.isin(win, kept.window))
     if cand.size == 0:
         return cand
-    off_centre = np.abs(pid[cand] - (win[cand] * shots_per_window + shots_per_window // 2))
+    if windows.cell_m > 0.0:
+        _, inv = np.unique(win[cand], return_inverse=True)
+        xy = np.asarray(point_xy_m, dtype=np.float64)[cand]
+        cnt = np.bincount(inv).astype(np.float64)
+        mean = np.column_stack([np.bincount(inv, weights=xy[:, k]) / cnt for k in range(2)])
+        off_centre = np.hypot(*(xy - mean[inv]).T)
+    else:
+        off_centre = np.abs(pid[cand] - (win[cand] * spw + spw // 2))
     order = np.lexsort((pid[cand], off_centre, win[cand]))
     _, first = np.unique(win[cand][order], return_index=True)
     return np.sort(cand[order][first])

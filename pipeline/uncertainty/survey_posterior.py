@@ -193,7 +193,9 @@ def _photon_posteriors(scene, returns, kept, processed, ctx, unc, grid, n, progr
     """
     ps, ins = scene.process, ctx.instrument
     pts = unc.points40
-    cand = window_candidates(pts.pulse_id, kept, ins.shots_per_window)
+    windows = ins.windows
+    pts_win = windows.of_points(pts.pulse_id, returns)
+    cand = window_candidates(pts.pulse_id, kept, windows, pts_win, pts.xyz_m[:, :2])
     if cand.size == 0:
         return SurveyPosteriors(None, cand, 0.0, 0)
     preferred = select_posterior_pulses(
@@ -205,7 +207,7 @@ def _photon_posteriors(scene, returns, kept, processed, ctx, unc, grid, n, progr
     system = waveform_system(scene, ctx)
     samples, exposure, t0 = window_histograms(
         kept,
-        returns.pulse_id[rows] // ins.shots_per_window,
+        pts_win[sel],
         returns.origin_meas_m[rows, 2],
         returns.direction_meas[rows, 2],
         returns.t_surface_s[rows],

@@ -40,6 +40,7 @@ from pipeline.process.returns import DetectedReturns, PointFlag, Points, ReturnK
 from pipeline.uncertainty.cell_uncertainty import CellUncertainty, cell_uncertainty
 from pipeline.uncertainty.seabed_gradient import (
     GRADIENT_TERM,
+    REGIONAL_CELL_M,
     gradient_sigma_depth_m,
     horizontal_cov,
     plane_gradient,
@@ -68,6 +69,7 @@ from pipeline.uncertainty.tpu_survey_wide import TpuSurveyWide, facet_sea, surve
 from pipeline.uncertainty.tpu_timing import split_timing_excess
 from pipeline.uncertainty.tpu_window import (
     WINDOW_TERM,
+    cell_relief_sigma_m,
     window_footprint_sigma_m,
     with_random_term,
 )
@@ -149,11 +151,18 @@ def survey_uncertainty(
     points40 = pts.select(is40)
     bottom_xy = seabed_xyz_depth(returns, processed.surface, refr)[:, :2]
     xy40, d40 = points40.xyz_m[:, :2], points40.depth_m
-    group = points40.pulse_id // ins.shots_per_window if ins.photon_counting else None
+    windows = ins.windows  # photon counting: the detector's windows of shots
+    group = None if windows is None else windows.of_points(points40.pulse_id, returns)
+    # a scan's cell windows count as one sounding each (their shots share one depth): the
+    # gradient's planes reach over neighbouring windows, so their radii and cells are at
+    # least 2.5, 5 and 1 cell sides (a profiler's windows, 0.4 m, change nothing)
+    cell = 0.0 if windows is None else windows.cell_m
     near = {
         "neighbours": st.gradient_neighbours,
-        "radius_m": st.gradient_radius_m,
-        "regional_radius_m": st.gradient_regional_radius_m,
+        "radius_m": max(st.gradient_radius_m, 2.5 * cell),
+        "regional_radius_m": st.gradient_regional_radius_m
+        and max(st.gradient_regional_radius_m, 5.0 * cell),
+        "regional_cell_m": max(REGIONAL_CELL_M, cell),
         "prior_slope_deg": st.gradient_prior_slope_deg,
         # a user's relief slope sigma wins; else the survey's (survey-wide: measured over it)
         "local_sigma": st.gradient_local_sigma
@@ -228,7 +237,7 @@ def survey_uncertainty(
     )
     # the surface as its returns measure it: their height variogram's nugget (the ranging
     # error of a surface point, e.g. a calm-water onset) raises each surface timing sigma
-    shots = ins.shots_per_window if ins.photon_counting else None
+    pulse_group = None if windows is None else windows.of_returns(returns)
     # survey-wide: one sea, its variogram
     vg = (
         wide.variogram
@@ -238,7 +247,7 @@ def survey_uncertainty(
             processed.surface,
             max_dt_s=st.surface_pair_max_dt_s,
             min_pairs=st.surface_min_pairs,
-            group=None if shots is None else returns.pulse_id // shots,
+            group=pulse_group,
         )
     )
     returns = with_surface_ranging(returns, processed.surface, vg)
@@ -263,12 +272,19 @@ def survey_uncertainty(
     # survey-wide: each line's direction, from all its pulses
     tracks, line_ids, line_axes = survey_tracks(returns, wide)
     if group is not None:
-        # one detection per photon window: the seabed's spread under the window's shots
-        win = points40.pulse_id // ins.shots_per_window
-        seabed = window_footprint_sigma_m(points40.xyz_m[:, :2], win, grad[at40])
-        # and the sea's slope under the window that the planes do not follow (depth only)
-        sea_cov = unresolved_slope_cov(vg, processed.surface, tracks[tpu40.row], rows=tpu40.row)
-        spread = window_footprint_sigma_m(points40.xyz_m[:, :2], win, grad[at40], sea_cov)
+        # one window, one detection: the seabed's spread under its shots (with the gradient's
+        # uncertainty) and the sea's slope the planes miss (depth only)
+        win = windows.of_points(points40.pulse_id, returns)
+        xy40w, g40, gc40 = points40.xyz_m[:, :2], grad[at40], grad_cov[at40]
+        if windows.cell_m > 0.0:  # a scan's cell, its bottom carried along its slope
+            # (process.photon_carry): the relief its plane misses is left; the sea is in the surface
+            # terms (a facet slope over 5 m read 0.034 m of flat water on tuning seed 46: err 0.010)
+            relief = cell_relief_sigma_m(xy40w, points40.depth_m, win, windows.cell_m)
+            seabed = spread = np.full(len(points40), relief)
+        else:
+            sea_cov = unresolved_slope_cov(vg, processed.surface, tracks[tpu40.row], rows=tpu40.row)
+            seabed = window_footprint_sigma_m(xy40w, win, g40, gradient_cov=gc40)
+            spread = window_footprint_sigma_m(xy40w, win, g40, sea_cov, gc40)
         tpu40 = with_random_term(tpu40, WINDOW_TERM, seabed, spread)
     # the waves between each pulse's water entry and its sounding (the variogram's wave part
     # beyond what the fitted plane's measured tilt already holds)
@@ -292,7 +308,6 @@ def survey_uncertainty(
     tpu40 = with_facet_excess(tpu40, returns.direction_meas, surf, refr)
     # or, with the correction off, the excess left on the soundings at its predicted size
     # survey-wide: the wave sea's facet figures (only where the term applies)
-    pulse_group = None if shots is None else returns.pulse_id // shots
     facets = facet_sea(returns, surf, refr, pulse_group, wide)
     tpu40 = with_uncorrected_facet_excess(tpu40, returns, surf, refr, facets=facets)
     # what the sounding's horizontal uncertainty makes of the gradient's own (unmeasured

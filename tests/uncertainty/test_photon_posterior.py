@@ -16,6 +16,7 @@ import pytest
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S as C
 from pipeline.process.photon_livetime import dead_height_m
+from pipeline.process.photon_windows import PhotonWindows
 from pipeline.scene import parse_scene
 from pipeline.uncertainty.photon_posterior import (
     KeptPhotons,
@@ -131,7 +132,19 @@ def test_one_candidate_per_window_the_shot_nearest_its_centre():
     )
     pid = np.array([30, 34, 35, 36, 41, 70, 79, 51])
     # window 3 (30-39): centre 35; window 7 (70-79): centre 75, 70 and 79 are 5 and 4 away
-    np.testing.assert_array_equal(window_candidates(pid, kept, 10), [2, 6])
+    np.testing.assert_array_equal(window_candidates(pid, kept, PhotonWindows(10)), [2, 6])
+
+
+def test_a_cell_windows_candidate_is_its_point_nearest_the_points_mean():
+    kept = KeptPhotons(
+        np.array([5, 9]), np.array([4, 3]), np.array([0, 0, 0]), np.zeros(0), np.zeros(0)
+    )
+    pid = np.arange(8)
+    win = np.array([5, 5, 5, 5, 9, 9, 9, 2])
+    xy = np.array([[0, 0], [4, 0], [1.9, 0.2], [2, 4], [0, 0], [0, 3], [0, 1.1], [0, 0]], float)
+    # window 5: mean (1.975, 1.05), nearest point 2; window 9: mean (0, 1.367), nearest 6
+    got = window_candidates(pid, kept, PhotonWindows(100, 10.0), win, xy)
+    np.testing.assert_array_equal(got, [2, 6])
 
 
 def _photon_scene(chunk_pulses):

@@ -16,6 +16,7 @@ from pipeline.uncertainty.tpu import (
 )
 from pipeline.uncertainty.tpu_window import (
     WINDOW_TERM,
+    cell_relief_sigma_m,
     window_footprint_sigma_m,
     with_random_term,
 )
@@ -105,6 +106,46 @@ def test_photon_window_spread_under_a_random_sea_slope():
     err = beta * (x - centre)
     np.testing.assert_allclose(np.sqrt(np.mean(err**2)), np.sqrt(np.mean(sigma**2)), rtol=0.03)
     assert np.mean(np.abs(err) <= 1.96 * sigma) == pytest.approx(0.95, abs=0.02)
+
+
+def test_cell_window_spread_with_an_uncertain_gradient():
+    """Square 10 m cells of a scan over a seabed whose gradient is known only to its
+    estimate's covariance G about a mean m: drawn here per cell, the true gradient m + e
+    (e ~ N(0, G)) makes each shot's depth miss the cell's by (m + e) . (p - p_mean). The
+    term's rms over many cells matches the drawn errors', and 95 % of them lie within
+    1.96 of it; without G the term would hold only the mean gradient's part."""
+    rng = np.random.default_rng(12)
+    n_win, per, side = 3000, 60, 10.0
+    xy = np.concatenate([rng.uniform(0.0, side, (per, 2)) + [20.0 * w, 0.0] for w in range(n_win)])
+    group = np.repeat(np.arange(n_win), per)
+    mean = np.array([0.03, -0.01])
+    g_cov = np.array([[0.02**2, 0.0001], [0.0001, 0.05**2]])
+    grad = np.tile(mean, (xy.shape[0], 1))
+    cov = np.tile(g_cov, (xy.shape[0], 1, 1))
+    sigma = window_footprint_sigma_m(xy, group, grad, gradient_cov=cov)
+    true_g = np.repeat(rng.multivariate_normal(mean, g_cov, n_win), per, axis=0)
+    centre = np.repeat(xy.reshape(n_win, per, 2).mean(axis=1), per, axis=0)
+    err = np.sum(true_g * (xy - centre), axis=1)
+    np.testing.assert_allclose(np.sqrt(np.mean(err**2)), np.sqrt(np.mean(sigma**2)), rtol=0.03)
+    assert np.mean(np.abs(err) <= 1.96 * sigma) == pytest.approx(0.95, abs=0.02)
+    exact = window_footprint_sigma_m(xy, group, grad)
+    assert np.mean(np.abs(err) <= 1.96 * exact) < 0.8  # ~70 % when written
+
+
+def test_cell_relief_is_what_windows_miss_their_neighbours_plane_by():
+    """Windows on a 12 m grid over a plane sloping 0.16, each raised by its own relief drawn
+    N(0, 0.2 m): the windows' misses from their neighbours' planes have the relief's sd (and
+    the plane's own error from ~20 neighbours, +2 % or so); a plane without relief gives 0."""
+    rng = np.random.default_rng(4)
+    gx, gy = np.meshgrid(np.arange(40) * 12.0, np.arange(40) * 12.0)
+    c = np.column_stack([gx.ravel(), gy.ravel()])
+    per = 30
+    xy = np.repeat(c, per, axis=0) + rng.uniform(-6.0, 6.0, (c.shape[0] * per, 2))
+    group = np.repeat(np.arange(c.shape[0]), per)
+    relief = np.repeat(rng.normal(0.0, 0.2, c.shape[0]), per)
+    plane = 0.16 * xy[:, 0] - 0.05 * xy[:, 1]
+    assert cell_relief_sigma_m(xy, plane + relief, group, 12.0) == pytest.approx(0.2, rel=0.1)
+    assert cell_relief_sigma_m(xy, plane, group, 12.0) < 1e-6
 
 
 def test_a_random_term_adds_in_quadrature():

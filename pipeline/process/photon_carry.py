@@ -1,0 +1,135 @@
+"""A scan's cell window's one bottom height carried to each shot along the seabed's slope.
+
+A cell window (:mod:`pipeline.process.photon_windows`) detects one bottom height for shots
+spread over its cell, ``cell_m`` across: over a seabed sloping by ``g`` each shot's own
+seabed differs from the window's by ``g . (p_i - p_w)`` (``p`` where the beams meet the
+datum ``z = 0``, ``p_w`` the window's mean), ``g L / sqrt(12)`` rms over a cell of side ``L``
+(0.14 m over 10 m cells at a slope of 0.05; 0.5 m at 10°). The neighbouring windows of the
+same slab measure that slope: each window's slope is the least-squares slope of its
+neighbours' bottom heights about its own (a plane through the window's own height, so the
+mean over its shots stays what the histogram measured), and each shot's bottom height moves
+along it. The heights are the detector's (on the measured beam in air, before refraction), so
+the slope is the apparent seabed's; across a cell and its neighbours the beams' angles change
+little (an oscillating mirror's by ~1-2°), and the refraction correction then runs on each
+shot's own beam as before.
+
+Only windows of the same slab are neighbours, so the carry, like the windows, does not
+depend on the chunking (chunks hold whole slabs). Where fewer than 3 neighbours with a bottom
+lie within :data:`NEIGHBOUR_CELLS` cell sides, or they lie on a line, no slope is taken (the
+shots keep the window's height).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from pipeline.optics import SPEED_OF_LIGHT_M_S
+from pipeline.process.photon_windows import crossing_xy, slab_of
+
+__all__ = ["NEIGHBOUR_CELLS", "MAX_SLOPE", "carried_bottom_heights_m", "second_pass"]
+
+#: Neighbouring windows within this many cell sides of a window's centre fit its slope.
+NEIGHBOUR_CELLS = 2.5
+#: Largest slope taken (tan 45°): a steeper fit is a false bottom among the neighbours.
+MAX_SLOPE = 1.0
+#: Neighbours searched per window, at most (a 2.5-cell radius holds ~20 cells).
+_K = 24
+
+
+def carried_bottom_heights_m(z_w, has_w, centre_xy, slab, window, shot_xy, cell_m):
+    """Each shot's bottom height: its window's carried along the slope of its neighbours.
+
+    Parameters
+    ----------
+    z_w : (n_windows,) float
+        Each window's detected bottom height (m; meaningless where ``has_w`` is False).
+    has_w : (n_windows,) bool
+        Windows with a bottom.
+    centre_xy : (n_windows, 2) float
+        Each window's mean of its shots' ``shot_xy``.
+    slab : (n_windows,) int
+        Each window's slab (only windows of one slab are neighbours).
+    window : (n_shots,) int
+        Each shot's window (row of the arrays above).
+    shot_xy : (n_shots, 2) float
+        Where each shot's beam meets ``z = 0``.
+    cell_m : float
+        The cells' side.
+
+    Returns
+    -------
+    z_shot : (n_shots,) float
+        ``z_w[window] + slope . (shot_xy - centre_xy[window])`` (the window's height where no
+        slope is taken).
+    slope : (n_windows, 2) float
+        The slope taken per window (0 where none).
+    """
+    n_w = z_w.shape[0]
+    slope = np.zeros((n_w, 2))
+    rows = np.flatnonzero(has_w)
+    if rows.size >= 4:
+        tree = cKDTree(centre_xy[rows])
+        k = min(_K, rows.size)
+        dist, nb = tree.query(centre_xy[rows], k=k, distance_upper_bound=NEIGHBOUR_CELLS * cell_m)
+        ok = np.isfinite(dist) & (dist > 0.0)  # the window itself is not its own neighbour
+        nb = np.where(ok, nb, 0)
+        nbr = rows[nb]
+        ok &= slab[nbr] == slab[rows][:, None]
+        d = np.where(ok[:, :, None], centre_xy[nbr] - centre_xy[rows][:, None, :], 0.0)
+        dz = np.where(ok, z_w[nbr] - z_w[rows][:, None], 0.0)
+        # the slope of a plane through the window's own height: 2 x 2 normal equations
+        a = np.einsum("wki,wkj->wij", d, d)
+        b = np.einsum("wki,wk->wi", d, dz)
+        det = a[:, 0, 0] * a[:, 1, 1] - a[:, 0, 1] ** 2
+        # at least 3 neighbours, spread in both directions (not on a line): the smaller
+        # eigenvalue of the offsets' scatter at least a quarter cell squared per neighbour
+        tr = a[:, 0, 0] + a[:, 1, 1]
+        small = 0.5 * (tr - np.sqrt(np.maximum(tr**2 - 4.0 * det, 0.0)))
+        good = (ok.sum(axis=1) >= 3) & (small >= ok.sum(axis=1) * (0.25 * cell_m) ** 2)
+        safe = np.where(good, det, 1.0)
+        sx = (a[:, 1, 1] * b[:, 0] - a[:, 0, 1] * b[:, 1]) / safe
+        sy = (a[:, 0, 0] * b[:, 1] - a[:, 0, 1] * b[:, 0]) / safe
+        s = np.where(good[:, None], np.column_stack([sx, sy]), 0.0)
+        s = np.where((np.hypot(s[:, 0], s[:, 1]) <= MAX_SLOPE)[:, None], s, 0.0)
+        slope[rows] = s
+    z_shot = z_w[window] + np.sum(slope[window] * (shot_xy - centre_xy[window]), axis=1)
+    return z_shot, slope
+
+
+def second_pass(first, windows, ids, origin_m, direction, n_air, min_separation_m):
+    """The second detection pass's ``(slope, split)`` per window, from the first pass's.
+
+    ``first`` holds the first pass's detections (``WaveformDetections``, one height per
+    window); ``windows``, ``ids``, ``origin_m``, ``direction`` and ``n_air`` are the
+    detector's (:func:`~pipeline.process.detect_photons.detect_photon_events`).
+
+    ``slope`` (n_windows, 2): the seabed slope of each window's neighbours
+    (:func:`~pipeline.process.photon_carry.carried_bottom_heights_m`); ``split``: the height
+    below which its events are de-trended, halfway from its surface down to the bottom search's
+    top (``max(min_separation_m, sea_band_m)`` below the surface), or ``-inf`` without one.
+    """
+    keys_w, window = np.unique(windows.of(ids, origin_m, direction), return_inverse=True)
+    n_win = keys_w.size
+    r = SPEED_OF_LIGHT_M_S / (2.0 * n_air)
+    cnt = np.maximum(np.bincount(window, minlength=n_win), 1)
+
+    def per_window(v, has):  # the first pass gives every shot of a window one height
+        z = origin_m[:, 2] + r * v * direction[:, 2]
+        k = np.bincount(window, weights=has, minlength=n_win)
+        return np.bincount(window, weights=np.where(has, z, 0.0), minlength=n_win) / np.maximum(
+            k, 1
+        ), k > 0
+
+    z_b, has_b = per_window(first.t_bottom_s, first.has_bottom)
+    z_s, has_s = per_window(first.t_surface_s, first.has_surface)
+    xy = crossing_xy(origin_m, direction)
+    centre = np.column_stack(
+        [np.bincount(window, weights=xy[:, k], minlength=n_win) / cnt for k in range(2)]
+    )
+    _, slope = carried_bottom_heights_m(
+        z_b, has_b, centre, slab_of(keys_w), window, xy, windows.cell_m
+    )
+    sep = max(min_separation_m, windows.sea_band_m)
+    split = np.where(has_s, z_s - 0.5 * sep, -np.inf)
+    return slope, split
