@@ -201,7 +201,7 @@ def detect_photon_events(
     kw["windows"] = windows
     if windows.cell_m > 0.0 and _detrend is None and n:
         first = detect_photon_events(*args, **kw, _detrend=False)
-        second = second_pass(first, windows, ids, origin_m, direction, n_air, s.min_separation_m)
+        second = second_pass(first, windows, ids, origin_m, direction, n_air, s)
         return detect_photon_events(*args, **kw, _detrend=second)
     shot, z = event_heights_m(offsets, times_s, origin_m, direction, n_air)
     keys = windows.of(ids, origin_m, direction)

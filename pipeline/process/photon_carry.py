@@ -35,6 +35,8 @@ NEIGHBOUR_CELLS = 2.5
 MAX_SLOPE = 1.0
 #: Neighbours searched per window, at most (a 2.5-cell radius holds ~20 cells).
 _K = 24
+#: Distance put between slabs in the neighbour search (beyond any radius).
+_SLAB_APART_M = 1.0e6
 
 
 def carried_bottom_heights_m(z_w, has_w, centre_xy, slab, window, shot_xy, cell_m):
@@ -69,9 +71,11 @@ def carried_bottom_heights_m(z_w, has_w, centre_xy, slab, window, shot_xy, cell_
     slope = np.zeros((n_w, 2))
     rows = np.flatnonzero(has_w)
     if rows.size >= 4:
-        tree = cKDTree(centre_xy[rows])
+        # the slab as a third coordinate, farther than any radius: a window's neighbours are
+        # its slab's whatever other slabs share the chunk (chunk-invariant)
+        pts = np.column_stack([centre_xy[rows], slab[rows] * _SLAB_APART_M])
         k = min(_K, rows.size)
-        dist, nb = tree.query(centre_xy[rows], k=k, distance_upper_bound=NEIGHBOUR_CELLS * cell_m)
+        dist, nb = cKDTree(pts).query(pts, k=k, distance_upper_bound=NEIGHBOUR_CELLS * cell_m)
         ok = np.isfinite(dist) & (dist > 0.0)  # the window itself is not its own neighbour
         nb = np.where(ok, nb, 0)
         nbr = rows[nb]
@@ -97,7 +101,7 @@ def carried_bottom_heights_m(z_w, has_w, centre_xy, slab, window, shot_xy, cell_
     return z_shot, slope
 
 
-def second_pass(first, windows, ids, origin_m, direction, n_air, min_separation_m):
+def second_pass(first, windows, ids, origin_m, direction, n_air, settings):
     """The second detection pass's ``(slope, split)`` per window, from the first pass's.
 
     ``first`` holds the first pass's detections (``WaveformDetections``, one height per
@@ -107,7 +111,8 @@ def second_pass(first, windows, ids, origin_m, direction, n_air, min_separation_
     ``slope`` (n_windows, 2): the seabed slope of each window's neighbours
     (:func:`~pipeline.process.photon_carry.carried_bottom_heights_m`); ``split``: the height
     below which its events are de-trended, halfway from its surface down to the bottom search's
-    top (``max(min_separation_m, sea_band_m)`` below the surface), or ``-inf`` without one.
+    top (``max(min_separation_m, sea_band_m)`` below the surface) and below the surface's
+    centroid box, or ``-inf`` without one; ``settings`` the detector's.
     """
     keys_w, window = np.unique(windows.of(ids, origin_m, direction), return_inverse=True)
     n_win = keys_w.size
@@ -130,6 +135,8 @@ def second_pass(first, windows, ids, origin_m, direction, n_air, min_separation_
     _, slope = carried_bottom_heights_m(
         z_b, has_b, centre, slab_of(keys_w), window, xy, windows.cell_m
     )
-    sep = max(min_separation_m, windows.sea_band_m)
-    split = np.where(has_s, z_s - 0.5 * sep, -np.inf)
+    # below the surface's centroid box too: its echo's lower tail is not moved
+    sep = max(settings.min_separation_m, windows.sea_band_m)
+    box_m = (settings.centroid_bins + 1) * settings.bin_m
+    split = np.where(has_s, z_s - max(0.5 * sep, box_m), -np.inf)
     return slope, split

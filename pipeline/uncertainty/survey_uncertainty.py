@@ -69,7 +69,7 @@ from pipeline.uncertainty.tpu_survey_wide import TpuSurveyWide, facet_sea, surve
 from pipeline.uncertainty.tpu_timing import split_timing_excess
 from pipeline.uncertainty.tpu_window import (
     WINDOW_TERM,
-    cell_relief_sigma_m,
+    cell_window_sigma_m,
     window_footprint_sigma_m,
     with_random_term,
 )
@@ -279,8 +279,8 @@ def survey_uncertainty(
         if windows.cell_m > 0.0:  # a scan's cell, its bottom carried along its slope
             # (process.photon_carry): the relief its plane misses is left; the sea is in the surface
             # terms (a facet slope over 5 m read 0.034 m of flat water on tuning seed 46: err 0.010)
-            relief = cell_relief_sigma_m(xy40w, points40.depth_m, win, windows.cell_m)
-            seabed = spread = np.full(len(points40), relief)
+            d40w, z40w, cell = points40.depth_m, points40.xyz_m[:, 2], windows.cell_m
+            seabed = spread = cell_window_sigma_m(xy40w, d40w, z40w, win, cell, g40, gc40)
         else:
             sea_cov = unresolved_slope_cov(vg, processed.surface, tracks[tpu40.row], rows=tpu40.row)
             seabed = window_footprint_sigma_m(xy40w, win, g40, gradient_cov=gc40)

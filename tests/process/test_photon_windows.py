@@ -203,3 +203,29 @@ def test_no_bottom_read_in_the_band_a_wave_sea_spreads_a_cells_surface_over():
 
     assert found(0.0) > 0.05  # the trouble the band is for (13 % of the shots when written)
     assert found(2.4) < 0.01
+
+
+def test_cell_detection_does_not_depend_on_the_chunk():
+    """Four slabs of the scan detected in one chunk, or slab by slab (chunks of whole slabs):
+    every field of every shot the same. Neighbouring windows of other slabs lie within the
+    carry's radius (the circle's sides sweep the same strip from slab to slab), and must
+    not change a window's slope."""
+    import dataclasses
+
+    from pipeline.process.photon_windows import PhotonWindows
+
+    n, slab = 64000, 16000
+    offsets, times, origin, beam, _, _ = _scan_events(n, seed=5)
+    ids = np.arange(n)
+    win = PhotonWindows(200, 10.0, slab)
+    whole = detect_photon_events(offsets, times, origin, beam, N_AIR, pulse_id=ids, windows=win)
+    assert whole.has_bottom.mean() > 0.8
+    for lo in range(0, n, slab):
+        sl = slice(lo, lo + slab)
+        off = offsets[lo : lo + slab + 1]
+        part = detect_photon_events(
+            off - off[0], times[off[0] : off[-1]], origin[sl], beam[sl], N_AIR,
+            pulse_id=ids[sl], windows=win,
+        )  # fmt: skip
+        for f in dataclasses.fields(part):
+            np.testing.assert_array_equal(getattr(whole, f.name)[sl], getattr(part, f.name), f.name)

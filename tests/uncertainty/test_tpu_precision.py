@@ -17,6 +17,7 @@ from pipeline.uncertainty.tpu import (
 from pipeline.uncertainty.tpu_window import (
     WINDOW_TERM,
     cell_relief_sigma_m,
+    cell_window_sigma_m,
     window_footprint_sigma_m,
     with_random_term,
 )
@@ -146,6 +147,29 @@ def test_cell_relief_is_what_windows_miss_their_neighbours_plane_by():
     plane = 0.16 * xy[:, 0] - 0.05 * xy[:, 1]
     assert cell_relief_sigma_m(xy, plane + relief, group, 12.0) == pytest.approx(0.2, rel=0.1)
     assert cell_relief_sigma_m(xy, plane, group, 12.0) < 1e-6
+
+
+def test_an_isolated_cell_window_keeps_its_spread_under_the_slope():
+    """A 10 x 10 grid of 12 m cells and one cell 200 m away, over a slope of 0.1 along x:
+    the grid's windows (carried by the detector, with neighbours) get the relief term (0
+    here: a plane), the isolated one the rms of 0.1 x its shots' offsets, 0.1 x 12 / sqrt 12
+    for shots spread evenly across it."""
+    rng = np.random.default_rng(2)
+    gx, gy = np.meshgrid(np.arange(10) * 12.0, np.arange(10) * 12.0)
+    c = np.vstack([np.column_stack([gx.ravel(), gy.ravel()]), [[400.0, 0.0]]])
+    per = 400
+    xy = np.repeat(c, per, axis=0) + np.column_stack(
+        [np.tile(np.linspace(-6.0, 6.0, per), c.shape[0]), rng.uniform(-6.0, 6.0, c.shape[0] * per)]
+    )
+    group = np.repeat(np.arange(c.shape[0]), per)  # keys of one slab (slab_of: 0)
+    depth = 5.0 + 0.1 * xy[:, 0]
+    grad = np.tile([0.1, 0.0], (xy.shape[0], 1))
+    no_cov = np.zeros((xy.shape[0], 2, 2))
+    sigma = cell_window_sigma_m(xy, depth, -depth, group, 12.0, grad, no_cov)
+    assert np.all(sigma[:-per] < 1e-6)
+    spread = 0.1 * np.std(np.linspace(-6.0, 6.0, per))
+    np.testing.assert_allclose(sigma[-per:], spread, rtol=1e-9)
+    assert spread == pytest.approx(0.1 * 12.0 / np.sqrt(12.0), rel=0.01)
 
 
 def test_a_random_term_adds_in_quadrature():
