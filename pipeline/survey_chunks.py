@@ -225,6 +225,8 @@ def _photon_chunk(job: ChunkJob, clock: StageClock, paths, pulses):
         scene.detector.dead_time_s,
         job.keep_fraction,
         scene.scene.seed,
+        detections=found,  # a scan's cells: their events as the detector's second pass saw them
+        settings=scene.process.photon_detect,
     )
     return found, ev.flags, kept
 

@@ -135,8 +135,42 @@ def second_pass(first, windows, ids, origin_m, direction, n_air, settings):
     _, slope = carried_bottom_heights_m(
         z_b, has_b, centre, slab_of(keys_w), window, xy, windows.cell_m
     )
-    # below the surface's centroid box too: its echo's lower tail is not moved
+    return slope, _split_m(z_s, has_s, windows, settings)
+
+
+def _split_m(z_s, has_s, windows, settings):
+    """Height below which a window's events are de-trended (:func:`second_pass`, notes).
+
+    Halfway from the surface to the bottom search's top, and below the surface's centroid
+    box (its echo's lower tail is not moved); ``-inf`` without a surface.
+    """
     sep = max(settings.min_separation_m, windows.sea_band_m)
     box_m = (settings.centroid_bins + 1) * settings.bin_m
-    split = np.where(has_s, z_s - max(0.5 * sep, box_m), -np.inf)
-    return slope, split
+    return np.where(has_s, z_s - max(0.5 * sep, box_m), -np.inf)
+
+
+def detrended_heights(z_ev, shot, detections, windows, ids, origin_m, direction, n_air, settings):
+    """Event heights as the detector's second pass histogrammed them, ``(n_events,)``.
+
+    For the kept windows' events of a posterior (:func:`~pipeline.uncertainty.
+    photon_posterior.keep_windows`): below each cell window's surface (the split of
+    :func:`second_pass`), an event moves by its shot's carry, which the detections hold as
+    each shot's bottom height less its window's mean. Windows of consecutive shots: as given.
+    """
+    if windows.cell_m <= 0.0:
+        return z_ev
+    _, window = np.unique(windows.of(ids, origin_m, direction), return_inverse=True)
+    n_win = int(window.max()) + 1
+    r = SPEED_OF_LIGHT_M_S / (2.0 * n_air)
+
+    def heights(t, has):
+        z = origin_m[:, 2] + r * t * direction[:, 2]
+        k = np.bincount(window, weights=has, minlength=n_win)
+        mean = np.bincount(window, weights=np.where(has, z, 0.0), minlength=n_win)
+        return z, mean / np.maximum(k, 1), k > 0
+
+    z_b, mean_b, _ = heights(detections.t_bottom_s, detections.has_bottom)
+    _, z_s, has_s = heights(detections.t_surface_s, detections.has_surface)
+    carry = np.where(detections.has_bottom, z_b - mean_b[window], 0.0)
+    split = _split_m(z_s, has_s, windows, settings)
+    return np.where(z_ev < split[window[shot]], z_ev - carry[shot], z_ev)

@@ -44,6 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S
+from pipeline.process.photon_carry import detrended_heights
 from pipeline.process.photon_livetime import bin_live_fraction, dead_height_m, event_heights_m
 from pipeline.process.photon_windows import PhotonWindows
 from pipeline.uncertainty.posterior_selection import kept_for_posterior
@@ -126,6 +127,8 @@ def keep_windows(
     dead_time_s: float,
     fraction: float,
     seed: int,
+    detections=None,
+    settings=None,
 ) -> KeptPhotons | None:
     """The events of a chunk's windows kept for posteriors (None when none is kept).
 
@@ -148,6 +151,10 @@ def keep_windows(
     fraction : float
         Share of the windows kept (:func:`kept_for_posterior` of the window number).
     seed : int
+    detections, settings : optional
+        The chunk's detections and the detector's settings: a scan's cell windows keep their
+        events as the detector's second pass histogrammed them (the seabed's slope taken
+        out below the surface: :func:`~pipeline.process.photon_carry.detrended_heights`).
     """
     if fraction <= 0.0 or pulse_id.size == 0:
         return None
@@ -157,6 +164,10 @@ def keep_windows(
     if keep.size == 0:
         return None
     shot, z = event_heights_m(offsets, times_s, origin_m, direction, n_air)
+    if detections is not None:
+        z = detrended_heights(
+            z, shot, detections, windows, pulse_id, origin_m, direction, n_air, settings
+        )
     tau_h = dead_height_m(dead_time_s, n_air, direction[shot, 2])
     ev_win = win[shot]
     sel = np.isin(ev_win, keep)
