@@ -90,10 +90,12 @@ def _check_survey(scene) -> None:
             f" pulse, more than {mem / 1e9:.3g} GB ({MEMORY_SHARE:.0%} of this machine's"
             " memory); lower the pulse rate, the area or `flight.n_lines`."
         )
+    extent = survey_extent_m(scene, lines)
+    _check_window_keys(scene, lines, extent)
     sb = scene.seabed
     if sb.kind == "dem":
         return
-    xmin, xmax, ymin, ymax = survey_extent_m(scene, lines)
+    xmin, xmax, ymin, ymax = extent
     spacing = sb.mesh_resolution_m
     if sb.roughness_rms_m > 0:
         spacing = min(spacing, sb.roughness_correlation_m / 4.0)
@@ -133,4 +135,29 @@ def _check_photon_windows(scene) -> None:
             f" window of `shots_per_window` = {pd.shots_per_window} consecutive shots sweeps"
             f" {sweep:.0f} m of the scan (at most {MAX_WINDOW_SWEEP_M:g}); set window_cell_m > 0"
             " or leave it unset (cells sized from the plan)."
+        )
+
+
+def _check_window_keys(scene, lines, extent_m) -> None:
+    """Refuse cell windows whose keys would not fit (before the run, not inside a chunk).
+
+    See :func:`pipeline.process.photon_windows.window_keys`.
+    """
+    from pipeline.process.photon_windows import MAX_CELL_INDEX, MAX_SLABS, resolve_windows
+
+    if scene.detector.mode != "photon_counting":
+        return
+    fl, pd = scene.flight, scene.process.photon_detect
+    win = resolve_windows(
+        pd.shots_per_window, pd.window_cell_m, scene.scanner, fl.altitude_m, fl.speed_m_s
+    )
+    if win.cell_m <= 0.0:
+        return
+    reach = max(abs(v) for v in extent_m) / win.cell_m
+    slabs = lines.n_pulses_total / win.slab_shots
+    if reach >= MAX_CELL_INDEX or slabs >= MAX_SLABS:
+        raise SceneError(
+            f"`process.photon_detect.window_cell_m` = {win.cell_m:g} m: the survey reaches"
+            f" {reach:.3g} cells from the frame's origin in {slabs:.3g} slabs (at most"
+            f" {MAX_CELL_INDEX} and {MAX_SLABS}); use larger cells or a closer frame origin."
         )

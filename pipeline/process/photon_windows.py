@@ -39,6 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = [
+    "MAX_CELL_INDEX",
+    "MAX_SLABS",
     "SLAB_CELLS",
     "PhotonWindows",
     "crossing_xy",
@@ -54,6 +56,8 @@ SLAB_CELLS = 10.0
 #: Bits of each cell index and of the slab number in a cell window's key.
 _CELL_BITS = 20
 _SLAB_BITS = 63 - 2 * _CELL_BITS
+#: Largest cell index from the frame's origin and number of slabs a key holds.
+MAX_CELL_INDEX, MAX_SLABS = 2 ** (_CELL_BITS - 1) - 1, 2**_SLAB_BITS
 
 
 def window_keys(

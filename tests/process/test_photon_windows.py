@@ -259,3 +259,22 @@ def test_kept_events_are_detrended_as_the_detector_saw_them():
 
     raw, flat = rms_about_window(z), rms_about_window(zd)
     assert raw > 0.3 and flat < raw / 3.0
+
+
+def test_cells_whose_keys_would_overflow_are_refused_before_the_run():
+    import tomllib
+    from pathlib import Path
+
+    from pipeline.scene import parse_scene
+
+    root = Path(__file__).resolve().parents[2]
+    data = tomllib.loads((root / "data_synthetic" / "scenes" / "photon_profiler.toml").read_text())
+    data["scanner"]["kind"] = "palmer"
+    data["flight"]["area_m"] = [-50.0, 50.0, 0.0, 60.0]
+    # 0.001 m cells: the survey's ~200 m reach is 2e5 cells, within the keys (5.2e5)
+    data["process"]["photon_detect"] = {"window_cell_m": 0.001}
+    parse_scene(data)
+    # 0.0001 m cells: 2e6 cells from the origin, beyond what a key holds
+    data["process"]["photon_detect"] = {"window_cell_m": 0.0001}
+    with pytest.raises(SceneError, match=r"window_cell_m` = 0.0001 m: the survey reaches"):
+        parse_scene(data)
