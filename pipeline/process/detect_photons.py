@@ -62,7 +62,7 @@ from pipeline.process.photon_livetime import (
     event_live_fraction,
     surface_pileup_pe,
 )
-from pipeline.process.photon_windows import PhotonWindows, crossing_xy
+from pipeline.process.photon_windows import PhotonWindows
 from pipeline.process.returns import DetectorFlag
 
 __all__ = ["PhotonDetectSettings", "detect_photon_events"]
@@ -210,13 +210,7 @@ def detect_photon_events(
     ev_win = window[shot]
     carry = np.zeros(n)  # each shot's bottom height over its window's (the second pass)
     if isinstance(_detrend, tuple):
-        slope_w, split_w = _detrend
-        xy = crossing_xy(origin_m, direction)
-        cnt = np.maximum(np.bincount(window, minlength=n_win), 1)
-        centre = np.column_stack(
-            [np.bincount(window, weights=xy[:, k], minlength=n_win) / cnt for k in range(2)]
-        )
-        carry = np.sum(slope_w[window] * (xy - centre[window]), axis=1)
+        carry, split_w = _detrend
         # the events below the surface band with the seabed's slope taken out
         z = np.where(z < split_w[ev_win], z - carry[shot], z)
     empty = WaveformDetections(

@@ -27,7 +27,14 @@ from scipy.spatial import cKDTree
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.photon_windows import crossing_xy, slab_of
 
-__all__ = ["NEIGHBOUR_CELLS", "MAX_SLOPE", "carried_bottom_heights_m", "second_pass"]
+__all__ = [
+    "NEIGHBOUR_CELLS",
+    "MAX_SLOPE",
+    "SLAB_APART_M",
+    "detrended_heights",
+    "neighbour_slopes",
+    "second_pass",
+]
 
 #: Neighbouring windows within this many cell sides of a window's centre fit its slope.
 NEIGHBOUR_CELLS = 2.5
@@ -35,12 +42,13 @@ NEIGHBOUR_CELLS = 2.5
 MAX_SLOPE = 1.0
 #: Neighbours searched per window, at most (a 2.5-cell radius holds ~20 cells).
 _K = 24
-#: Distance put between slabs in the neighbour search (beyond any radius).
-_SLAB_APART_M = 1.0e6
+#: Distance put between slabs in a neighbour search (beyond any radius): a window's
+#: neighbours are its slab's whatever other slabs lie near.
+SLAB_APART_M = 1.0e6
 
 
-def carried_bottom_heights_m(z_w, has_w, centre_xy, slab, window, shot_xy, cell_m):
-    """Each shot's bottom height: its window's carried along the slope of its neighbours.
+def neighbour_slopes(z_w, has_w, centre_xy, slab, cell_m):
+    """Each window's seabed slope, from the bottom heights of its slab's neighbours.
 
     Parameters
     ----------
@@ -49,23 +57,17 @@ def carried_bottom_heights_m(z_w, has_w, centre_xy, slab, window, shot_xy, cell_
     has_w : (n_windows,) bool
         Windows with a bottom.
     centre_xy : (n_windows, 2) float
-        Each window's mean of its shots' ``shot_xy``.
+        Each window's mean of its shots' crossings of ``z = 0``.
     slab : (n_windows,) int
         Each window's slab (only windows of one slab are neighbours).
-    window : (n_shots,) int
-        Each shot's window (row of the arrays above).
-    shot_xy : (n_shots, 2) float
-        Where each shot's beam meets ``z = 0``.
     cell_m : float
         The cells' side.
 
     Returns
     -------
-    z_shot : (n_shots,) float
-        ``z_w[window] + slope . (shot_xy - centre_xy[window])`` (the window's height where no
-        slope is taken).
-    slope : (n_windows, 2) float
-        The slope taken per window (0 where none).
+    (n_windows, 2) float
+        The slope of a plane through each window's own height fitted to its neighbours' (0
+        where none is taken, module notes); a shot's bottom moves by ``slope . (xy - centre)``.
     """
     n_w = z_w.shape[0]
     slope = np.zeros((n_w, 2))
@@ -73,7 +75,7 @@ def carried_bottom_heights_m(z_w, has_w, centre_xy, slab, window, shot_xy, cell_
     if rows.size >= 4:
         # the slab as a third coordinate, farther than any radius: a window's neighbours are
         # its slab's whatever other slabs share the chunk (chunk-invariant)
-        pts = np.column_stack([centre_xy[rows], slab[rows] * _SLAB_APART_M])
+        pts = np.column_stack([centre_xy[rows], slab[rows] * SLAB_APART_M])
         k = min(_K, rows.size)
         dist, nb = cKDTree(pts).query(pts, k=k, distance_upper_bound=NEIGHBOUR_CELLS * cell_m)
         ok = np.isfinite(dist) & (dist > 0.0)  # the window itself is not its own neighbour
@@ -97,45 +99,47 @@ def carried_bottom_heights_m(z_w, has_w, centre_xy, slab, window, shot_xy, cell_
         s = np.where(good[:, None], np.column_stack([sx, sy]), 0.0)
         s = np.where((np.hypot(s[:, 0], s[:, 1]) <= MAX_SLOPE)[:, None], s, 0.0)
         slope[rows] = s
-    z_shot = z_w[window] + np.sum(slope[window] * (shot_xy - centre_xy[window]), axis=1)
-    return z_shot, slope
+    return slope
 
 
 def second_pass(first, windows, ids, origin_m, direction, n_air, settings):
-    """The second detection pass's ``(slope, split)`` per window, from the first pass's.
+    """The second detection pass's ``(carry, split)``, from the first pass's detections.
 
     ``first`` holds the first pass's detections (``WaveformDetections``, one height per
     window); ``windows``, ``ids``, ``origin_m``, ``direction`` and ``n_air`` are the
-    detector's (:func:`~pipeline.process.detect_photons.detect_photon_events`).
+    detector's (:func:`~pipeline.process.detect_photons.detect_photon_events`), ``settings``
+    its settings.
 
-    ``slope`` (n_windows, 2): the seabed slope of each window's neighbours
-    (:func:`~pipeline.process.photon_carry.carried_bottom_heights_m`); ``split``: the height
-    below which its events are de-trended, halfway from its surface down to the bottom search's
-    top (``max(min_separation_m, sea_band_m)`` below the surface) and below the surface's
-    centroid box, or ``-inf`` without one; ``settings`` the detector's.
+    ``carry`` (n_shots,): each shot's bottom height over its window's, along the window's
+    :func:`neighbour_slopes`; ``split`` (n_windows,): the height below which its events are
+    de-trended (:func:`_split_m`).
     """
     keys_w, window = np.unique(windows.of(ids, origin_m, direction), return_inverse=True)
     n_win = keys_w.size
-    r = SPEED_OF_LIGHT_M_S / (2.0 * n_air)
-    cnt = np.maximum(np.bincount(window, minlength=n_win), 1)
-
-    def per_window(v, has):  # the first pass gives every shot of a window one height
-        z = origin_m[:, 2] + r * v * direction[:, 2]
-        k = np.bincount(window, weights=has, minlength=n_win)
-        return np.bincount(window, weights=np.where(has, z, 0.0), minlength=n_win) / np.maximum(
-            k, 1
-        ), k > 0
-
-    z_b, has_b = per_window(first.t_bottom_s, first.has_bottom)
-    z_s, has_s = per_window(first.t_surface_s, first.has_surface)
+    _, z_b, has_b = _window_heights(first.t_bottom_s, first.has_bottom, window, n_win,
+                                    origin_m, direction, n_air)  # fmt: skip
+    _, z_s, has_s = _window_heights(first.t_surface_s, first.has_surface, window, n_win,
+                                    origin_m, direction, n_air)  # fmt: skip
     xy = crossing_xy(origin_m, direction)
+    cnt = np.maximum(np.bincount(window, minlength=n_win), 1)
     centre = np.column_stack(
         [np.bincount(window, weights=xy[:, k], minlength=n_win) / cnt for k in range(2)]
     )
-    _, slope = carried_bottom_heights_m(
-        z_b, has_b, centre, slab_of(keys_w), window, xy, windows.cell_m
-    )
-    return slope, _split_m(z_s, has_s, windows, settings)
+    slope = neighbour_slopes(z_b, has_b, centre, slab_of(keys_w), windows.cell_m)
+    carry = np.sum(slope[window] * (xy - centre[window]), axis=1)
+    return carry, _split_m(z_s, has_s, windows, settings)
+
+
+def _window_heights(t, has, window, n_win, origin_m, direction, n_air):
+    """Shots' heights at times ``t`` on their beams, their windows' means over ``has``.
+
+    ``(z (n_shots,), mean (n_windows,), any (n_windows,))``: the height of each shot, the mean
+    over each window's shots with ``has`` (0 without), whether any has.
+    """
+    z = origin_m[:, 2] + SPEED_OF_LIGHT_M_S / (2.0 * n_air) * t * direction[:, 2]
+    k = np.bincount(window, weights=has, minlength=n_win)
+    mean = np.bincount(window, weights=np.where(has, z, 0.0), minlength=n_win)
+    return z, mean / np.maximum(k, 1), k > 0
 
 
 def _split_m(z_s, has_s, windows, settings):
@@ -161,16 +165,10 @@ def detrended_heights(z_ev, shot, detections, windows, ids, origin_m, direction,
         return z_ev
     _, window = np.unique(windows.of(ids, origin_m, direction), return_inverse=True)
     n_win = int(window.max()) + 1
-    r = SPEED_OF_LIGHT_M_S / (2.0 * n_air)
-
-    def heights(t, has):
-        z = origin_m[:, 2] + r * t * direction[:, 2]
-        k = np.bincount(window, weights=has, minlength=n_win)
-        mean = np.bincount(window, weights=np.where(has, z, 0.0), minlength=n_win)
-        return z, mean / np.maximum(k, 1), k > 0
-
-    z_b, mean_b, _ = heights(detections.t_bottom_s, detections.has_bottom)
-    _, z_s, has_s = heights(detections.t_surface_s, detections.has_surface)
+    z_b, mean_b, _ = _window_heights(detections.t_bottom_s, detections.has_bottom, window,
+                                     n_win, origin_m, direction, n_air)  # fmt: skip
+    _, z_s, has_s = _window_heights(detections.t_surface_s, detections.has_surface, window,
+                                    n_win, origin_m, direction, n_air)  # fmt: skip
     carry = np.where(detections.has_bottom, z_b - mean_b[window], 0.0)
     split = _split_m(z_s, has_s, windows, settings)
     return np.where(z_ev < split[window[shot]], z_ev - carry[shot], z_ev)

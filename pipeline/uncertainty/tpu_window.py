@@ -34,6 +34,8 @@ import dataclasses
 
 import numpy as np
 
+from pipeline.constants import MAD_TO_SIGMA
+from pipeline.uncertainty.seabed_gradient import group_means
 from pipeline.uncertainty.tpu_settings import DEPTH, PointTpu, Z
 
 __all__ = [
@@ -131,10 +133,7 @@ def cell_relief_sigma_m(xy_m, z_m, group, cell_m, neighbour_cells=2.5) -> float:
     z = np.asarray(z_m, dtype=np.float64).ravel()
     if xy.shape[0] == 0:
         return 0.0
-    _, inv = np.unique(np.asarray(group).ravel(), return_inverse=True)
-    cnt = np.bincount(inv).astype(np.float64)
-    c = np.column_stack([np.bincount(inv, weights=xy[:, k]) / cnt for k in range(2)])
-    zc = np.bincount(inv, weights=z) / cnt
+    c, zc = group_means(group, xy, z)
     if zc.size < 5:
         return 0.0
     k = min(24, zc.size)
@@ -150,7 +149,7 @@ def cell_relief_sigma_m(xy_m, z_m, group, cell_m, neighbour_cells=2.5) -> float:
         return 0.0
     intercept = np.linalg.solve(ata[tell], atz[tell][..., None])[:, 0, 0]
     miss = zc[tell] - intercept
-    return float(1.4826 * np.median(np.abs(miss - np.median(miss))))
+    return float(MAD_TO_SIGMA * np.median(np.abs(miss - np.median(miss))))
 
 
 def cell_window_sigma_m(
@@ -172,16 +171,16 @@ def cell_window_sigma_m(
     """
     from scipy.spatial import cKDTree
 
+    from pipeline.process.photon_carry import SLAB_APART_M
     from pipeline.process.photon_windows import slab_of
 
     xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
     if xy.shape[0] == 0:
         return np.zeros(0)
     keys, inv = np.unique(np.asarray(group).ravel(), return_inverse=True)
-    cnt = np.bincount(inv).astype(np.float64)
-    c = np.column_stack([np.bincount(inv, weights=xy[:, k]) / cnt for k in range(2)])
+    c, _ = group_means(inv, xy, np.zeros(len(xy)))
     # neighbours of the same slab within the radius, the window itself left out
-    c3 = np.column_stack([c, slab_of(keys) * 1.0e6])
+    c3 = np.column_stack([c, slab_of(keys) * SLAB_APART_M])
     n_near = cKDTree(c3).query_ball_point(c3, neighbour_cells * cell_m, return_length=True) - 1
     carried = (n_near >= 3)[inv]
     relief = min(
