@@ -53,6 +53,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S
@@ -148,26 +149,49 @@ def _accumulate(filt, first_idx, end_idx, dt_s) -> ColumnStack:
     """Stack of ``filt`` (n, m) from ``ceil(first_idx)`` to before ``end_idx``, shapes (n,)."""
     n, m = filt.shape
     off = np.ceil(first_idx).astype(np.int64)
-    cols = np.arange(m)[None, :]
-    j = cols - off[:, None]  # bin of each sample
-    use = (j >= 0) & (cols < end_idx[:, None])
-    jb, y = j[use], filt[use]
+    if n and off.min() < 0:  # (a column from before sample 0 would need more than m bins)
+        raise ValueError("a column starts before the first sample")
     # each pulse's column end (its first bin not stacked), by class
     end_bin = np.clip(np.ceil(end_idx).astype(np.int64) - off, 0, m)
     n_cls = m // END_CLASS_BINS + 1
-    cls = np.broadcast_to((end_bin // END_CLASS_BINS)[:, None], (n, m))[use]
-    flat = cls * m + jb
-    return ColumnStack(
-        np.bincount(jb, weights=y, minlength=m),
-        np.bincount(jb, weights=y * y, minlength=m),
-        np.bincount(jb, minlength=m).astype(np.int64),
-        dt_s,
-        (
-            np.bincount(flat, weights=y, minlength=n_cls * m).reshape(n_cls, m),
-            np.bincount(flat, weights=y * y, minlength=n_cls * m).reshape(n_cls, m),
-            np.bincount(flat, minlength=n_cls * m).astype(np.int64).reshape(n_cls, m),
-        ),
+    s1, s2, cnt = _stack_sums(
+        np.ascontiguousarray(filt, dtype=np.float64),
+        off,
+        np.asarray(end_idx, dtype=np.float64),
+        end_bin // END_CLASS_BINS,
+        n_cls,
     )
+    return ColumnStack(
+        s1[n_cls], s2[n_cls], cnt[n_cls], dt_s, (s1[:n_cls], s2[:n_cls], cnt[:n_cls])
+    )
+
+
+@numba.njit(cache=True, nogil=True)
+def _stack_sums(filt, off, end_idx, cls, n_cls):
+    """Sums of ``y``, ``y²`` and counts per bin ``c - off`` of the samples ``off <= c < end``.
+
+    Row ``n_cls`` of each ``(n_cls + 1, m)`` array: all pulses; rows ``0 .. n_cls - 1``: the
+    pulses of each end class. Each bin's values are added in pulse order (as ``np.bincount``
+    over the pulses' samples in turn adds them): the same sums to the bit.
+    """
+    n, m = filt.shape
+    s1 = np.zeros((n_cls + 1, m))
+    s2 = np.zeros((n_cls + 1, m))
+    cnt = np.zeros((n_cls + 1, m), np.int64)
+    for p in range(n):
+        k = cls[p]
+        for c in range(off[p], m):
+            if not (c < end_idx[p]):
+                break
+            y = filt[p, c]
+            j = c - off[p]
+            s1[n_cls, j] += y
+            s2[n_cls, j] += y * y
+            cnt[n_cls, j] += 1
+            s1[k, j] += y
+            s2[k, j] += y * y
+            cnt[k, j] += 1
+    return s1, s2, cnt
 
 
 def stack_column(

@@ -60,6 +60,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy import special
 
@@ -192,35 +193,25 @@ def _column_fit(samples, t_surface_s, t_end_idx, noise_sigma, det, min_snr, firs
     """
     if filt is None:
         filt = filtered_waveforms(samples, det)
-    n, m = filt.shape
+    n = filt.shape[0]
     i_s = np.asarray(t_surface_s, dtype=np.float64) / det.dt_s
-    cols = np.arange(m)[None, :]
-    nf = np.maximum(np.asarray(noise_sigma, dtype=np.float64), 1e-300)[:, None]
-    after = cols > first[:, None]
-    # the contiguous run above the noise from the first column sample on: the column's decay,
-    # not a later noise excursion
-    run = np.cumprod(np.where(after, filt > min_snr * nf, True), axis=1).astype(bool)
-    use = after & run & (cols < np.asarray(t_end_idx)[:, None])
-    t = (cols - i_s[:, None]) * det.dt_s
-    # weights (C/σ)²: the inverse variance of log C under additive noise
-    w = np.where(use, (filt / nf) ** 2, 0.0)
-    logc = np.log(np.where(use, filt, 1.0))
-    sw, st, sl = w.sum(1), (w * t).sum(1), (w * logc).sum(1)
-    stt, stl = (w * t * t).sum(1), (w * t * logc).sum(1)
+    nf = np.maximum(np.asarray(noise_sigma, dtype=np.float64), 1e-300)
+    end = np.broadcast_to(np.asarray(t_end_idx, dtype=np.float64), (n,))
+    f = np.asarray(first, dtype=np.float64)
+    sw, st, sl, stt, stl, count, first_y, top_y = _column_sums(
+        np.ascontiguousarray(filt, dtype=np.float64), i_s, f, end, nf, det.dt_s, min_snr
+    )
     den = sw * stt - st * st
-    ok = (use.sum(1) >= 3) & (den > 0)
+    ok = (count >= 3) & (den > 0)
     slope = np.where(ok, (sw * stl - st * sl) / np.where(ok, den, 1.0), 0.0)
     log_c0 = np.where(ok, (sl - slope * st) / np.where(sw > 0, sw, 1.0), 0.0)
     ok &= slope < 0.0
     # a column only decays: a run that rises past its first sample holds an echo the detector
     # did not report (a bright bottom a metre under a weak surface echo, suite tuning seed 0:
     # read as a column, it claimed no bottom down to 24 m)
-    has = use.any(axis=1)
-    first_y = filt[np.arange(n), np.where(has, np.argmax(use, axis=1), 0)]
-    top_y = np.max(np.where(use, filt, -np.inf), axis=1)
     # (an echo stands the detector's threshold above the column; two samples' noise differ by
     # √2 of one's)
-    rises = has & (top_y - first_y > det.threshold_sigma * math.sqrt(2.0) * nf[:, 0])
+    rises = (count > 0) & (top_y - first_y > det.threshold_sigma * math.sqrt(2.0) * nf)
     ok &= ~rises
     t_mid = np.where(ok, st / np.where(sw > 0, sw, 1.0), 0.0)
     corr = det.correlation_samples  # the filtered noise's correlation
@@ -236,6 +227,50 @@ def _column_fit(samples, t_surface_s, t_end_idx, noise_sigma, det, min_snr, firs
         np.where(ok, np.sqrt(var_mid), 0.0),
         rises,
     )
+
+
+@numba.njit(cache=True, nogil=True)
+def _column_sums(filt, i_surface, first, end, nf, dt_s, min_snr):
+    """Per pulse, the weighted sums of the column's log-linear fit over its run of samples.
+
+    The run: the samples after ``first`` (index, exclusive) while each stands above
+    ``min_snr`` noise σ (the column's decay, not a later noise excursion), before ``end``;
+    weights ``(C/σ)²`` (the inverse variance of ``log C`` under additive noise), times from
+    the surface (``i_surface``, samples). Returns ``Σw, Σw t, Σw log C, Σw t², Σw t log C``,
+    the run's length, its first sample and its highest (``-inf`` without any), each ``(n,)``.
+    """
+    n, m = filt.shape
+    out = np.zeros((5, n))
+    count = np.zeros(n, np.int64)
+    first_y = np.zeros(n)
+    top_y = np.full(n, -np.inf)
+    for p in range(n):
+        c0 = 0 if first[p] < 0.0 else int(math.floor(first[p])) + 1
+        level = min_snr * nf[p]
+        sw = st = sl = stt = stl = 0.0
+        k = 0
+        for c in range(c0, m):
+            y = filt[p, c]
+            if not (y > level) or not (c < end[p]):
+                break
+            w = (y / nf[p]) ** 2
+            t = (c - i_surface[p]) * dt_s
+            lc = math.log(y)
+            sw += w
+            st += w * t
+            sl += w * lc
+            stt += w * t * t
+            stl += w * t * lc
+            if k == 0:
+                first_y[p] = y
+            if y > top_y[p]:
+                top_y[p] = y
+            k += 1
+        out[0, p], out[1, p], out[2, p], out[3, p], out[4, p] = sw, st, sl, stt, stl
+        count[p] = k
+        if k == 0:
+            first_y[p] = filt[p, 0]
+    return out[0], out[1], out[2], out[3], out[4], count, first_y, top_y
 
 
 def column_margins(

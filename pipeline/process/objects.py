@@ -34,8 +34,10 @@ side). Measured data only: coordinates, heights and the TPU of the points.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -105,10 +107,6 @@ class ObjectDetections:
     sigma_m: np.ndarray
 
 
-#: Rows at least this long: ``np.nanmedian`` takes another path (:func:`_row_median`).
-_SHORT_ROW = 600
-
-
 def _reference(xy: np.ndarray, z: np.ndarray, cell_m: float) -> np.ndarray:
     """Indices of the cell-median point of each ``cell_m`` cell (by height)."""
     ij = np.floor(xy / cell_m).astype(np.int64)
@@ -118,35 +116,6 @@ def _reference(xy: np.ndarray, z: np.ndarray, cell_m: float) -> np.ndarray:
     counts = np.bincount(cell)
     start = np.concatenate([[0], np.cumsum(counts)[:-1]])
     return order[start + (counts - 1) // 2]
-
-
-def _row_median(v: np.ndarray, ok: np.ndarray) -> np.ndarray:
-    """Median of each row over ``ok`` entries (NaN for a row without any).
-
-    ``np.nanmedian(..., axis=1)``'s figures, the way it makes them for rows shorter than
-    :data:`_SHORT_ROW` (``np.ma.median``: the masked entries filled with +inf, one argsort per
-    row, the sum of the two middle entries over 2), without the masked arrays around it (most
-    of the object test's time). The same argsort keeps even the order of ties (-0.0, +0.0).
-    A row without any entry gives NaN here without nanmedian's "All-NaN slice" warning.
-    """
-    a = np.where(ok, v, np.nan)
-    n_rows, n_cols = a.shape
-    if n_cols == 0 or n_cols >= _SHORT_ROW:
-        with np.errstate(all="ignore"):
-            return np.nanmedian(a, axis=1)
-    missing = np.isnan(a)
-    order = np.where(missing, np.inf, a).argsort(axis=1)
-    count = n_cols - np.count_nonzero(missing, axis=1)
-    hi = count // 2
-    lo = np.where(count % 2 == 1, hi, hi - 1)
-    rows = np.arange(n_rows)
-    pick = np.stack(
-        [a[rows, order[rows, np.maximum(lo, 0)]], a[rows, order[rows, np.minimum(hi, n_cols - 1)]]],
-        axis=1,
-    )
-    # summed as np.ma.median sums them (a reduction over the pair: -0.0 + -0.0 gives +0.0)
-    with np.errstate(invalid="ignore"):
-        return np.where(count > 0, pick.sum(axis=1) / 2.0, np.nan)
 
 
 def detect_objects(xy_m, z_m, sigma_z_m, settings: ObjectSettings = ObjectSettings()):
@@ -186,55 +155,153 @@ def detect_objects(xy_m, z_m, sigma_z_m, settings: ObjectSettings = ObjectSettin
 
 def _test_rows(xy, z, sig, ref, tree, rows: slice, settings: ObjectSettings):
     """:func:`detect_objects`' test of the points ``rows``: (is_object, height_m, sigma_m)."""
-    xy_r, z_r = xy[rows], z[rows]
-    n = z_r.size
+    xy_r = xy[rows]
+    n = xy_r.shape[0]
     k = int(min(settings.neighbours, ref.size))
-    dist, idx = tree.query(xy_r, k=k, distance_upper_bound=settings.radius_m)
-    dist, idx = dist.reshape(n, k), idx.reshape(n, k)
-    ok = idx < ref.size
-    j = ref[np.where(ok, idx, 0)]
-    dx, dy = xy[j, 0] - xy_r[:, :1], xy[j, 1] - xy_r[:, 1:]
-    dz = z[j] - z_r[:, None]  # neighbour heights relative to the point
-    enough = ok.sum(axis=1) >= settings.min_neighbours
+    _, idx = tree.query(xy_r, k=k, distance_upper_bound=settings.radius_m)
+    idx = np.asarray(idx).reshape(n, k)
+    return _test_kernel(
+        xy,
+        z,
+        sig,
+        ref,
+        idx,
+        rows.start,
+        settings.min_neighbours,
+        settings.iterations,
+        settings.min_scale_m,
+        settings.k_sigma,
+        settings.min_height_m,
+    )
 
-    a = np.nan_to_num(_row_median(dz, ok))
-    b = np.zeros(n)
-    c = np.zeros(n)
-    scale = np.maximum(np.nan_to_num(_MAD_TO_SIGMA * _row_median(np.abs(dz - a[:, None]), ok)), 0)
-    for _ in range(settings.iterations):
-        scale = np.maximum(scale, settings.min_scale_m)
-        r = dz - (a[:, None] + b[:, None] * dx + c[:, None] * dy)
-        u = r / (_TUKEY_C * scale[:, None])
-        w = np.where(ok & (np.abs(u) < 1.0), (1.0 - u * u) ** 2, 0.0)
-        a, b, c = _weighted_plane(dx, dy, dz, w)
-        r = dz - (a[:, None] + b[:, None] * dx + c[:, None] * dy)
-        scale = np.nan_to_num(_MAD_TO_SIGMA * _row_median(np.abs(r), ok))
-    # the residuals of a 3-parameter fit to m points shrink by sqrt((m - 3) / m); the plane's
-    # own value at the point is uncertain by about scale / sqrt(m)
-    m = np.maximum(ok.sum(axis=1), 4)
-    scale = np.maximum(scale * np.sqrt(m / (m - 3.0)), settings.min_scale_m)
-    height = np.where(enough, -a, np.nan)  # the plane passes a above the point: h = -a
-    sigma = np.where(enough, np.sqrt(sig * sig + scale * scale * (1.0 + 1.0 / m)), np.nan)
-    with np.errstate(invalid="ignore"):
-        is_obj = enough & (height > settings.k_sigma * sigma) & (height >= settings.min_height_m)
+
+@numba.njit(cache=True, nogil=True)
+def _median(buf, m):
+    """Median of ``buf[:m]`` (reordered in place): the two middle values' sum over 2.
+
+    The middle order statistics by quickselect (Hoare's partition): the values a sort
+    would put there, in a few passes over 48 neighbours instead of a sort's.
+    """
+    hi = m // 2
+    left, right = 0, m - 1
+    while left < right:
+        pivot = buf[(left + right) // 2]
+        i, j = left, right
+        while i <= j:
+            while buf[i] < pivot:
+                i += 1
+            while buf[j] > pivot:
+                j -= 1
+            if i <= j:
+                buf[i], buf[j] = buf[j], buf[i]
+                i += 1
+                j -= 1
+        if hi <= j:
+            right = j
+        elif hi >= i:
+            left = i
+        else:
+            break
+    upper = buf[hi]
+    if m % 2 == 1:
+        return (upper + upper) / 2.0
+    lower = buf[0]  # the largest of the values before the middle
+    for c in range(1, hi):
+        if buf[c] > lower:
+            lower = buf[c]
+    return (lower + upper) / 2.0
+
+
+@numba.njit(cache=True, nogil=True)
+def _test_kernel(xy, z, sig, ref, idx, row0, min_nb, iterations, min_scale, k_sigma, min_h):
+    """Per row: neighbours' robust plane (Tukey IRLS), height above it and the test's sigma.
+
+    ``idx`` ``(n, k)``: the rows' nearest reference points (``ref.size`` where none). The
+    figures of the vectorised test this replaced (medians of the same values; sums and the
+    3 x 3 solve in another order: last-bit differences).
+    """
+    n, k = idx.shape
+    n_ref = ref.size
+    is_obj = np.zeros(n, np.bool_)
+    height = np.full(n, np.nan)
+    sigma = np.full(n, np.nan)
+    dx = np.empty(k)
+    dy = np.empty(k)
+    dz = np.empty(k)
+    buf = np.empty(k)
+    for i in range(n):
+        p = row0 + i
+        m = 0
+        for c in range(k):
+            if idx[i, c] < n_ref:
+                j = ref[idx[i, c]]
+                dx[m] = xy[j, 0] - xy[p, 0]
+                dy[m] = xy[j, 1] - xy[p, 1]
+                dz[m] = z[j] - z[p]
+                m += 1
+        if m < min_nb:
+            continue
+        buf[:m] = dz[:m]
+        a = _median(buf, m)
+        for c in range(m):
+            buf[c] = abs(dz[c] - a)
+        scale = max(_MAD_TO_SIGMA * _median(buf, m), 0.0)
+        b = 0.0
+        cc = 0.0
+        for _ in range(iterations):
+            scale = max(scale, min_scale)
+            sw = sx = sy = sxx = syy = sxy = sz = sxz = syz = 0.0
+            for c in range(m):
+                u = (dz[c] - (a + b * dx[c] + cc * dy[c])) / (_TUKEY_C * scale)
+                if abs(u) < 1.0:
+                    w = (1.0 - u * u) ** 2
+                    sw += w
+                    sx += w * dx[c]
+                    sy += w * dy[c]
+                    sxx += w * dx[c] * dx[c]
+                    syy += w * dy[c] * dy[c]
+                    sxy += w * dx[c] * dy[c]
+                    sz += w * dz[c]
+                    sxz += w * dx[c] * dz[c]
+                    syz += w * dy[c] * dz[c]
+            a, b, cc = _plane3(sw, sx, sy, sxx, syy, sxy, sz, sxz, syz)
+            for c in range(m):
+                buf[c] = abs(dz[c] - (a + b * dx[c] + cc * dy[c]))
+            scale = _MAD_TO_SIGMA * _median(buf, m)
+            if not np.isfinite(scale):
+                scale = 0.0
+        # the residuals of a 3-parameter fit to m points shrink by sqrt((m - 3) / m); the
+        # plane's own value at the point is uncertain by about scale / sqrt(m)
+        mm = max(m, 4)
+        scale = max(scale * math.sqrt(mm / (mm - 3.0)), min_scale)
+        h = -a  # the plane passes a above the point
+        s = math.sqrt(sig[i] * sig[i] + scale * scale * (1.0 + 1.0 / mm))
+        height[i] = h
+        sigma[i] = s
+        is_obj[i] = h > k_sigma * s and h >= min_h
     return is_obj, height, sigma
 
 
-def _weighted_plane(dx, dy, dz, w):
-    """Per row, the weighted least-squares plane ``dz = a + b dx + c dy`` (ridge on b, c)."""
-    sw = w.sum(axis=1)
-    sx, sy = (w * dx).sum(axis=1), (w * dy).sum(axis=1)
-    sxx, syy, sxy = (w * dx * dx).sum(axis=1), (w * dy * dy).sum(axis=1), (w * dx * dy).sum(axis=1)
+@numba.njit(cache=True, nogil=True)
+def _plane3(sw, sx, sy, sxx, syy, sxy, sz, sxz, syz):
+    """The weighted least-squares plane ``dz = a + b dx + c dy`` from its sums (ridge on b, c).
+
+    The 3 x 3 normal equations solved by Cramer's rule (symmetric, positive definite with
+    the ridge).
+    """
     # ridge: a tiny multiple of the neighbourhood's own spread (collinear profiler lines,
     # a single neighbour); without weight at all the plane falls back to a = 0 (no object)
     ridge = 1e-6 * (sxx + syy) + 1e-12
-    m = np.empty((dx.shape[0], 3, 3))
-    m[:, 0] = np.stack([sw + 1e-12, sx, sy], axis=1)
-    m[:, 1] = np.stack([sx, sxx + ridge, sxy], axis=1)
-    m[:, 2] = np.stack([sy, sxy, syy + ridge], axis=1)
-    rhs = np.stack([(w * dz).sum(axis=1), (w * dx * dz).sum(axis=1), (w * dy * dz).sum(axis=1)], 1)
-    sol = np.linalg.solve(m, rhs[..., None])[..., 0]
-    return sol[:, 0], sol[:, 1], sol[:, 2]
+    m00, m01, m02 = sw + 1e-12, sx, sy
+    m11, m12, m22 = sxx + ridge, sxy, syy + ridge
+    c00 = m11 * m22 - m12 * m12
+    c01 = m02 * m12 - m01 * m22
+    c02 = m01 * m12 - m02 * m11
+    det = m00 * c00 + m01 * c01 + m02 * c02
+    a = (c00 * sz + c01 * sxz + c02 * syz) / det
+    b = (c01 * sz + (m00 * m22 - m02 * m02) * sxz + (m01 * m02 - m00 * m12) * syz) / det
+    c = (c02 * sz + (m01 * m02 - m00 * m12) * sxz + (m00 * m11 - m01 * m01) * syz) / det
+    return a, b, c
 
 
 def classify_objects(points: Points, settings: ObjectSettings) -> tuple[Points, int]:

@@ -1,14 +1,11 @@
 """Submerged objects (class 43) on hand-built point clouds with analytic cubes."""
 
-import warnings
-
 import numpy as np
 import pytest
 
 from pipeline.process.classify import BATHYMETRIC_POINT, SUBMERGED_OBJECT
 from pipeline.process.objects import (
     ObjectSettings,
-    _row_median,
     classify_objects,
     detect_objects,
 )
@@ -133,19 +130,53 @@ def test_blocks_of_points_give_the_same_detections_as_all_at_once(monkeypatch):
         np.testing.assert_array_equal(got.sigma_m, whole.sigma_m)
 
 
-def test_row_medians_are_nanmedians_bit_for_bit():
-    # the object test's row medians: np.nanmedian's figures, ties of -0.0 and +0.0, rows
-    # without any entry and NaNs among the entries included
-    rng = np.random.default_rng(2)
-    for trial in range(60):
-        n, k = int(rng.integers(1, 200)), int(rng.integers(1, 40))
-        v = rng.normal(0.0, 1.0, (n, k)) * 10.0 ** rng.uniform(-3.0, 3.0)
-        if trial % 3 == 0:
-            v = np.round(v, 1)  # ties, and -0.0 beside +0.0
-        ok = rng.random((n, k)) < rng.uniform(0.0, 1.0)
-        v[rng.random((n, k)) < 0.05] = np.nan
-        with np.errstate(all="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            want = np.nanmedian(np.where(ok, v, np.nan), axis=1)
-        got = _row_median(v, ok)
-        assert got.tobytes() == want.tobytes(), trial
+def _brute_force_test(xy, z, sig, settings, i):
+    """The module docstring's test of point ``i``, one point at a time with numpy's own tools.
+
+    Neighbours by distance over every reference point (no k-d tree), ``np.median`` and a
+    weighted ``np.linalg.lstsq`` (the same ridge rows) in each reweighting: an independent
+    reading of the method, not the kernel's code.
+    """
+    from pipeline.process.objects import _reference
+
+    ref = _reference(xy, z, settings.reference_cell_m)
+    d = np.hypot(*(xy[ref] - xy[i]).T)
+    near = np.argsort(d, kind="stable")[: settings.neighbours]
+    j = ref[near[d[near] <= settings.radius_m]]
+    if j.size < settings.min_neighbours:
+        return False, np.nan, np.nan
+    dx, dy, dz = xy[j, 0] - xy[i, 0], xy[j, 1] - xy[i, 1], z[j] - z[i]
+    a, b, c = np.median(dz), 0.0, 0.0
+    scale = 1.4826 * np.median(np.abs(dz - a))
+    for _ in range(settings.iterations):
+        scale = max(scale, settings.min_scale_m)
+        u = (dz - (a + b * dx + c * dy)) / (4.685 * scale)
+        w = np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0)
+        ridge = 1e-6 * (np.sum(w * dx * dx) + np.sum(w * dy * dy)) + 1e-12
+        rows = np.sqrt(w)[:, None] * np.c_[np.ones_like(dx), dx, dy]
+        design = np.vstack([rows, np.diag(np.sqrt([1e-12, ridge, ridge]))])
+        rhs = np.concatenate([np.sqrt(w) * dz, np.zeros(3)])
+        a, b, c = np.linalg.lstsq(design, rhs, rcond=None)[0]
+        scale = 1.4826 * np.median(np.abs(dz - (a + b * dx + c * dy)))
+    m = max(j.size, 4)
+    scale = max(scale * np.sqrt(m / (m - 3.0)), settings.min_scale_m)
+    sigma = np.sqrt(sig[i] ** 2 + scale**2 * (1.0 + 1.0 / m))
+    return bool(-a > settings.k_sigma * sigma and -a >= settings.min_height_m), -a, sigma
+
+
+def test_the_compiled_test_is_the_method_point_by_point():
+    # a cube's points (objects), its edges (partly in the neighbourhood), the seabed, a sparse
+    # edge of the swath (few neighbours): every figure as the brute-force reading makes it
+    rng = np.random.default_rng(5)
+    x, y, z, sig, cubes, top = swath_cloud(rng, density_per_m2=3.0)
+    settings = ObjectSettings()
+    got = detect_objects(np.c_[x, y], z, sig, settings)
+    edge = np.flatnonzero(np.abs(x) > 19.0)[:10]
+    picks = np.concatenate([np.flatnonzero(top)[:30], rng.choice(x.size, 60, replace=False), edge])
+    xy = np.c_[x, y]
+    for i in picks:
+        want_obj, want_h, want_s = _brute_force_test(xy, z, sig, settings, i)
+        assert got.is_object[i] == want_obj, i
+        np.testing.assert_allclose(got.height_m[i], want_h, rtol=1e-9, atol=1e-12, err_msg=str(i))
+        np.testing.assert_allclose(got.sigma_m[i], want_s, rtol=1e-9, atol=1e-12, err_msg=str(i))
+    assert got.is_object[picks].sum() >= 10 and (~got.is_object[picks]).sum() >= 50
