@@ -23,10 +23,12 @@ threshold can add it.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from scipy.special import ndtr
 
 from pipeline.constants import MAD_TO_SIGMA
+from pipeline.process.row_kernels import median_of, pairwise_sum
 
 __all__ = ["difference_noise_sigma", "window_baseline"]
 
@@ -86,33 +88,83 @@ def difference_noise_sigma(y: np.ndarray) -> np.ndarray:
         Noise σ of one sample (≥ 0; 0 only for a row whose differences are all equal). For
         white noise it is ``std(diff) / √2``; slow trends (a baseline, the water column's
         decay) cancel in the differences, and echoes are clipped out.
+
+    Notes
+    -----
+    Each row's differences are formed, centred and clipped inside compiled loops
+    (:func:`_difference_start`, :func:`_clipped_moment`), their squares added in numpy's
+    order (:func:`~pipeline.process.row_kernels.pairwise_sum`): the figures of the
+    whole-array code this replaced, to the bit, without its ``(n, m)`` temporaries.
     """
-    d = np.diff(np.asarray(y, dtype=np.float64), axis=1)
-    d -= _row_median(d)[:, None]
-    a = np.abs(d)
-    # the data's quantum: the smallest non-zero difference (integer codes: 1)
-    quantum = np.min(np.where(a > 0, a, np.inf), axis=1)
-    quantum = np.where(np.isfinite(quantum), quantum, 0.0)
-    s = np.maximum(MAD_TO_SIGMA * _row_median(a), quantum)
-    d2 = d * d  # the same squares every pass: formed once
-    inside = n_in = ms = None
+    y = np.ascontiguousarray(y, dtype=np.float64)
+    med, quantum, s = _difference_start(y)
     for _ in range(N_ITER):
         # never clip a one-quantum step: at σ under a count it is most of the noise
         lim = np.maximum(CLIP_SIGMA * s, 1.5 * quantum)
-        now = a <= lim[:, None]
-        if inside is None:
-            rows = slice(None)
-            n_in, ms = np.empty(now.shape[0], dtype=np.intp), np.empty(now.shape[0])
-        else:
-            # a row whose clipped set did not move keeps its moment (the same sum of the same
-            # squares): after the first pass few rows move (Palmer: a fifth, then a fortieth)
-            rows = np.flatnonzero((now != inside).any(axis=1))
-        inside = now
-        n_in[rows] = np.maximum(now[rows].sum(axis=1), 1)
-        ms[rows] = np.where(now[rows], d2[rows], 0.0).sum(axis=1) / n_in[rows]
+        total, count = _clipped_moment(y, med, lim)
+        ms = total / np.maximum(count, 1)
         share = _inside_variance_share(lim / np.maximum(s, 1e-300))
         s = np.sqrt(ms / share)
     return s / np.sqrt(2.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def _difference_start(y):
+    """Per row: the differences' median, their quantum and the MAD start of σ, each ``(n,)``.
+
+    The quantum is the smallest non-zero centred difference (integer codes: 1; 0 without
+    any); the start ``max(MAD_TO_SIGMA · MAD, quantum)``. A row holding a NaN gives NaN.
+    """
+    n, m = y.shape
+    k = m - 1
+    med = np.empty(n)
+    quantum = np.zeros(n)
+    start = np.empty(n)
+    buf = np.empty(k)
+    for p in range(n):
+        nan = False
+        for c in range(k):
+            buf[c] = y[p, c + 1] - y[p, c]
+            nan |= buf[c] != buf[c]
+        if nan:
+            med[p] = np.nan
+            start[p] = np.nan
+            continue
+        md = median_of(buf, k)
+        q = np.inf
+        for c in range(k):
+            a = abs((y[p, c + 1] - y[p, c]) - md)
+            buf[c] = a
+            if a > 0.0 and a < q:
+                q = a
+        q = q if q < np.inf else 0.0
+        mad = MAD_TO_SIGMA * median_of(buf, k)
+        med[p] = md
+        quantum[p] = q
+        start[p] = mad if (mad >= q or mad != mad) else q
+    return med, quantum, start
+
+
+@numba.njit(cache=True, nogil=True)
+def _clipped_moment(y, med, lim):
+    """Per row: the sum of the centred differences' squares within ``lim``, and their count."""
+    n, m = y.shape
+    k = m - 1
+    total = np.empty(n)
+    count = np.zeros(n, np.int64)
+    sq = np.empty(k)
+    for p in range(n):
+        c_in = 0
+        for c in range(k):
+            d = (y[p, c + 1] - y[p, c]) - med[p]
+            if abs(d) <= lim[p]:
+                sq[c] = d * d
+                c_in += 1
+            else:
+                sq[c] = 0.0
+        total[p] = pairwise_sum(sq, 0, k)
+        count[p] = c_in
+    return total, count
 
 
 def window_baseline(y: np.ndarray, k: int, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

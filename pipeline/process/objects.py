@@ -45,6 +45,7 @@ from pipeline.config import setting
 from pipeline.parallel import thread_map_rows
 from pipeline.process.classify import BATHYMETRIC_POINT, SUBMERGED_OBJECT
 from pipeline.process.returns import Points, ReturnKind
+from pipeline.process.row_kernels import median_of
 
 __all__ = ["ObjectSettings", "ObjectDetections", "detect_objects", "classify_objects"]
 
@@ -176,43 +177,6 @@ def _test_rows(xy, z, sig, ref, tree, rows: slice, settings: ObjectSettings):
 
 
 @numba.njit(cache=True, nogil=True)
-def _median(buf, m):
-    """Median of ``buf[:m]`` (reordered in place): the two middle values' sum over 2.
-
-    The middle order statistics by quickselect (Hoare's partition): the values a sort
-    would put there, in a few passes over 48 neighbours instead of a sort's.
-    """
-    hi = m // 2
-    left, right = 0, m - 1
-    while left < right:
-        pivot = buf[(left + right) // 2]
-        i, j = left, right
-        while i <= j:
-            while buf[i] < pivot:
-                i += 1
-            while buf[j] > pivot:
-                j -= 1
-            if i <= j:
-                buf[i], buf[j] = buf[j], buf[i]
-                i += 1
-                j -= 1
-        if hi <= j:
-            right = j
-        elif hi >= i:
-            left = i
-        else:
-            break
-    upper = buf[hi]
-    if m % 2 == 1:
-        return (upper + upper) / 2.0
-    lower = buf[0]  # the largest of the values before the middle
-    for c in range(1, hi):
-        if buf[c] > lower:
-            lower = buf[c]
-    return (lower + upper) / 2.0
-
-
-@numba.njit(cache=True, nogil=True)
 def _test_kernel(xy, z, sig, ref, idx, row0, min_nb, iterations, min_scale, k_sigma, min_h):
     """Per row: neighbours' robust plane (Tukey IRLS), height above it and the test's sigma.
 
@@ -242,10 +206,10 @@ def _test_kernel(xy, z, sig, ref, idx, row0, min_nb, iterations, min_scale, k_si
         if m < min_nb:
             continue
         buf[:m] = dz[:m]
-        a = _median(buf, m)
+        a = median_of(buf, m)
         for c in range(m):
             buf[c] = abs(dz[c] - a)
-        scale = max(_MAD_TO_SIGMA * _median(buf, m), 0.0)
+        scale = max(_MAD_TO_SIGMA * median_of(buf, m), 0.0)
         b = 0.0
         cc = 0.0
         for _ in range(iterations):
@@ -267,7 +231,7 @@ def _test_kernel(xy, z, sig, ref, idx, row0, min_nb, iterations, min_scale, k_si
             a, b, cc = _plane3(sw, sx, sy, sxx, syy, sxy, sz, sxz, syz)
             for c in range(m):
                 buf[c] = abs(dz[c] - (a + b * dx[c] + cc * dy[c]))
-            scale = _MAD_TO_SIGMA * _median(buf, m)
+            scale = _MAD_TO_SIGMA * median_of(buf, m)
             if not np.isfinite(scale):
                 scale = 0.0
         # the residuals of a 3-parameter fit to m points shrink by sqrt((m - 3) / m); the
