@@ -174,6 +174,10 @@ class TracedTables:
             self.log_rho[1] - self.log_rho[0]
         )
         shape = ft.shape
+        if not (np.all(np.isfinite(ft)) and np.all(np.isfinite(fr))):
+            # (the compiled lookup reads the table unchecked: a NaN or infinite optical
+            # depth or radius would index past it)
+            raise ValueError("forward-scattering tables: optical depth and radius must be finite")
         traced = _trilinear(
             self.h,
             np.ascontiguousarray(ia, dtype=np.int64).ravel(),

@@ -148,7 +148,9 @@ class ColumnStack:
 def _accumulate(filt, first_idx, end_idx, dt_s) -> ColumnStack:
     """Stack of ``filt`` (n, m) from ``ceil(first_idx)`` to before ``end_idx``, shapes (n,)."""
     n, m = filt.shape
-    off = np.ceil(first_idx).astype(np.int64)
+    first_idx = np.asarray(first_idx, dtype=np.float64)
+    # a column without a finite start is not stacked (it starts past the window's end)
+    off = np.where(np.isfinite(first_idx), np.ceil(np.minimum(first_idx, m)), m).astype(np.int64)
     if n and off.min() < 0:  # (a column from before sample 0 would need more than m bins)
         raise ValueError("a column starts before the first sample")
     # each pulse's column end (its first bin not stacked), by class

@@ -97,7 +97,11 @@ def difference_noise_sigma(y: np.ndarray) -> np.ndarray:
     whole-array code this replaced, to the bit, without its ``(n, m)`` temporaries.
     """
     y = np.ascontiguousarray(y, dtype=np.float64)
-    med, quantum, s = _difference_start(y)
+    if y.ndim != 2 or y.shape[1] < 2:
+        raise ValueError(f"difference_noise_sigma needs rows of >= 2 samples; got {y.shape}")
+    # (the constant is passed, not read by the kernel: a cached kernel keeps the values it
+    # was compiled with, and numba checks only this file's date)
+    med, quantum, s = _difference_start(y, MAD_TO_SIGMA)
     for _ in range(N_ITER):
         # never clip a one-quantum step: at σ under a count it is most of the noise
         lim = np.maximum(CLIP_SIGMA * s, 1.5 * quantum)
@@ -109,7 +113,7 @@ def difference_noise_sigma(y: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def _difference_start(y):
+def _difference_start(y, mad_to_sigma):
     """Per row: the differences' median, their quantum and the MAD start of σ, each ``(n,)``.
 
     The quantum is the smallest non-zero centred difference (integer codes: 1; 0 without
@@ -138,7 +142,7 @@ def _difference_start(y):
             if a > 0.0 and a < q:
                 q = a
         q = q if q < np.inf else 0.0
-        mad = MAD_TO_SIGMA * median_of(buf, k)
+        mad = mad_to_sigma * median_of(buf, k)
         med[p] = md
         quantum[p] = q
         start[p] = mad if (mad >= q or mad != mad) else q

@@ -335,11 +335,11 @@ def detect_photon_events(
     between = (col > i_b[:, None]) & (col < i_s[:, None])
     valley = np.where(has_b, np.argmin(np.where(between & measured, hist, np.inf), axis=1), -1)
     b_box = (i_b - cb, np.minimum(i_b + cb, np.where(has_b, valley - 1, nb)))
-    # a cell over a wind sea: about its echo's mode, not a crest's (photon_windows.wave_mode)
+    # a cell over a wind sea: about its echo's mode, not a crest's (photon_windows.wave_surface)
     i_c, half, waves = i_s, np.full(n_win, cb), np.zeros(n_win, dtype=bool)
     if (h_sea := sea_sigma_bins(windows, s.bin_m)) >= 1:
-        summed = box_sum(full - h_sea, full + h_sea)
-        i_c, half, waves = wave_surface(box[rows, i_s], summed, bg, top, i_s, has_s, cb, h_sea)
+        floor = np.maximum(i_s - sep_bins, valley)  # above the bottom's search and its valley
+        i_c, half, waves = wave_surface(hist, box[rows, i_s], bg, floor, top, i_s, has_s, cb, h_sea)
     s_box = (np.maximum(i_c - half, valley + 1), i_c + half)
 
     def centroid(i_peak, box):

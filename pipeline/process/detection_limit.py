@@ -245,7 +245,10 @@ def _column_sums(filt, i_surface, first, end, nf, dt_s, min_snr):
     first_y = np.zeros(n)
     top_y = np.full(n, -np.inf)
     for p in range(n):
-        c0 = 0 if first[p] < 0.0 else int(math.floor(first[p])) + 1
+        if not (first[p] < m):  # (past the window, or not a number: no run)
+            c0 = m
+        else:
+            c0 = 0 if first[p] < 0.0 else int(math.floor(first[p])) + 1
         level = min_snr * nf[p]
         sw = st = sl = stt = stl = 0.0
         k = 0

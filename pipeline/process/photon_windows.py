@@ -198,7 +198,7 @@ def sea_sigma_bins(windows: PhotonWindows, bin_m: float) -> int:
 WAVE_SPREAD_RATIO = 0.6
 
 
-def wave_surface(narrow, summed, bg, top, i_peak, has, cb, h_sea):
+def wave_surface(hist, narrow, bg, floor, top, i_peak, has, cb, h_sea):
     """Each cell's surface bin and centroid half-width: the mode of a wave-spread echo.
 
     A cell's shots meet the sea at many phases of its waves, so over a wind sea its surface
@@ -207,18 +207,22 @@ def wave_surface(narrow, summed, bg, top, i_peak, has, cb, h_sea):
     surfaces read 0.34 m above the mean sea and the depths 0.15 m deep. Where the echo is so
     spread (:data:`WAVE_SPREAD_RATIO`), its surface is the centroid within one wave sigma
     (``H_s / 4`` at the logged wind) of the mode of the histogram summed over that sigma,
-    searched within the band below the highest significant box, which the crests reach: the
-    mean sea's height for a symmetric spread. A narrow echo (a flat sea under a logged wind,
-    a cell on a long wave's crest) keeps its peak and box.
+    searched from the highest significant box, which the crests reach, down to ``floor``
+    (above the bottom's search and the valley over a found bottom; the bins at and below it
+    count as background in the sums, so a bright shallow bottom is no mode): the mean sea's
+    height for a symmetric spread. A narrow echo (a flat sea under a logged wind, a cell on a
+    long wave's crest) keeps its peak and box.
 
     Parameters
     ----------
+    hist : (n_windows, n_bins)
+        The live-time corrected histogram.
     narrow : (n_windows,)
-        The live-time corrected counts in the centroid box (``±cb``) of the climb's peak.
-    summed : (n_windows, n_bins)
-        The histogram summed over ``±h_sea`` bins.
+        Its counts in the centroid box (``±cb``) of the climb's peak.
     bg : (n_windows,)
         Background counts per bin.
+    floor : (n_windows,) int
+        The highest bin the surface may not reach.
     top, i_peak : (n_windows,) int
         The highest significant box, and the climb's peak below it.
     has : (n_windows,) bool
@@ -229,19 +233,24 @@ def wave_surface(narrow, summed, bg, top, i_peak, has, cb, h_sea):
     Returns
     -------
     centre : (n_windows,) int
-        The centroid's centre bin.
+        The centroid's centre bin (above ``floor`` with its box's lower half where it moved).
     half : (n_windows,) int
         Its half-width, bins.
     waves : (n_windows,) bool
         The echo is wave-spread (its centroid stands for the surface, not a pulse fit).
     """
-    rows = np.arange(summed.shape[0])
-    col = np.arange(summed.shape[1])[None, :]
-    inside = (col <= top[:, None]) & (col >= (top - 4 * h_sea)[:, None])
+    n_win, nb = hist.shape
+    rows = np.arange(n_win)
+    col = np.arange(nb)[None, :]
+    kept = np.where(col > floor[:, None], hist, bg[:, None])
+    cs = np.concatenate([np.zeros((n_win, 1)), np.cumsum(kept, axis=1)], axis=1)
+    lo, hi = np.clip(col - h_sea, 0, nb), np.clip(col + h_sea + 1, 0, nb)
+    summed = cs[:, hi[0]] - cs[:, lo[0]]
+    inside = (col <= top[:, None]) & (col >= np.maximum(top - 4 * h_sea, floor + 1)[:, None])
     mode = np.argmax(np.where(inside, summed, -np.inf), axis=1)
     spread = summed[rows, mode] - bg * (2 * h_sea + 1)
     share = (narrow - bg * (2 * cb + 1)) / np.maximum(spread, 1e-9)
-    waves = has & (share < WAVE_SPREAD_RATIO)
+    waves = has & inside[rows, mode] & (share < WAVE_SPREAD_RATIO)
     half = np.where(waves, max(h_sea, cb), cb)
     return np.where(waves, mode, i_peak), half, waves
 
