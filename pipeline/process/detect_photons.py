@@ -62,7 +62,7 @@ from pipeline.process.photon_livetime import (
     event_live_fraction,
     surface_pileup_pe,
 )
-from pipeline.process.photon_windows import PhotonWindows, sea_sigma_bins, wave_surface
+from pipeline.process.photon_windows import PhotonWindows
 from pipeline.process.returns import DetectorFlag
 
 __all__ = ["PhotonDetectSettings", "detect_photon_events"]
@@ -334,13 +334,8 @@ def detect_photon_events(
     # the centroids of surface and bottom stop at the emptiest bin between them
     between = (col > i_b[:, None]) & (col < i_s[:, None])
     valley = np.where(has_b, np.argmin(np.where(between & measured, hist, np.inf), axis=1), -1)
+    s_box = (np.maximum(i_s - cb, valley + 1), i_s + cb)
     b_box = (i_b - cb, np.minimum(i_b + cb, np.where(has_b, valley - 1, nb)))
-    # a cell over a wind sea: about its echo's mode, not a crest's (photon_windows.wave_surface)
-    i_c, half, waves = i_s, np.full(n_win, cb), np.zeros(n_win, dtype=bool)
-    if (h_sea := sea_sigma_bins(windows, s.bin_m)) >= 1:
-        floor = np.maximum(i_s - sep_bins, valley)  # above the bottom's search and its valley
-        i_c, half, waves = wave_surface(hist, box[rows, i_s], bg, floor, top, i_s, has_s, cb, h_sea)
-    s_box = (np.maximum(i_c - half, valley + 1), i_c + half)
 
     def centroid(i_peak, box):
         lo, hi = box[0][ev_win], box[1][ev_win]
@@ -402,7 +397,7 @@ def detect_photon_events(
     i_lim = np.where(has_det, np.maximum(i_det, i_lim), i_lim)
     has_lim = has_s & ~has_b & (i_lim < s_lo - cb)
     z_lim = (k0 + i_lim + 0.5) * s.bin_m
-    z_s, amp_s = centroid(i_c, s_box)
+    z_s, amp_s = centroid(i_s, s_box)
     lam_s = surface_pileup_pe(shot, window, b, ev_win, s_box, n, n_win, n_channels)
     z_b, amp_b = centroid(i_b, b_box)
     if s.echo_ml and pulse_sigma_s > 0:
@@ -414,7 +409,6 @@ def detect_photon_events(
              "bg_b": local[rows, i_b] * per_m, "edge_s": (k0 + s_box[0]) * s.bin_m,
              "edge_b": (k0 + b_box[1] + 1) * s.bin_m},
         )  # fmt: skip
-        z_s = np.where(waves, centroid(i_c, s_box)[0], z_s)  # (a wave sea's echo: no pulse)
     # per shot: time at which its own measured beam reaches the window's detected heights
     dz = direction[:, 2]
     with np.errstate(divide="ignore"):

@@ -275,78 +275,37 @@ def test_cells_whose_keys_would_overflow_are_refused_before_the_run():
         parse_scene(data)
 
 
-def _sea_cells(sigma_m, column, seed=21, n=64000, bottom=(0.0, -10.0)):
-    """Photons of a Palmer scan: each shot's surface at its own height of a sea, Gaussian
-    about the mean sea z = 0 with ``sigma_m`` (a linear sea's heights, which its returns
-    sample evenly), a water column fading 1/m below it (``column`` photons per shot; the
-    surface 0.6), a flat seabed (``bottom``: photons per shot, apparent height) and a
-    uniform background. The truth, z = 0, is drawn here."""
-    rng = np.random.default_rng(seed)
+@pytest.mark.xfail(
+    strict=True,
+    reason="a cell over a wind sea reads its surface at a crest's peak (the first peak met "
+    "from above): +0.5 m here, +0.34 m on suite tuning seed 57 (10.1 m/s); session 27 tried "
+    "the echo's mode and did not keep it (RESULTS_suite.md, 'Session 27')",
+)
+def test_a_wave_cell_surface_is_the_mean_sea():
+    """Each shot meets its own height of a wind sea, Gaussian about the mean sea z = 0 with
+    sigma 0.5 m (H_s 2 m; a linear sea's heights, which its returns sample evenly), plus a
+    uniform background; the truth, z = 0, is drawn here. The cells' mean surface should lie
+    within a few centimetres of it (the sampling error over the ~300 cells is ~0.003 m)."""
+    from pipeline.process.photon_windows import PhotonWindows
+
+    rng = np.random.default_rng(21)
+    n = 64000
     origin, beam, _ = _palmer(n)
     cos = -beam[:, 2]
-    sea = sigma_m * rng.standard_normal(n)
-    k_s, k_c, k_g = rng.poisson(0.6, n), rng.poisson(column, n), rng.poisson(0.5, n)
-    k_b = rng.poisson(bottom[0], n)
-    z = [np.repeat(sea, k_s), np.repeat(sea, k_c) - rng.exponential(1.0, k_c.sum())]
-    z.append(np.full(k_b.sum(), bottom[1]))
-    ks = (k_s, k_c, k_b)
-    t = [2.0 * N_AIR * ((H_M - zz) / np.repeat(cos, k)) / C for zz, k in zip(z, ks, strict=True)]
-    t[0] = t[0] + 0.3e-9 * rng.standard_normal(k_s.sum())
+    sea = 0.5 * rng.standard_normal(n)
+    k_s, k_g = rng.poisson(0.6, n), rng.poisson(0.5, n)
+    t_s = 2.0 * N_AIR * ((H_M - np.repeat(sea, k_s)) / np.repeat(cos, k_s)) / C
+    t_s = t_s + 0.3e-9 * rng.standard_normal(k_s.sum())
     t_g = np.repeat(2.0 * N_AIR * (H_M / cos) / C - 60e-9, k_g) + rng.uniform(0, 160e-9, k_g.sum())
-    times = np.concatenate([*t, t_g])
-    shot = np.concatenate([np.repeat(np.arange(n), k) for k in (*ks, k_g)])
+    times = np.concatenate([t_s, t_g])
+    shot = np.concatenate([np.repeat(np.arange(n), k_s), np.repeat(np.arange(n), k_g)])
     order = np.lexsort((times, shot))
-    offsets = np.r_[0, np.cumsum(k_s + k_c + k_b + k_g)]
-
-    def detect(band_m):
-        from pipeline.process.photon_windows import PhotonWindows
-
-        win = PhotonWindows(200, 10.0, n, band_m)
-        return detect_photon_events(
-            offsets, times[order], origin, beam, N_AIR, pulse_id=np.arange(n), windows=win
-        )
-
-    def surface_m(det):
-        hs = det.has_surface
-        assert hs.mean() > 0.9
-        return H_M - C * det.t_surface_s[hs] / (2.0 * N_AIR) * cos[hs]
-
-    return detect, surface_m
-
-
-def test_a_wave_cell_surface_is_the_mean_sea_not_the_crests():
-    """A sea of sigma 0.5 m (H_s 2 m) in 10 m cells: read about the first peak from above,
-    the cells' surfaces stand a crest's height high (0.5 m when written); about the echo's
-    mode, within a few centimetres of the mean sea (the sampling error of a cell's mean is
-    ~0.05 m; over the 300 cells ~0.003 m)."""
-    detect, surface_m = _sea_cells(0.5, 0.0)
-    assert np.mean(surface_m(detect(0.0))) > 0.3  # no band: the climb's peak, a crest's
-    assert abs(np.mean(surface_m(detect(2.0)))) < 0.04
-
-
-def test_a_narrow_surface_echo_is_read_as_before_under_a_logged_wind():
-    """A flat sea under a column half as bright as the surface, the band of an 8 m/s wind
-    logged: every cell's echo is narrow, so its surface is its peak's centroid, as with no
-    band at all (the wave mode, a box of the wave's sigma below the echo, would hold column
-    and read low: 0.07 m in this case when tried)."""
-    detect, _ = _sea_cells(0.0, 0.3)
-    a, b = detect(0.0), detect(1.44)
-    np.testing.assert_array_equal(a.t_surface_s, b.t_surface_s)
-    np.testing.assert_array_equal(a.has_surface, b.has_surface)
-
-
-@pytest.mark.parametrize(("sigma_m", "band_m"), [(0.0, 2.14), (0.5, 2.0)])
-def test_a_bright_bottom_just_past_the_band_is_not_the_surface(sigma_m, band_m):
-    """A seabed 2.5 times as bright as the surface, 2.3 m under a flat sea with a 10 m/s wind
-    logged (band 2.14 m), or 2.5 m under a sea of sigma 0.5 m: summed over the wave's sigma,
-    the bottom outshines the narrow surface box and, searched down to the band's depth, was
-    read as the surface (z_s -1.76 m on the flat sea in the review that found it). The surface
-    is searched above the bottom's search: the sea's median within 0.05 m, the bottom found,
-    and no more surfaces on the seabed than without the band (over the sea of sigma 0.5 m,
-    1.4 % of the shots' windows show no significant surface above the seabed either way)."""
-    detect, surface_m = _sea_cells(sigma_m, 0.0, bottom=(1.5, -2.3 if sigma_m == 0 else -2.5))
-    det = detect(band_m)
-    z_s, before = surface_m(det), surface_m(detect(0.0))
-    assert abs(np.median(z_s)) < 0.05
-    assert np.mean(z_s < -1.0) <= np.mean(before < -1.0) + 0.002
-    assert det.has_bottom.mean() > 0.9
+    offsets = np.r_[0, np.cumsum(k_s + k_g)]
+    win = PhotonWindows(200, 10.0, n, 2.0)
+    det = detect_photon_events(
+        offsets, times[order], origin, beam, N_AIR, pulse_id=np.arange(n), windows=win
+    )
+    hs = det.has_surface
+    assert hs.mean() > 0.9
+    z_s = H_M - C * det.t_surface_s[hs] / (2.0 * N_AIR) * cos[hs]
+    assert abs(np.mean(z_s)) < 0.05
