@@ -352,6 +352,10 @@ def _cut(i_fit: np.ndarray, offsets: np.ndarray, m: int) -> np.ndarray:
     return (i_fit + offsets[0] < 0) | (i_fit + offsets[-1] > m - 1)
 
 
+#: Grid step of :func:`onset_peak`'s first pass.
+_COARSE = 10
+
+
 def onset_peak(sg: float, decay: np.ndarray) -> np.ndarray:
     """Peak value of each pulse's :func:`column_onset` (1 for a step; below for a decay).
 
@@ -365,7 +369,14 @@ def onset_peak(sg: float, decay: np.ndarray) -> np.ndarray:
     # the peak lies within ~3 σ of the surface for every tabulated decay: a 0.02 σ grid
     z = np.arange(-1.0, 4.0001, 0.02)
     k = np.asarray(decay, dtype=np.float64)[:, None]
-    return column_onset(z[None, :] * sg, sg, k).max(axis=1)
+    # the onset is log-concave in u (an exponential times a normal CDF), so one peak: every
+    # 10th grid point first, then the grid within one such step of the best of them. The
+    # same values at the same points as the whole grid's, and its maximum (a fifth of the
+    # evaluations)
+    coarse = np.arange(0, z.size, _COARSE)
+    best = coarse[column_onset(z[coarse][None, :] * sg, sg, k).argmax(axis=1)]
+    near = np.clip(best[:, None] + np.arange(-_COARSE, _COARSE + 1), 0, z.size - 1)
+    return column_onset(z[near] * sg, sg, k).max(axis=1)
 
 
 def _refined(sse: np.ndarray, i_peak: np.ndarray) -> np.ndarray:

@@ -42,3 +42,17 @@ def test_each_pulse_alone_gives_the_same_time_as_in_a_batch():
     batch = surface_step_fit(filt, i_peak, SG)
     one = np.array([surface_step_fit(filt[i : i + 1], i_peak[i : i + 1], SG)[0] for i in range(40)])
     np.testing.assert_array_equal(batch, one)
+
+
+def test_onset_peak_is_the_whole_grids_maximum_bit_for_bit():
+    # the two-pass search (every 10th grid point, then around the best) against the maximum
+    # over the whole 0.02-sigma grid, for decays from none to very steep and several widths
+    from pipeline.process.surface_step import DECAY_GRID, column_onset, onset_peak
+
+    rng = np.random.default_rng(12)
+    z = np.arange(-1.0, 4.0001, 0.02)
+    decay = np.concatenate([[0.0, 1e-9, 1.0, 5.0, 50.0], 10.0 ** rng.uniform(-4, 1, 3000)])
+    decay = np.concatenate([decay, DECAY_GRID])
+    for sg in (0.5, 1.0, 1.7, 4.0):
+        want = column_onset(z[None, :] * sg, sg, decay[:, None]).max(axis=1)
+        assert onset_peak(sg, decay).tobytes() == want.tobytes(), sg
