@@ -13,7 +13,6 @@ folders are not removed; deleting them is always safe.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import sys
 from pathlib import Path
@@ -35,13 +34,15 @@ def kernel_sources(root: Path = _PACKAGE) -> list[Path]:
     return found
 
 
-def kernel_key(root: Path = _PACKAGE) -> str:
-    """Hash of :func:`kernel_sources` (their paths under ``root`` and their bytes)."""
-    key = hashlib.sha256()
-    for path in kernel_sources(root):
-        key.update(str(path.relative_to(root)).encode())
-        key.update(path.read_bytes())
-    return key.hexdigest()[:16]
+def kernel_key(root: Path = _PACKAGE) -> str | None:
+    """:func:`~pipeline.table_cache.code_key` of :func:`kernel_sources` (None: one unreadable).
+
+    The tables' key: the sources' bytes, numpy's and scipy's versions, the machine and its
+    CPU features (compiled code is the machine's too).
+    """
+    from pipeline.table_cache import code_key
+
+    return code_key(kernel_sources(root))
 
 
 def use_kernel_cache() -> Path | None:
@@ -54,8 +55,11 @@ def use_kernel_cache() -> Path | None:
         return None
     from pipeline.table_cache import cache_dir
 
+    key = kernel_key()
+    if key is None:
+        return None
     try:
-        folder = cache_dir() / "numba" / kernel_key()
+        folder = cache_dir() / "numba" / key
         folder.mkdir(parents=True, exist_ok=True)
     except OSError:
         return None
