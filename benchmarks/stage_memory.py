@@ -1,7 +1,7 @@
 """Peak resident memory after each stage of a Palmer survey of about N pulses (issue 15).
 
-Usage: ``PYTHONPATH=. python benchmarks/stage_memory.py N`` (1 worker, posteriors off,
-chunks of 20 000 pulses; the scene is :func:`bench_e2e.palmer`). Prints each stage's
+Usage: ``PYTHONPATH=. python benchmarks/stage_memory.py N [--set run.KEY=VALUE ...]`` (1 worker,
+posteriors off, chunks of 20 000 pulses; the scene is :func:`bench_e2e.palmer`). Prints each stage's
 ``peak_rss_mb`` from the run's manifest (:class:`pipeline.stages.StageClock`): the first stage
 whose figure jumps is the one that raised the run's peak. One survey per invocation: the
 high-water mark never falls within a process. Results: ``RESULTS_e2e.md``.
@@ -25,14 +25,33 @@ from pipeline.scene import parse_scene  # noqa: E402
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("pulses", type=int)
-    n = ap.parse_args().pulses
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="run.KEY=VALUE",
+        help="a run setting, e.g. run.block_pulses=200000 (repeatable)",
+    )
+    args = ap.parse_args()
+    n = args.pulses
+    data = palmer(n, False, 20_000)
+    for kv in args.set:
+        key, value = kv.split("=", 1)
+        section, name = key.split(".", 1)
+        data.setdefault(section, {})[name] = (
+            None if value == "None" else float(value) if "." in value else int(value)
+        )
     with tempfile.TemporaryDirectory() as tmp:
-        scene = parse_scene(palmer(n, False, 20_000))
+        scene = parse_scene(data)
         m = run_scene(scene, Path(tmp) / "out", log=lambda s: None, workers=1)
-    print(f"# about {n} pulses")
-    for s in m["plan"]:
+    print(f"# about {n} pulses ({m['evaluation'].get('pulses')} evaluated); {' '.join(args.set)}")
+    stages = [s for s in m["plan"] if s.get("peak_rss_mb") is not None]
+    stages += [{"stage": k, **v} for k, v in m.get("other_stages", {}).items()]
+    for s in stages:
         if s.get("peak_rss_mb") is not None:
             print(f"{s['stage']:20s} {s['peak_rss_mb']:8.0f} MB  cpu {s['cpu_s']:.1f} s")
+    if "blocked" in m["evaluation"]:
+        print("blocked:", m["evaluation"]["blocked"])
 
 
 if __name__ == "__main__":

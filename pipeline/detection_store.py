@@ -143,6 +143,10 @@ class DetectionStore:
         self.chunks.append(summary)
         return summary
 
+    def fields(self, c: int) -> list[str]:
+        """The fields stored for chunk ``c``."""
+        return list(self._index[c])
+
     def load_chunk(self, c: int, fields: list[str] | None = None) -> dict[str, np.ndarray]:
         """Fields of chunk ``c`` (all by default)."""
         out = {}

@@ -119,6 +119,8 @@ def run_scene(
             {"stage": s.name, "runs": s.runs, "reason": s.reason, **stages.get(s.name, {})}
             for s in the_plan
         ],
+        # timed parts outside the plan's stages (a blocked survey's block passes)
+        "other_stages": {k: v for k, v in stages.items() if k not in {s.name for s in the_plan}},
         "files": {k: Path(v).relative_to(out).as_posix() for k, v in files.items()},
         "timings_s": {"total_wall_s": time.perf_counter() - t0},
         # where the chunk loop ran (stage CPU seconds add up every worker's)

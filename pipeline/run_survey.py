@@ -4,12 +4,15 @@ Simulation (terrain → survey → trace → receiver) runs in chunks of ``run.c
 (:mod:`pipeline.survey_chunks`), here or on workers (:mod:`pipeline.parallel`); of each chunk
 only what a real system records is kept: the measured navigation and the detections of the
 receiver's data, spilled chunk by chunk to disk (:mod:`pipeline.detection_store`; the
-survey-wide statistics the later stages need are streamed). Processing
-(:mod:`pipeline.process`) then sees only those (loaded back whole: not tiled yet) and
-the :class:`~pipeline.process.context.ProcessingContext`; the evaluate stage alone meets the
-truth (:mod:`pipeline.survey_report`). Every stage runs only where the plan
-(:func:`pipeline.stages.plan`) says so, under the :class:`~pipeline.stages.StageClock`.
-The grid and ``points.laz`` are made tile by tile (:mod:`pipeline.survey_tiles`).
+survey-wide statistics the later stages need are streamed). Processing, the grid and the TPU
+(:func:`pipeline.survey_processing.process_survey`) then see only those and the
+:class:`~pipeline.process.context.ProcessingContext`: loaded back whole, or, for a survey of
+more than ``run.block_pulses`` pulses, block by block with a halo (:mod:`pipeline.survey_blocks`)
+so memory stays bounded. The evaluate stage alone meets the truth
+(:mod:`pipeline.survey_report`, :mod:`pipeline.survey_finish`). Every stage runs only where
+the plan (:func:`pipeline.stages.plan`) says so, under the
+:class:`~pipeline.stages.StageClock`. The grid and ``points.laz`` are made tile by tile
+(:mod:`pipeline.survey_tiles`).
 """
 
 from __future__ import annotations
@@ -33,8 +36,10 @@ from pipeline.process.context import (
 from pipeline.process.returns import DetectedReturns, DetectorFlag
 from pipeline.process.surface_echo_mix import mix_stored_echoes
 from pipeline.stages import Plan, StageClock
+from pipeline.survey_blocks import is_blocked
 from pipeline.survey_chunks import NB_FIELDS, ChunkJob, no_bottom_limits, run_chunk
-from pipeline.survey_tiles import grid_by_tiles, tile_layout, write_points_by_tiles
+from pipeline.survey_finish import finish_survey, log_cleanup
+from pipeline.survey_tiles import tile_layout, write_points_by_tiles
 from pipeline.uncertainty.photon_posterior import KeptPhotons
 from pipeline.uncertainty.posterior_selection import KeptWaveforms, posterior_budget
 
@@ -47,8 +52,10 @@ class SimulatedSurvey:
 
     Attributes
     ----------
-    returns : DetectedReturns
-        Measured navigation and detections of every pulse, ``(n_pulses,)`` per field.
+    returns : DetectedReturns or None
+        Measured navigation and detections of every pulse, ``(n_pulses,)`` per field; None
+        for a survey processed block by block (:func:`~pipeline.survey_blocks.is_blocked`):
+        they stay on the store.
     kept : KeptWaveforms or KeptPhotons or None
         Waveforms (photon counting: the events of the windows) kept for posteriors.
     truth : Truth
@@ -65,7 +72,7 @@ class SimulatedSurvey:
         :class:`~pipeline.detection_store.SurveyAggregates`); None without any.
     """
 
-    returns: DetectedReturns
+    returns: DetectedReturns | None
     kept: KeptWaveforms | KeptPhotons | None
     truth: Any
     lines: Any
@@ -243,8 +250,10 @@ def simulate_detections(
             f"{no_bottom['excess_decay_per_m']:.3f}/m (in-water path) faster than the column "
             f"({no_bottom['bottoms_used']} bottoms: {no_bottom['excess_decay_from']})"
         )
+    # a survey too large to hold stays on the store, read block by block (survey_blocks)
+    blocked = is_blocked(scene, lines.n_pulses_total)
     return SimulatedSurvey(
-        returns=store.returns(),
+        returns=None if blocked else store.returns(),
         kept=(KeptPhotons if not job.waveform else KeptWaveforms).concatenate(kept),
         truth=truth,
         lines=lines,
@@ -254,6 +263,22 @@ def simulate_detections(
         no_bottom=no_bottom,
         median_surface_range_m=agg.median_surface_range_m(),
     )
+
+
+def _measured_water(ctx: ProcessingContext, sim: SimulatedSurvey, log) -> ProcessingContext:
+    """The context with the forward-scattering correction at the water the columns measured."""
+    if sim.no_bottom is not None and sim.median_surface_range_m is not None:
+        ctx = with_measured_attenuation(
+            ctx, sim.no_bottom.get("column_decay_per_m"), sim.median_surface_range_m
+        )
+    fs = ctx.refraction.forward_scatter
+    if fs is not None:
+        where = ctx.sources["process.forward_scatter.beam_attenuation_per_m"]
+        log(
+            f"  forward-scattering correction at c = {fs.beam_attenuation_per_m:.3f}/m ({where}),"
+            f" albedo {fs.single_scattering_albedo:.3f}"
+        )
+    return ctx
 
 
 def run_survey(
@@ -276,110 +301,35 @@ def run_survey(
         The error report (also written to ``evaluation.json``).
     """
     from pipeline.process.coverage import area_coverage
-    from pipeline.process.datum import survey_datum
     from pipeline.process.grid import snap_bounds_m
-    from pipeline.process.survey_points import process_detections
-    from pipeline.uncertainty.survey_uncertainty import survey_uncertainty, with_tpu
+    from pipeline.survey_processing import process_survey
 
     ctx = processing_context(scene)
+    ps, fr = scene.process, scene.frame
+    origin = (fr.origin_easting_m, fr.origin_northing_m, 0.0)
     with DetectionStore(out, ctx.instrument.air_index) as store:
         sim = simulate_detections(scene, plan, ctx, clock, store, log, progress, executor)
-    if sim.no_bottom is not None and sim.median_surface_range_m is not None:
-        # the forward-scattering correction at the water the survey's columns measured
-        ctx = with_measured_attenuation(
-            ctx, sim.no_bottom.get("column_decay_per_m"), sim.median_surface_range_m
-        )
-    fs = ctx.refraction.forward_scatter
-    if fs is not None:
-        where = ctx.sources["process.forward_scatter.beam_attenuation_per_m"]
-        log(
-            f"  forward-scattering correction at c = {fs.beam_attenuation_per_m:.3f}/m ({where}),"
-            f" albedo {fs.single_scattering_albedo:.3f}"
-        )
-    ps, fr = scene.process, scene.frame
-    with clock.stage("process"):
-        processed = process_detections(sim.returns, ctx, ps.classify, water_column=False)
-    if processed.surface.facet_slope_var is not None:
-        log(
-            f"  wave facets: mean-square slope {ctx.refraction.facet_mss:.4f} (Cox-Munk at the "
-            f"logged wind, process.wind_speed_m_s: {ctx.sources['process.wind_speed_m_s']}); "
-            "soundings raised by their in-water paths' mean excess"
-        )
-    elif ctx.refraction.facet_mss > 0.0:
-        log("  wave facets: none (the surface echoes show no wave sea)")
-    if plan.runs("water_column"):
-        from pipeline.process.water_column import add_water_column_points
-
-        with clock.stage("water_column"):
-            processed = add_water_column_points(processed, sim.returns, ctx.refraction, ps.classify)
-    with clock.stage("grid"):
-        origin = (fr.origin_easting_m, fr.origin_northing_m, 0.0)
+        ctx = _measured_water(ctx, sim, log)
         xmin, xmax, ymin, ymax = sim.extent_m
         bounds = snap_bounds_m(
             np.array([xmin, xmax]), np.array([ymin, ymax]), ps.grid_resolution_m, origin
         )
-        # one datum for the grid (the user's water level, else the mean measured surface):
-        # depth below the local fitted surface would carry the wave heights into the grid
-        datum = survey_datum(processed.points, ps.datum)
         layout = tile_layout(scene, bounds)
+        if sim.returns is None:  # too large to hold: block by block (pipeline.survey_blocks)
+            from pipeline.survey_blocks_run import run_blocked
 
-        def make_grid(points):
-            return grid_by_tiles(points, layout, origin, fr.crs, datum.water_level_m, ps)
-
-        grid = make_grid(processed.points)
-        covered = area_coverage(
-            processed.points.xyz_m[:, :2], scene.flight.area_m, ps.grid_resolution_m
-        )
-    cell = ps.grid_resolution_m
-    log(f"  coverage: {covered:.0%} of flight.area_m has a point in its {cell:g} m cell")
-    if covered < 0.5:
-        log(
-            f"  WARNING: the flight plan leaves {1.0 - covered:.0%} of flight.area_m without a"
-            " point: check flight.area_m, n_lines, line_length_m and the swath"
-        )
-    with clock.stage("tpu"):
-        unc = survey_uncertainty(sim.returns, processed, ctx, grid)
-        processed = dataclasses.replace(processed, points=with_tpu(processed.points, unc))
-    from pipeline.uncertainty.tpu_facet import UNCORRECTED_TERM
-
-    left_on = unc.tpu40.terms.get(UNCORRECTED_TERM)
-    if left_on is not None and left_on.size:
-        log(
-            "  wave facets (correction off): the excess left on the soundings is in the TPU, "
-            f"median {np.median(left_on[:, -1]):.3f} m (process.wave_facet_correction)"
-        )
-    with clock.stage("process"):
-        from pipeline.survey_cleanup import objects_and_rejections
-
-        processed, unc, grid, n_obj, rejected = objects_and_rejections(
-            processed, unc, grid, make_grid, ps, datum.water_level_m
-        )
-    log(f"  submerged objects: {n_obj} seabed points stand above the local seabed (class 43)")
-    n_held, cl = processed.claims_withheld, ps.classify
-    log(
-        f"  class-45 claims withheld (a sounding within {cl.no_bottom_radius_m:g} m or land "
-        f"within {cl.no_bottom_land_radius_m:g} m shallower): {n_held}"
-    )
-    log(f"  rejected bathymetric points (class 7, withheld): {rejected}")
-    post = None
-    if plan.runs("posterior"):
-        from pipeline.parallel import kernel_threads
-
-        threads = executor.local_threads if executor is not None else 1
-        with clock.stage("posterior"), kernel_threads(threads):
-            # imported here: a survey without posteriors never imports emcee
-            from pipeline.uncertainty.survey_posterior import survey_posteriors
-            from pipeline.uncertainty.survey_uncertainty import with_posteriors
-
-            post = survey_posteriors(
-                scene, sim.returns, sim.kept, processed, ctx, unc, grid, progress=progress
+            return run_blocked(
+                scene, plan, out, clock, log, progress, executor, store, sim, ctx, layout
             )
-            if post is not None and post.posteriors is not None:
-                p = post.posteriors
-                # the waveform's own sigma: the cells add the TPU's other terms themselves
-                std = p.depth_m["std"] if p.waveform_std_m is None else p.waveform_std_m
-                unc = with_posteriors(unc, grid, post.point_index, p.converged, std)
-    with clock.stage("outputs"):
+    made = process_survey(sim.returns, scene, plan, ctx, layout, clock, log)
+    processed = made.processed
+    covered = area_coverage(
+        processed.points.xyz_m[:, :2], scene.flight.area_m, ps.grid_resolution_m
+    )
+    log_cleanup(log, processed, made.n_objects, made.rejected, ps, covered)
+
+    def deliver(unc, grid):
+        # the points tile by tile, the grid with its cells' uncertainty
         from pipeline.outputs.netcdf import write_grid_nc
         from pipeline.outputs.raster import write_grid_tif
 
@@ -391,51 +341,8 @@ def run_survey(
             "grid": write_grid_tif(out / "grid.tif", grid, unc.cells),
             "grid_nc": write_grid_nc(out / "grid.nc", grid, unc.cells),
         }
-    pictures = None  # left out by the plan (run.views = false)
-    if plan.runs("views"):
-        with clock.stage("views"):
-            # the evaluation side (the truth's seabed and water, the points' errors); a failure
-            # costs only the views (one warning line)
-            from pipeline.outputs.view3d import write_views
+        return files, processed.points.select(las_order)
 
-            # in the LAS's order: a view's point i is the LAS's point i
-            vtp, pictures = write_views(
-                out / "view", processed.points.select(las_order), sim, origin, fr.crs, log
-            )
-            files.update({f"view_{k}": p for k, p in vtp.items()})
-    with clock.stage("evaluate"):
-        from pipeline.survey_report import evaluate_survey
-
-        files["evaluation"] = out / "evaluation.json"
-        evaluation = evaluate_survey(
-            scene,
-            sim,
-            processed,
-            ctx,
-            grid,
-            datum,
-            unc,
-            post,
-            clock,
-            files["evaluation"],
-            log,
-            area_covered=covered,
-        )
-        files["evaluation_points"] = out / "evaluation_points.npz"
-        from pipeline.outputs.report import write_survey_report
-
-        files["report"] = write_survey_report(
-            out / "report.html",
-            scene,
-            plan,
-            sim,
-            processed,
-            ctx,
-            grid,
-            unc,
-            post,
-            evaluation,
-            clock,
-            views=pictures,
-        )
-    return files, evaluation
+    return finish_survey(
+        scene, plan, out, clock, log, progress, executor, sim, ctx, made, covered, deliver
+    )

@@ -225,7 +225,11 @@ class ProfilerSettings:
 
 @dataclass(frozen=True, kw_only=True)
 class RunSettings:
-    """How the run is executed (never what it computes)."""
+    """How the run is executed.
+
+    Never what it computes, except that a blocked survey with more than ``sample_pulses``
+    pulses measures its survey-wide figures, and is evaluated, on a sample of its blocks.
+    """
 
     chunk_pulses: int = setting(100_000, ge=1, le=10_000_000, doc="pulses per streamed chunk")
     tile_m: float | None = setting(
@@ -240,6 +244,29 @@ class RunSettings:
         True,
         doc="write the 3D views (view/*.vtp) and the report's pictures; false leaves them out "
         "(runs of many scenes, as bathy suite makes: a few seconds and hundreds of MB each)",
+    )
+    block_pulses: int = setting(
+        1_000_000,
+        ge=1000,
+        le=1_000_000_000,
+        doc="a survey of more pulses is processed block by block after the chunk loop, each "
+        "block (with its halo) holding about this many pulses: memory stays bounded "
+        "(pipeline.survey_blocks)",
+    )
+    block_m: float | None = setting(
+        None,
+        gt=0.0,
+        le=1e6,
+        doc="side of those blocks (local frame, rounded to whole grid cells); set: blocks "
+        "whatever the survey's size; None: from run.block_pulses and the pulse density",
+    )
+    sample_pulses: int = setting(
+        500_000,
+        ge=1000,
+        le=1_000_000_000,
+        doc="a blocked survey's survey-wide figures (water level, sea, TPU figures) and its "
+        "evaluation, report and views come from whole blocks holding at most this many pulses, "
+        "spread over it and processed as a survey of their own (all of it when it has fewer)",
     )
 
 

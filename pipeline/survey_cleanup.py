@@ -21,7 +21,9 @@ from pipeline.uncertainty.survey_uncertainty import without_points
 __all__ = ["objects_and_rejections"]
 
 
-def objects_and_rejections(processed, unc, grid: Grid, make_grid: Callable, ps, water_level_m):
+def objects_and_rejections(
+    processed, unc, grid: Grid, make_grid: Callable, ps, water_level_m, surface_range_m=None
+):
     """Classify objects, reject gross errors, and bring the grid and the cells up to date.
 
     Parameters
@@ -38,6 +40,9 @@ def objects_and_rejections(processed, unc, grid: Grid, make_grid: Callable, ps, 
         ``objects``, ``outliers`` and ``grid_object_least_depth`` are read.
     water_level_m : float
         The grid's datum (elevation of the water level).
+    surface_range_m : (float, float), optional
+        The survey's class-41 height range, when ``processed`` is a block of it
+        (:func:`~pipeline.process.seabed_outliers.water_surface_range_m`).
 
     Returns
     -------
@@ -51,7 +56,7 @@ def objects_and_rejections(processed, unc, grid: Grid, make_grid: Callable, ps, 
     # class 43: seabed points standing above the local seabed by k sigma of their TPU
     pts, n_obj = classify_objects(processed.points, ps.objects)
     # gross errors: class 7, withheld; the grid and the cells again without them
-    pts, rejected = reject_seabed_outliers(pts, ps.outliers, ps.objects)
+    pts, rejected = reject_seabed_outliers(pts, ps.outliers, ps.objects, surface_range_m)
     processed = dataclasses.replace(processed, points=pts)
     if sum(rejected.values()):
         grid = make_grid(processed.points)

@@ -14,13 +14,10 @@ What runs by tile
 -----------------
 The grid (:func:`grid_by_tiles`, a cell's points by their own position) and ``points.laz``
 (:func:`write_points_by_tiles`, a pulse's points by the pulse's position, so each pulse is
-numbered whole). Processing (surface fit, refraction, classes, TPU, class 43) still runs on the
-whole survey in ``bathy run``. The points can be made by tile
-(:func:`pipeline.process_tiles.process_by_tiles`, the survey-wide figures of
-:mod:`pipeline.process.survey_wide` handed in, the halo of
-:func:`~pipeline.process_tiles.processing_halo_m`), the same to the bit; those figures are
-still measured over the whole survey, and the TPU's mean tilt sigma and the datum are too.
-:func:`halo_m` and :func:`chunks_meeting` are what its tiles will load by.
+numbered whole). Processing (surface fit, refraction, classes, TPU, class 43) runs on the
+whole survey in ``bathy run``, or, for a survey too large to hold, block by block: blocks are
+tiles of this layout's kind (:mod:`pipeline.survey_blocks`), loaded with their halo by
+:func:`chunks_meeting`, given the survey-wide figures of a sample of blocks.
 
 Halo
 ----

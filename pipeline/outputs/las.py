@@ -235,8 +235,13 @@ def las_records(
     points: Points,
     returns: DetectedReturns | None,
     amplitude_full_scale: float,
+    lines=None,
 ) -> laspy.LasData:
-    """The point records of ``points`` under ``header`` (every pulse's points must be there)."""
+    """The point records of ``points`` under ``header`` (every pulse's points must be there).
+
+    ``lines``: the survey's :class:`~pipeline.outputs.las_fields.LineEnds` when ``returns``
+    are a part of it (the scan angle).
+    """
     las = laspy.LasData(header)
     origin = _header_origin(header)
     offsets, scales = np.asarray(header.offsets), np.asarray(header.scales)
@@ -262,7 +267,7 @@ def las_records(
     rejected = PointFlag.TVU_EXCEEDED | PointFlag.SEABED_OUTLIER | PointFlag.SURFACE_IMPLAUSIBLE
     las.withheld = (points.flags & np.uint16(rejected)) != 0
     if returns is not None:
-        pf = pulse_fields(points, returns, amplitude_full_scale)
+        pf = pulse_fields(points, returns, amplitude_full_scale, lines)
         las.gps_time = pf.gps_time_s
         las.intensity = pf.intensity
         las.scan_angle = pf.scan_angle
@@ -309,10 +314,11 @@ class LazTileWriter:
         )
         return self
 
-    def write(self, points: Points, returns: DetectedReturns | None) -> None:
-        """Append the records of ``points`` (whole pulses)."""
+    def write(self, points: Points, returns: DetectedReturns | None, lines=None) -> None:
+        """Append the records of ``points`` (whole pulses; ``lines``: :func:`las_records`)."""
         if len(points):
-            self._writer.write_points(las_records(self.header, points, returns, self.afs).points)
+            recs = las_records(self.header, points, returns, self.afs, lines)
+            self._writer.write_points(recs.points)
 
     def __exit__(self, *exc) -> None:
         self._stack.__exit__(*exc)

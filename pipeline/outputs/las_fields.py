@@ -21,7 +21,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -34,6 +34,7 @@ __all__ = [
     "VERTICAL_CRS_NAME",
     "SCAN_ANGLE_UNIT_DEG",
     "PulseFields",
+    "LineEnds",
     "pulse_fields",
     "scan_angle_rad",
     "las_crs",
@@ -70,29 +71,74 @@ def las_crs(crs: Any) -> pyproj.CRS:
     )
 
 
-def scan_angle_rad(returns: DetectedReturns) -> np.ndarray:
+@dataclass
+class LineEnds:
+    """Each flight line's first and last pulse origin, gathered part by part.
+
+    A line's flown direction (:func:`scan_angle_rad`) is from its first to its last pulse: a
+    survey read block by block (:mod:`pipeline.survey_blocks`) gathers them over its stored
+    chunks (:meth:`add`), so every block's scan angles use its lines' whole length.
+    """
+
+    line: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    t_first: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    xy_first: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    t_last: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    xy_last: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+    @classmethod
+    def of(cls, returns: DetectedReturns) -> LineEnds:
+        """The ends of each line among ``returns`` (``t_emit_s``, ``line_id``)."""
+        line, t = returns.line_id, returns.t_emit_s
+        order = np.lexsort((t, line))
+        ls = line[order]
+        first = np.flatnonzero(np.r_[True, ls[1:] != ls[:-1]])
+        last = np.r_[first[1:], ls.size] - 1
+        xy = returns.origin_meas_m[:, :2]
+        return cls(
+            ls[first].astype(np.int64),
+            t[order[first]],
+            xy[order[first]],
+            t[order[last]],
+            xy[order[last]],
+        )
+
+    def add(self, returns: DetectedReturns) -> None:
+        """Take in more pulses' ends (the earlier and the later of each line)."""
+        new = LineEnds.of(returns)
+        line = np.union1d(self.line, new.line)
+        m = line.size
+        t0, x0 = np.full(m, np.inf), np.zeros((m, 2))
+        t1, x1 = np.full(m, -np.inf), np.zeros((m, 2))
+        for part in (self, new):
+            at = np.searchsorted(line, part.line)
+            early = part.t_first < t0[at]
+            t0[at[early]], x0[at[early]] = part.t_first[early], part.xy_first[early]
+            late = part.t_last > t1[at]
+            t1[at[late]], x1[at[late]] = part.t_last[late], part.xy_last[late]
+        self.line, self.t_first, self.xy_first, self.t_last, self.xy_last = line, t0, x0, t1, x1
+
+
+def scan_angle_rad(returns: DetectedReturns, lines: LineEnds | None = None) -> np.ndarray:
     """LAS scan angle of every pulse from its measured beam and the line's flown direction.
 
     Parameters
     ----------
     returns : DetectedReturns
         With ``t_emit_s`` and ``line_id``, ``(n,)``.
+    lines : LineEnds, optional
+        The survey's line ends, when ``returns`` are a part of it; default: of ``returns``.
 
     Returns
     -------
     (n,) float64
         Radians, positive to starboard (LAS: counter-clockwise seen from the rear).
     """
-    line, t = returns.line_id, returns.t_emit_s
-    origin = returns.origin_meas_m
-    order = np.lexsort((t, line))
-    ls = line[order]
-    first = np.flatnonzero(np.r_[True, ls[1:] != ls[:-1]])
-    last = np.r_[first[1:], ls.size] - 1
-    along = origin[order[last], :2] - origin[order[first], :2]
+    ends = LineEnds.of(returns) if lines is None else lines
+    along = ends.xy_last - ends.xy_first
     norm = np.hypot(along[:, 0], along[:, 1])
     along = np.where(norm[:, None] > 0.0, along / np.where(norm > 0.0, norm, 1.0)[:, None], [0, 1])
-    row = np.searchsorted(ls[first], line)
+    row = np.searchsorted(ends.line, returns.line_id)
     # right of track = along x up: (a_y, -a_x)
     right = np.column_stack([along[row, 1], -along[row, 0]])
     d = returns.direction_meas
@@ -100,7 +146,10 @@ def scan_angle_rad(returns: DetectedReturns) -> np.ndarray:
 
 
 def pulse_fields(
-    points: Points, returns: DetectedReturns, amplitude_full_scale: float
+    points: Points,
+    returns: DetectedReturns,
+    amplitude_full_scale: float,
+    lines: LineEnds | None = None,
 ) -> PulseFields:
     """GPS time, intensity, scan angle and point source ID of every point, from its pulse.
 
@@ -112,6 +161,8 @@ def pulse_fields(
         The detections the points were made from, with ``t_emit_s`` and ``line_id``.
     amplitude_full_scale : float
         The receiver's dynamic range in amplitude units (> 0).
+    lines : LineEnds, optional
+        The survey's line ends when ``returns`` are a part of it (:func:`scan_angle_rad`).
     """
     if returns.t_emit_s is None or returns.line_id is None:
         raise ValueError("`returns` must carry `t_emit_s` and `line_id` for the LAS fields")
@@ -123,7 +174,7 @@ def pulse_fields(
     if len(points) and (len(sorted_id) == 0 or np.any(sorted_id[pos] != points.pulse_id)):
         raise ValueError("every point's `pulse_id` must be a pulse of `returns`")
     row = by_id[pos]
-    angle_deg = np.degrees(scan_angle_rad(returns))[row]
+    angle_deg = np.degrees(scan_angle_rad(returns, lines))[row]
     amp = np.zeros(len(points))
     if points.amplitude is not None:
         # derived (synthetic) points carry no echo of their own

@@ -77,6 +77,7 @@ from pipeline.process.scatter_bias import range_bias_m
 from pipeline.process.sea_kriging import sea_field
 from pipeline.process.surface_fit import SurfaceFitSettings, WaterSurface, fit_water_surface
 from pipeline.process.surface_points import returns_numbering, timing_sigma, water_surface_points
+from pipeline.process.surface_wide import surface_wide
 from pipeline.process.survey_wide import SurveyWide, sea_wide
 
 __all__ = [
@@ -112,6 +113,11 @@ class ProcessedPoints:
     claims_withheld : int
         Class-45 claims not made: a nearby class-40 sounding lies shallower
         (:func:`pipeline.process.survey_points.contradicted_claims`).
+    wide : SurveyWide or None
+        The survey-wide figures the surface fit and the sea used (measured from these
+        returns, or handed in).
+    withheld_pulse_id : (claims_withheld,) int64 or None
+        The pulses of those claims.
     """
 
     surface: WaterSurface
@@ -119,6 +125,8 @@ class ProcessedPoints:
     uncorrected: Points
     sea_change_m: np.ndarray | None = None
     claims_withheld: int = 0
+    wide: SurveyWide | None = None
+    withheld_pulse_id: np.ndarray | None = None
 
 
 def seabed_points(
@@ -365,7 +373,10 @@ def georeference(
     """
     st = surface_settings or SurfaceFitSettings()
     group = None if windows is None else windows.of_returns(returns)
-    surface = fit_water_surface(returns, st, None if wide is None else wide.surface, group)
+    # the survey-wide figures, measured here (or handed in for a tile): kept with the result,
+    # so a survey's sample can hand them to its blocks (pipeline.survey_blocks)
+    level = surface_wide(returns, st) if wide is None else wide.surface
+    surface = fit_water_surface(returns, st, level, group)
     sea = sea_wide(returns, surface, st, refraction_settings, group) if wide is None else wide.sea
     field = None
     if sea.covariance is not None:  # photon windows: one detection each, never kriged
@@ -386,4 +397,10 @@ def georeference(
         parts.append(water_surface_points(returns, surface, refraction_settings, derived=True))
     points = classify_points(Points.concatenate(parts), classify_settings)
     raw = seabed_points(returns, surface, refraction_settings, correct_refraction=False)
-    return ProcessedPoints(surface, points, classify_points(raw, classify_settings), sea_change)
+    return ProcessedPoints(
+        surface,
+        points,
+        classify_points(raw, classify_settings),
+        sea_change,
+        wide=SurveyWide(level, sea),
+    )

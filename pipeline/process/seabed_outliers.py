@@ -61,6 +61,7 @@ __all__ = [
     "REJECTED",
     "OutlierSettings",
     "tvu_exceeded",
+    "water_surface_range_m",
     "implausible_surface",
     "seabed_outliers",
     "reject_seabed_outliers",
@@ -108,19 +109,35 @@ def tvu_exceeded(depth_m, sigma_v_m, order: str) -> np.ndarray:
         return ~(tvu <= iho.tvu_allowance_m(d, order))
 
 
-def implausible_surface(points: Points, margin_m: float) -> np.ndarray:
+def water_surface_range_m(points: Points) -> tuple[float, float] | None:
+    """``(min, max)`` of the class-41 water-surface heights of ``points``; None without any.
+
+    What :func:`implausible_surface` tests against: the survey's (a block of a survey is
+    handed its survey's, :mod:`pipeline.survey_blocks`).
+    """
+    s = (points.classification == WATER_SURFACE) & (points.kind == ReturnKind.SURFACE)
+    if not s.any():
+        return None
+    zs = points.xyz_m[s, 2]
+    return float(zs.min()), float(zs.max())
+
+
+def implausible_surface(
+    points: Points, margin_m: float, surface_range_m: tuple[float, float] | None = None
+) -> np.ndarray:
     """``(n,)`` bool: the point's local water plane lies beyond the measured surface heights.
 
     The plane's height at the point is ``z + depth_m``; beyond: outside the range of the
     survey's class-41 water-surface heights by more than ``margin_m`` (all False without
-    class-41 points).
+    class-41 points). ``surface_range_m``: that range, measured elsewhere (default: from
+    ``points``, :func:`water_surface_range_m`).
     """
-    s = (points.classification == WATER_SURFACE) & (points.kind == ReturnKind.SURFACE)
-    if not s.any():
+    rng = water_surface_range_m(points) if surface_range_m is None else surface_range_m
+    if rng is None:
         return np.zeros(len(points), dtype=bool)
-    zs = points.xyz_m[s, 2]
+    lo, hi = rng
     plane = points.xyz_m[:, 2] + points.depth_m
-    return (plane > zs.max() + margin_m) | (plane < zs.min() - margin_m)
+    return (plane > hi + margin_m) | (plane < lo - margin_m)
 
 
 def seabed_outliers(
@@ -155,7 +172,10 @@ def seabed_outliers(
 
 
 def reject_seabed_outliers(
-    points: Points, settings: OutlierSettings, fit: ObjectSettings
+    points: Points,
+    settings: OutlierSettings,
+    fit: ObjectSettings,
+    surface_range_m: tuple[float, float] | None = None,
 ) -> tuple[Points, dict[str, int]]:
     """Class-40 bottom points either rule rejects set to class 7 and flagged; counts.
 
@@ -166,6 +186,9 @@ def reject_seabed_outliers(
     settings : OutlierSettings
     fit : ObjectSettings
         The object detector's settings (its fit; its ``k_sigma`` bounds ours from below).
+    surface_range_m : (float, float), optional
+        The survey's class-41 height range (:func:`water_surface_range_m`), when ``points``
+        are a block of it; default: measured from ``points``.
 
     Returns
     -------
@@ -192,7 +215,7 @@ def reject_seabed_outliers(
         counts["tvu_exceeded"] = int(over.sum())
         sea &= ~over
     if settings.surface_margin_m is not None:
-        out = sea & implausible_surface(points, settings.surface_margin_m)
+        out = sea & implausible_surface(points, settings.surface_margin_m, surface_range_m)
         flags[out] |= np.uint16(PointFlag.SURFACE_IMPLAUSIBLE)
         counts["surface_implausible"] = int(out.sum())
         sea &= ~out

@@ -76,7 +76,10 @@ def process_detections(
     withheld = contradicted_claims(claims, processed.points, classify)
     points = Points.concatenate([processed.points, claims.select(~withheld)])
     processed = dataclasses.replace(
-        processed, points=number_all_returns(points), claims_withheld=int(withheld.sum())
+        processed,
+        points=number_all_returns(points),
+        claims_withheld=int(withheld.sum()),
+        withheld_pulse_id=claims.pulse_id[withheld],
     )
     if water_column:
         processed = add_water_column_points(processed, returns, ctx.refraction, classify)

@@ -1,0 +1,251 @@
+"""Surveys too large to hold: processing block by block after the chunk loop (issue 15).
+
+A survey whose pulses outnumber ``run.block_pulses`` (or any survey, when ``run.block_m`` is
+set) is not loaded back from the :class:`~pipeline.detection_store.DetectionStore` whole.
+After the chunk loop it runs in four passes, each holding a bounded part of the survey:
+
+1. **Blocks.** Square blocks of whole grid cells over the grid's bounds (:func:`block_layout`:
+   ``run.block_m``, else sized so that a block and its halo hold about ``run.block_pulses``
+   pulses). A pulse belongs to the block of its position
+   (:func:`~pipeline.detection_store.pulse_position_m`); one pass over the stored chunks counts
+   them.
+2. **Sample.** Whole blocks spread over the survey, at most ``run.sample_pulses`` pulses in
+   all (:func:`sample_blocks`: every block when the survey has fewer), are loaded (no halo)
+   and processed as a survey of their own (:func:`~pipeline.survey_processing.process_survey`).
+   They give the survey-wide figures (:class:`~pipeline.survey_processing.SurveyFigures`:
+   processing's water level, sea and facet figures, the TPU's, the datum, the class-41 height
+   range) and they are what the posteriors, the evaluation, the views and the report see.
+3. **Beam reach.** One pass over the chunks measures the farthest reach of a beam from its
+   pulse's position (:func:`~pipeline.process_tiles.beam_reach_m`, a maximum: the same
+   streamed) at the sample's water level; it sets the halo (:func:`block_halo_m`).
+4. **Every block** with its halo: processed with the sample's figures handed in; its own
+   pulses' points are appended to ``points.laz`` (:class:`~pipeline.outputs.las.LazTileWriter`)
+   and its own cells go into the survey's grid and cell uncertainty. Nothing of a block stays.
+
+What stays in memory across blocks: the grid and its cells (a few arrays per cell, sized by
+the area), the sample's products and the kept waveforms (bounded by the posterior budget).
+
+**Exact where the searches stay in the halo.** With every block in the sample, the figures
+are the whole survey's, and each block's own points, cells and TPU are the whole survey's
+wherever its neighbour searches stay inside its halo (as for tiles,
+:mod:`pipeline.process_tiles`): ``tests/test_survey_blocks.py`` compares a blocked run with
+the same survey processed whole. With a sample smaller than the survey, the figures are the
+sample's: a survey has one sea and one water level, which whole blocks spread over it measure.
+
+Posteriors sample the sample's soundings; the delivered grid's cells carry the TPU (no
+posterior), and the views show the sample's points.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from pipeline.detection_store import detected_returns, pulse_position_m
+from pipeline.survey_tiles import TileLayout, chunks_meeting, snap_tile_m
+
+__all__ = [
+    "is_blocked",
+    "block_layout",
+    "block_halo_m",
+    "pulse_counts",
+    "sample_blocks",
+    "load_blocks",
+    "SurveyGridAccumulator",
+]
+
+#: Grid fields copied cell by cell from a block's grid into the survey's.
+_GRID_FIELDS = ("depth_m", "median_depth_m", "spread_m", "z_m", "count", "mean_depth_m")
+#: The cell uncertainty's fields.
+_CELL_FIELDS = ("sigma_v_m", "sigma_h_m", "tvu95_m", "thu95_m", "count", "n_posterior", "order")
+
+
+def is_blocked(scene, n_pulses: int) -> bool:
+    """Whether the survey is processed block by block (module notes)."""
+    run = scene.run
+    return run.block_m is not None or int(n_pulses) > run.block_pulses
+
+
+def _base_halo_m(ctx, ps) -> float:
+    """The neighbour searches' reach past a block, the beams' own reach left out."""
+    from pipeline.process_tiles import processing_halo_m
+    from pipeline.uncertainty.tpu_survey_wide import tpu_halo_m
+
+    # in turn: the class-43 and rejection tests read their neighbours' TPU (and the reference
+    # cells at the far edge), each TPU its neighbours' points, each point its processing's
+    # neighbours
+    proc = processing_halo_m(ctx, 0.0, classify=ps.classify)
+    tests = ps.objects.radius_m + math.sqrt(2.0) * ps.objects.reference_cell_m
+    return float(proc + tpu_halo_m(ctx.tpu) + tests)
+
+
+def block_halo_m(ctx, ps, beam_reach_m: float) -> float:
+    """How far past a block its pulses are loaded (m).
+
+    Processing's halo (:func:`~pipeline.process_tiles.processing_halo_m`: the beam reach, the
+    surface fit's, kriging's, land's and the class-45 test's radii), plus the TPU's reach
+    (:func:`~pipeline.uncertainty.tpu_survey_wide.tpu_halo_m`) over the points processing
+    made, plus the class-43 and rejection tests' radius over those points' TPU, plus one
+    beam reach: a block's own cells hold the points of pulses positioned up to a beam reach
+    outside it.
+    """
+    from pipeline.process_tiles import processing_halo_m
+
+    proc = processing_halo_m(ctx, beam_reach_m, classify=ps.classify)
+    base = _base_halo_m(ctx, ps) - processing_halo_m(ctx, 0.0, classify=ps.classify)
+    return float(proc + base + beam_reach_m)
+
+
+def block_layout(scene, bounds_m: np.ndarray, n_pulses: int, halo_m: float) -> TileLayout:
+    """The blocks over the grid ``bounds_m`` (``run.block_m``, else from the pulse density).
+
+    Without ``run.block_m`` a block's side ``s`` is such that ``(s + 2 halo)²`` holds
+    ``run.block_pulses`` pulses at the survey's mean density over the bounds (at least the
+    halo, so the halo does not dominate the work), whole grid cells.
+    """
+    r = scene.process.grid_resolution_m
+    w, e, s, n = bounds_m
+    extent = max(e - w, n - s)
+    side = scene.run.block_m
+    if side is None:
+        density = max(n_pulses, 1) / max((e - w) * (n - s), r * r)
+        side = max(math.sqrt(scene.run.block_pulses / density) - 2.0 * halo_m, halo_m, r)
+    return TileLayout(np.asarray(bounds_m, dtype=np.float64), r, snap_tile_m(side, r, extent))
+
+
+def _positions(store, c: int) -> np.ndarray:
+    fields = ["origin_meas_m", "direction_meas", "has_surface", "t_surface_s", "has_bottom"]
+    fields += ["t_bottom_s"] + [k for k in ("has_column", "t_column_s") if k in store.fields(c)]
+    return pulse_position_m(store.load_chunk(c, fields), store.air_index)
+
+
+def pulse_counts(store, layout: TileLayout) -> np.ndarray:
+    """Pulses of each block, ``(n_blocks,)`` int64: one pass over the stored chunks."""
+    counts = np.zeros(layout.n_tiles, dtype=np.int64)
+    for c in range(len(store.chunks)):
+        pos = _positions(store, c)
+        counts += np.bincount(layout.tile_of_xy(pos[:, 0], pos[:, 1]), minlength=counts.size)
+    return counts
+
+
+def sample_blocks(counts: np.ndarray, max_pulses: int) -> np.ndarray:
+    """Blocks spread over the survey holding at most ``max_pulses`` pulses (sorted indices).
+
+    Every block with a pulse when they hold at most ``max_pulses``; else the blocks with a
+    pulse taken in van der Corput order of their rank in the layout (row by row from the
+    north-west: 0, 1/2, 1/4, 3/4, ... of the way through them, each prefix spread over the
+    survey) while their pulses stay within ``max_pulses``; at least one block.
+    """
+    used = np.flatnonzero(counts > 0)
+    if used.size == 0 or counts[used].sum() <= max_pulses:
+        return used
+    bits = max(1, int(used.size - 1).bit_length())
+    rank = np.array([int(f"{i:0{bits}b}"[::-1], 2) for i in range(used.size)])
+    spread = used[np.argsort(rank)]
+    total = np.cumsum(counts[spread])
+    n = max(1, int(np.searchsorted(total, max_pulses, side="right")))
+    return np.sort(spread[:n])
+
+
+def _grown_boxes(layout: TileLayout, blocks, halo: float) -> np.ndarray:
+    """``(m, 4)`` boxes of ``blocks`` grown by ``halo``; open outwards at the grid's edges."""
+    w, e, s, n = layout.bounds_m
+    out = []
+    for b in blocks:
+        x0, x1, y0, y1 = layout.box_m(int(b))
+        # an edge block owns the pulses beyond the grid (the nearest tile): its box is open
+        out.append(
+            [
+                -np.inf if x0 <= w else x0 - halo,
+                np.inf if x1 >= e else x1 + halo,
+                -np.inf if y0 <= s else y0 - halo,
+                np.inf if y1 >= n else y1 + halo,
+            ]
+        )
+    return np.array(out, dtype=np.float64).reshape(-1, 4)
+
+
+def load_blocks(store, layout: TileLayout, blocks, halo: float):
+    """The stored pulses of ``blocks`` and of their halo, in pulse order.
+
+    Returns
+    -------
+    returns : DetectedReturns
+    own : (n,) bool
+        The pulse's position lies in one of ``blocks``.
+    """
+    blocks = np.asarray(blocks, dtype=np.int64)
+    boxes = _grown_boxes(layout, blocks, halo)
+    chunks = sorted({c for box in boxes for c in chunks_meeting(store.chunks, box, 0.0)})
+    parts, owns = [], []
+    for c in chunks:
+        part = store.load_chunk(c)
+        pos = pulse_position_m(part, store.air_index)
+        x, y = pos[:, 0], pos[:, 1]
+        own = np.isin(layout.tile_of_xy(x, y), blocks)
+        near = own.copy()
+        for x0, x1, y0, y1 in boxes:
+            near |= (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
+        parts.append({k: v[near] for k, v in part.items()})
+        owns.append(own[near])
+    if not parts:
+        raise ValueError(f"blocks {blocks.tolist()} hold no stored pulse")
+    keys = set.intersection(*(set(p) for p in parts))
+    cat = {k: np.concatenate([p[k] for p in parts]) for k in keys}
+    return detected_returns(cat), np.concatenate(owns)
+
+
+def _sub_layout(layout: TileLayout, b: int, halo: float) -> tuple[TileLayout, int, int]:
+    """A one-tile layout over block ``b`` grown by ``halo`` (whole cells, within the grid).
+
+    Returns the layout and the survey grid's row and column of its north-west cell.
+    """
+    r = layout.resolution_m
+    w, e, s, n = layout.bounds_m
+    x0, x1, y0, y1 = layout.box_m(b)
+    cw = max(w, w + math.floor((x0 - halo - w) / r) * r)
+    ce = min(e, w + math.ceil((x1 + halo - w) / r) * r)
+    cn = min(n, n - math.floor((n - y1 - halo) / r) * r)
+    cs = max(s, n - math.ceil((n - y0 + halo) / r) * r)
+    bounds = np.array([cw, ce, cs, cn])
+    sub = TileLayout(bounds, r, snap_tile_m(None, r, max(ce - cw, cn - cs)))
+    return sub, int(round((n - cn) / r)), int(round((cw - w) / r))
+
+
+class SurveyGridAccumulator:
+    """The survey's grid and cell uncertainty, filled with each block's own cells."""
+
+    def __init__(self, empty_grid, empty_cells) -> None:
+        self.grid, self.cells = empty_grid, empty_cells
+        self._g = {
+            k: getattr(empty_grid, k).copy()
+            for k in _GRID_FIELDS
+            if getattr(empty_grid, k) is not None
+        }
+        self._c = {k: getattr(empty_cells, k).copy() for k in _CELL_FIELDS}
+        self._designated = None
+
+    def add(self, layout: TileLayout, b: int, grid, cells, row0: int, col0: int) -> None:
+        """Copy block ``b``'s own cells from its grid (north-west cell at ``row0, col0``)."""
+        k = layout.cells_per_tile
+        ny, nx = layout.grid_shape
+        i, j = divmod(int(b), layout.shape[1])
+        r0, r1 = i * k, min((i + 1) * k, ny)
+        c0, c1 = j * k, min((j + 1) * k, nx)
+        src = (slice(r0 - row0, r1 - row0), slice(c0 - col0, c1 - col0))
+        dst = (slice(r0, r1), slice(c0, c1))
+        for name, a in self._g.items():
+            a[dst] = getattr(grid, name)[src]
+        for name, a in self._c.items():
+            a[dst] = getattr(cells, name)[src]
+        if grid.designated is not None:
+            if self._designated is None:
+                self._designated = np.zeros(self.grid.shape, dtype=bool)
+            self._designated[dst] = grid.designated[src]
+
+    def result(self):
+        """``(grid, cells)`` of the survey."""
+        grid = dataclasses.replace(self.grid, designated=self._designated, **self._g)
+        return grid, dataclasses.replace(self.cells, **self._c)

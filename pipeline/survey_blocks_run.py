@@ -1,0 +1,218 @@
+"""``bathy run`` after the chunk loop for a survey too large to hold, block by block.
+
+The passes of :mod:`pipeline.survey_blocks`, wired and timed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from pipeline.outputs.las_fields import LineEnds
+from pipeline.process.classify import (
+    BATHYMETRIC_POINT,
+    DERIVED_WATER_SURFACE,
+    GROUND,
+    HIGH_NOISE,
+    LOW_NOISE,
+    NO_BOTTOM_FOUND_AT,
+    SUBMERGED_OBJECT,
+    UNCLASSIFIED,
+    WATER_COLUMN,
+    WATER_SURFACE,
+)
+from pipeline.process.returns import PointFlag
+from pipeline.survey_blocks import (
+    SurveyGridAccumulator,
+    _base_halo_m,
+    _sub_layout,
+    block_halo_m,
+    block_layout,
+    load_blocks,
+    pulse_counts,
+    sample_blocks,
+)
+from pipeline.survey_tiles import grid_by_tiles, points_tile_order
+
+__all__ = ["run_blocked", "CoverageAccumulator"]
+
+#: Every class processing makes: the points file's header names them before any is written.
+CLASSES = np.array(
+    [
+        UNCLASSIFIED,
+        GROUND,
+        LOW_NOISE,
+        HIGH_NOISE,
+        BATHYMETRIC_POINT,
+        WATER_SURFACE,
+        DERIVED_WATER_SURFACE,
+        SUBMERGED_OBJECT,
+        NO_BOTTOM_FOUND_AT,
+        WATER_COLUMN,
+    ],
+    dtype=np.uint8,
+)
+
+
+class CoverageAccumulator:
+    """:func:`~pipeline.process.coverage.area_coverage` of points given block by block."""
+
+    def __init__(self, area_m, cell_m: float) -> None:
+        self.xmin, self.xmax, self.ymin, self.ymax = (float(v) for v in area_m)
+        self.cell_m = float(cell_m)
+        self.nx = max(1, int(np.ceil((self.xmax - self.xmin) / cell_m)))
+        self.ny = max(1, int(np.ceil((self.ymax - self.ymin) / cell_m)))
+        self.seen = np.zeros(self.nx * self.ny, dtype=bool)
+
+    def add(self, xy_m: np.ndarray) -> None:
+        """Mark the cells holding a point of ``xy_m`` ``(n, 2)``."""
+        x, y = xy_m[:, 0], xy_m[:, 1]
+        inside = (x >= self.xmin) & (x < self.xmax) & (y >= self.ymin) & (y < self.ymax)
+        i = np.minimum(((x[inside] - self.xmin) / self.cell_m).astype(np.int64), self.nx - 1)
+        j = np.minimum(((y[inside] - self.ymin) / self.cell_m).astype(np.int64), self.ny - 1)
+        self.seen[j * self.nx + i] = True
+
+    def fraction(self) -> float:
+        """Fraction of the area's cells holding a point."""
+        return float(self.seen.mean())
+
+
+#: The rejection rules' counts (:func:`~pipeline.process.seabed_outliers.reject_seabed_outliers`)
+#: by the flag each sets.
+_RULES = {
+    "tvu_exceeded": PointFlag.TVU_EXCEEDED,
+    "surface_implausible": PointFlag.SURFACE_IMPLAUSIBLE,
+    "seabed_outlier": PointFlag.SEABED_OUTLIER,
+}
+
+
+def _quiet(*_args, **_kw) -> None:
+    return None
+
+
+def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ctx, layout):
+    """The passes of :mod:`pipeline.survey_blocks`; returns ``(files, evaluation)``.
+
+    Parameters
+    ----------
+    store : DetectionStore
+        The survey's detections (open).
+    sim : SimulatedSurvey
+        The chunk loop's result, ``returns`` None.
+    layout : TileLayout
+        The grid's bounds and the points file's tiles.
+    """
+    from pipeline.outputs.atomic import write_json
+    from pipeline.outputs.las import LazTileWriter, las_header
+    from pipeline.process_tiles import beam_reach_m
+    from pipeline.survey_finish import finish_survey, log_cleanup
+    from pipeline.survey_processing import process_survey
+    from pipeline.uncertainty.cell_uncertainty import cell_uncertainty
+    from pipeline.uncertainty.survey_uncertainty import take_tpu
+
+    ps, fr, run = scene.process, scene.frame, scene.run
+    origin = (fr.origin_easting_m, fr.origin_northing_m, 0.0)
+    n_pulses = store.n_pulses
+    with clock.stage("blocks"):
+        base = _base_halo_m(ctx, ps)
+        blocks = block_layout(scene, layout.bounds_m, n_pulses, base)
+        counts = pulse_counts(store, blocks)
+        sample = sample_blocks(counts, run.sample_pulses)
+        # the sample's own pulses only: a survey of its own, its blocks' edges its edges
+        sample_returns, _ = load_blocks(store, blocks, sample, 0.0)
+    used = np.flatnonzero(counts > 0)
+    log(
+        f"  blocks of {blocks.tile_m:g} m: {used.size} with pulses (at most "
+        f"{int(counts.max())} each); sample of {sample.size} blocks, {len(sample_returns)}"
+        " pulses (run.sample_pulses)"
+    )
+    # the sample, processed as a survey of its own: the survey-wide figures
+    made = process_survey(sample_returns, scene, plan, ctx, layout, clock, log)
+    figures = made.figures
+    with clock.stage("blocks"):
+        # streamed maxima and ends: the beams' reach at the sample's level, the lines' ends
+        reach, lines = 0.0, LineEnds()
+        for c in range(len(store.chunks)):
+            part = store.returns([c])
+            reach = max(reach, beam_reach_m(part, ctx, figures.wide))
+            lines.add(part)
+        halo = block_halo_m(ctx, ps, reach)
+    log(f"  block halo {halo:.0f} m (beam reach {reach:.1f} m)")
+    empty = made.processed.points.select(np.zeros(0, dtype=np.int64))
+    water = figures.datum.water_level_m
+    empty_grid = grid_by_tiles(empty, layout, origin, fr.crs, water, ps)
+    empty_cells = cell_uncertainty(empty_grid, take_tpu(made.unc.tpu40, np.zeros(0, np.int64)))
+    acc = SurveyGridAccumulator(empty_grid, empty_cells)
+    cover = CoverageAccumulator(scene.flight.area_m, ps.grid_resolution_m)
+    n_obj, rejected, withheld = 0, {}, 0
+    header = las_header(CLASSES, made.processed.points.amplitude is not None, fr.crs, origin)
+    air = ctx.instrument.air_index
+    t0 = time.perf_counter()
+    with LazTileWriter(out / "points.laz", header, ctx.instrument.amplitude_full_scale) as w:
+        for k, b in enumerate(used):
+            with clock.stage("blocks"):
+                ret, own = load_blocks(store, blocks, [b], halo)
+            sub, row0, col0 = _sub_layout(blocks, int(b), halo)
+            blk = process_survey(ret, scene, plan, ctx, sub, clock, _quiet, figures)
+            with clock.stage("outputs"):
+                pts = blk.processed.points
+                mine = np.isin(pts.pulse_id, ret.pulse_id[own])
+                pts = pts.select(mine)
+                order, starts = points_tile_order(pts, ret, layout, air)
+                for i in range(starts.size - 1):
+                    w.write(pts.select(order[starts[i] : starts[i + 1]]), ret, lines)
+                acc.add(blocks, int(b), blk.grid, blk.unc.cells, row0, col0)
+                cover.add(pts.xyz_m[:, :2])
+            # the block's own pulses' counts (its halo's are another block's)
+            n_obj += int(np.count_nonzero(pts.classification == SUBMERGED_OBJECT))
+            for name, flag in _RULES.items():
+                hit = (pts.flags & np.uint16(flag)) != 0
+                rejected[name] = rejected.get(name, 0) + int(np.count_nonzero(hit))
+            held = blk.processed.withheld_pulse_id
+            withheld += int(np.count_nonzero(np.isin(held, ret.pulse_id[own])))
+            del ret, own, blk, pts
+            if (k + 1) % 10 == 0 or k + 1 == used.size:
+                log(f"  block {k + 1}/{used.size} processed ({time.perf_counter() - t0:.0f} s)")
+    grid, cells = acc.result()
+    covered = cover.fraction()
+    log_cleanup(
+        log,
+        dataclasses.replace(made.processed, claims_withheld=withheld),
+        n_obj,
+        rejected,
+        ps,
+        covered,
+    )
+    sample_sim = dataclasses.replace(sim, returns=sample_returns)
+
+    def deliver(unc, _grid):
+        # the points are written; the survey's grid with its cells' TPU (module notes)
+        from pipeline.outputs.netcdf import write_grid_nc
+        from pipeline.outputs.raster import write_grid_tif
+
+        files = {
+            "points": out / "points.laz",
+            "grid": write_grid_tif(out / "grid.tif", grid, cells),
+            "grid_nc": write_grid_nc(out / "grid.nc", grid, cells),
+        }
+        return files, made.processed.points
+
+    files, evaluation = finish_survey(
+        scene, plan, out, clock, log, progress, executor, sample_sim, ctx, made, covered, deliver
+    )
+    evaluation["blocked"] = {
+        "block_m": blocks.tile_m,
+        "blocks": int(used.size),
+        "halo_m": halo,
+        "sample_blocks": int(sample.size),
+        "sample_pulses": int(counts[sample].sum()),
+        "survey_pulses": int(n_pulses),
+        "evaluated_on": "the sample's blocks, processed as a survey of their own",
+        "class43_points": n_obj,
+        "rejected": rejected,
+        "class45_withheld": withheld,
+    }
+    write_json(files["evaluation"], evaluation)
+    return files, evaluation

@@ -1,0 +1,196 @@
+"""A survey processed block by block (issue 15): the same outputs as processed whole.
+
+``bathy run`` of a survey too large to hold reads it back from the store one block and its
+halo at a time (:mod:`pipeline.survey_blocks`). With every block in the sample, the survey-wide
+figures are the whole survey's, so each block's own points, cells and counts must be the ones
+the whole survey's processing gives them: compared here, exactly, on a simulated wave survey
+with a shore and class-45 claims (``tests/test_process_tiles.py``'s), against the same survey
+processed whole. The parts the passes are built of are checked against brute force.
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+
+import numpy as np
+import pytest
+
+from pipeline.detection_store import DetectionStore, pulse_position_m
+from pipeline.outputs.las_fields import LineEnds, scan_angle_rad
+from pipeline.process.coverage import area_coverage
+from pipeline.process.returns import DetectedReturns
+from pipeline.run import run_scene
+from pipeline.scene import parse_scene
+from pipeline.survey_blocks import load_blocks, sample_blocks
+from pipeline.survey_blocks_run import CoverageAccumulator
+from pipeline.survey_tiles import TileLayout
+from tests.conftest import ROOT
+
+
+def test_sample_blocks_take_every_block_under_the_cap_else_a_spread_prefix():
+    counts = np.array([0, 5, 7, 0, 3, 9, 4, 6, 8, 2])
+    used = np.flatnonzero(counts)
+    np.testing.assert_array_equal(sample_blocks(counts, 44), used)  # 44 = all of them
+    # the 8 used blocks in van der Corput order of their rank (0, 4, 2, 6, 1, 5, 3, 7):
+    # blocks 1, 6, 4, 8, 2, ... hold 5, 4, 3, 8, 7, ...: 5 + 4 + 3 + 8 = 20, the next 27
+    np.testing.assert_array_equal(sample_blocks(counts, 20), [1, 4, 6, 8])
+    np.testing.assert_array_equal(sample_blocks(counts, 19), [1, 4, 6])
+    assert sample_blocks(counts, 1).size == 1  # at least one block
+    assert sample_blocks(np.zeros(4, dtype=np.int64), 10).size == 0
+
+
+def _part(rng, n, id0, line):
+    d = rng.normal(size=(n, 3)) * [0.2, 0.2, 0.0] + [0.0, 0.0, -1.0]
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    t_s = rng.uniform(1.5e-6, 1.7e-6, n)
+    has_s, has_b = rng.random(n) < 0.8, rng.random(n) < 0.5
+    return {
+        "pulse_id": np.arange(id0, id0 + n, dtype=np.int64),
+        "origin_meas_m": np.column_stack(
+            [rng.uniform(-80, 80, n), rng.uniform(-80, 80, n), 250 + 0 * t_s]
+        ),
+        "direction_meas": d,
+        "has_surface": has_s,
+        "t_surface_s": np.where(has_s, t_s, 0.0),
+        "has_bottom": has_b,
+        "t_bottom_s": np.where(has_b, t_s + 5e-8, 0.0),
+        "surface_confidence": has_s * 1.0,
+        "bottom_confidence": has_b * 1.0,
+        "flags": np.zeros(n, dtype=np.uint16),
+        "surface_amplitude": has_s * 1.0,
+        "bottom_amplitude": has_b * 1.0,
+        "t_no_bottom_s": np.zeros(n),
+        "t_emit_s": id0 * 1e-3 + np.arange(n) * 1e-4,
+        "line_id": np.full(n, line, dtype=np.int64),
+    }
+
+
+def test_a_block_and_its_halo_are_the_stored_pulses_within_the_grown_box(tmp_path):
+    rng = np.random.default_rng(3)
+    parts = [_part(rng, 400, 400 * i, i % 2) for i in range(5)]
+    layout = TileLayout(np.array([-100.0, 100.0, -100.0, 100.0]), 5.0, 50.0)  # 4 x 4 blocks
+    with DetectionStore(tmp_path, 1.000277) as store:
+        for p in parts:
+            store.append(p)
+        ret, own = load_blocks(store, layout, [5, 10], 12.0)
+    # brute force over every pulse: block 5 is row 1, col 1 (x -50..0, y 0..50), block 10
+    # row 2, col 2 (x 0..50, y -50..0); inner blocks, so their boxes are closed
+    cat = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    xy = pulse_position_m(cat, 1.000277)
+    x, y = xy[:, 0], xy[:, 1]
+    in5 = (x >= -50) & (x < 0) & (y > 0) & (y <= 50)
+    in10 = (x >= 0) & (x < 50) & (y > -50) & (y <= 0)
+    near = ((x >= -62) & (x <= 12) & (y >= -12) & (y <= 62)) | (
+        (x >= -12) & (x <= 62) & (y >= -62) & (y <= 12)
+    )
+    want = np.flatnonzero(near | in5 | in10)
+    np.testing.assert_array_equal(ret.pulse_id, cat["pulse_id"][want])  # in pulse order
+    np.testing.assert_array_equal(own, (in5 | in10)[want])
+    np.testing.assert_array_equal(ret.t_bottom_s, cat["t_bottom_s"][want])
+
+
+def test_line_ends_gathered_part_by_part_give_the_whole_survey_scan_angles():
+    rng = np.random.default_rng(5)
+    parts = [_part(rng, 300, 300 * i, i % 3) for i in range(6)]
+    cat = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    rets = [DetectedReturns(**p) for p in parts]
+    whole = DetectedReturns(**cat)
+    ends = LineEnds()
+    for r in rets[::-1]:  # any order of the parts
+        ends.add(r)
+    want = LineEnds.of(whole)
+    for f in ("line", "t_first", "xy_first", "t_last", "xy_last"):
+        np.testing.assert_array_equal(getattr(ends, f), getattr(want, f), err_msg=f)
+    angle = scan_angle_rad(whole)
+    np.testing.assert_array_equal(scan_angle_rad(rets[2], ends), angle[600:900])
+    # the part's own ends give other angles: the lines' whole length matters
+    assert not np.array_equal(scan_angle_rad(rets[2]), angle[600:900])
+
+
+def test_coverage_gathered_block_by_block_is_the_whole_coverage():
+    rng = np.random.default_rng(7)
+    xy = rng.uniform(-20, 120, size=(300, 2)) * [1.0, 0.5]
+    area = (0.0, 100.0, 0.0, 40.0)
+    acc = CoverageAccumulator(area, 5.0)
+    for part in np.array_split(xy, 7):
+        acc.add(part)
+    assert acc.fraction() == area_coverage(xy, area, 5.0)
+    assert 0.2 < acc.fraction() < 1.0
+
+
+def _scene(**run):
+    data = tomllib.loads(
+        (ROOT / "data_synthetic" / "scenes" / "palmer_survey_waves.toml").read_text()
+    )
+    data["flight"]["area_m"] = [0.0, 60.0, 0.0, 60.0]
+    data["flight"]["run_in_m"] = 0.0
+    data["flight"]["altitude_m"] = 250.0
+    data["scanner"]["prf_hz"] = 15000.0
+    data["water"]["extinction_per_m"] = 0.4  # turbid: class-45 claims on the deep side
+    data["trace"] = {"subrays": 3}
+    data["process"]["posterior_pulses_per_km2"] = 0.0
+    data["process"]["posterior_min_pulses"] = 0
+    data["run"] = {"views": False, **run}
+    return parse_scene(data)
+
+
+def _points(out):
+    import laspy
+
+    las = laspy.read(out / "points.laz")
+    pts = {d: np.asarray(las[d]) for d in las.point_format.dimension_names}
+    # the same pulses' points, whatever order the tiles or blocks wrote them in
+    order = np.lexsort((pts["return_number"], pts["pulse_id"]))
+    return {d: v[order] for d, v in pts.items()}
+
+
+def _evaluation(out):
+    """The evaluation's figures: the clock's readings and the blocks' own summary left out."""
+
+    def drop(x):
+        if isinstance(x, dict):
+            skip = ("stages", "seconds_per_pulse", "timings_s", "blocked")
+            return {k: drop(v) for k, v in x.items() if k not in skip}
+        return [drop(v) for v in x] if isinstance(x, list) else x
+
+    return drop(json.loads((out / "evaluation.json").read_text()))
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """The survey processed whole, and by blocks of 100 m with every block in the sample."""
+    root = tmp_path_factory.mktemp("blocks")
+    lines = {}
+    for name, run in (("whole", {}), ("blocks", {"block_m": 100.0})):
+        got = []
+        run_scene(_scene(**run), root / name, log=got.append, workers=1)
+        lines[name] = got
+    return root, lines
+
+
+@pytest.mark.slow
+def test_a_blocked_survey_gives_the_whole_survey_points_grid_and_evaluation(runs):
+    import rasterio
+
+    root, lines = runs
+    ev = json.loads((root / "blocks" / "evaluation.json").read_text())["blocked"]
+    assert ev["blocks"] >= 4 and ev["sample_blocks"] == ev["blocks"]  # every block sampled
+    assert ev["sample_pulses"] == ev["survey_pulses"] > 10_000
+    a, b = _points(root / "whole"), _points(root / "blocks")
+    assert a.keys() == b.keys() and len(a["X"]) > 20_000
+    for d in a:
+        np.testing.assert_array_equal(a[d], b[d], err_msg=d)
+    assert np.any(a["classification"] == 45)  # the claims are there to compare
+    with (
+        rasterio.open(root / "whole" / "grid.tif") as r,
+        rasterio.open(root / "blocks" / "grid.tif") as s,
+    ):
+        np.testing.assert_array_equal(r.read(), s.read())
+    assert json.dumps(_evaluation(root / "whole"), sort_keys=True, default=str) == json.dumps(
+        _evaluation(root / "blocks"), sort_keys=True, default=str
+    )
+    # the counts logged are the survey's, not the sum of the blocks' overlapping halos
+    for key in ("submerged objects", "class-45 claims withheld", "rejected bathymetric"):
+        want = [s for s in lines["whole"] if key in s]
+        assert want and want == [s for s in lines["blocks"] if key in s], key
