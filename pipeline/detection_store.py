@@ -19,6 +19,7 @@ which does not depend on the chunk size, the order of arrival or the workers. Co
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import tempfile
 from dataclasses import dataclass, field
@@ -62,6 +63,19 @@ class ChunkSummary:
     n_pulses: int
     pulse_id_range: tuple[int, int]
     bbox_m: np.ndarray | None
+
+
+#: The fields a pulse's position is made of (:func:`pulse_position_m`).
+POSITION_FIELDS = (
+    "origin_meas_m",
+    "direction_meas",
+    "has_surface",
+    "t_surface_s",
+    "has_bottom",
+    "t_bottom_s",
+    "has_column",
+    "t_column_s",
+)
 
 
 def pulse_position_m(part: dict[str, np.ndarray], air_index: float) -> np.ndarray:
@@ -158,8 +172,17 @@ class DetectionStore:
         return out
 
     def replace_field(self, c: int, name: str, values: np.ndarray) -> None:
-        """Overwrite (or add) one field of chunk ``c`` (appended; the old bytes are left)."""
+        """Overwrite (or add) one field of chunk ``c`` (appended; the old bytes are left).
+
+        A field the pulse positions are made of (:func:`pulse_position_m`) moves the chunk's
+        bounding box with it.
+        """
         self._put(c, name, np.asarray(values))
+        if name in POSITION_FIELDS and self.chunks[c].n_pulses:
+            names = [k for k in POSITION_FIELDS if k in self._index[c]]
+            xy = pulse_position_m(self.load_chunk(c, names), self.air_index)
+            bbox = np.array([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()])
+            self.chunks[c] = dataclasses.replace(self.chunks[c], bbox_m=bbox)
 
     def drop_field(self, name: str) -> None:
         """Forget a field of every chunk."""

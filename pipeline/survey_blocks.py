@@ -40,10 +40,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from pipeline.detection_store import detected_returns, pulse_position_m
+from pipeline.detection_store import POSITION_FIELDS, detected_returns, pulse_position_m
 from pipeline.survey_tiles import TileLayout, chunks_meeting, snap_tile_m
 
 __all__ = [
@@ -52,8 +53,11 @@ __all__ = [
     "block_halo_m",
     "pulse_counts",
     "sample_blocks",
+    "blocks_to_process",
     "load_blocks",
     "SurveyGridAccumulator",
+    "LineSums",
+    "with_survey_lines",
 ]
 
 #: Grid fields copied cell by cell from a block's grid into the survey's.
@@ -116,9 +120,8 @@ def block_layout(scene, bounds_m: np.ndarray, n_pulses: int, halo_m: float) -> T
 
 
 def _positions(store, c: int) -> np.ndarray:
-    fields = ["origin_meas_m", "direction_meas", "has_surface", "t_surface_s", "has_bottom"]
-    fields += ["t_bottom_s"] + [k for k in ("has_column", "t_column_s") if k in store.fields(c)]
-    return pulse_position_m(store.load_chunk(c, fields), store.air_index)
+    names = [k for k in POSITION_FIELDS if k in store.fields(c)]
+    return pulse_position_m(store.load_chunk(c, names), store.air_index)
 
 
 def pulse_counts(store, layout: TileLayout) -> np.ndarray:
@@ -130,23 +133,71 @@ def pulse_counts(store, layout: TileLayout) -> np.ndarray:
     return counts
 
 
-def sample_blocks(counts: np.ndarray, max_pulses: int) -> np.ndarray:
+def _halton(k: int, base: int) -> float:
+    """The ``k``-th term of the van der Corput sequence in ``base`` (Halton's coordinate)."""
+    out, f = 0.0, 1.0 / base
+    while k:
+        k, digit = divmod(k, base)
+        out += digit * f
+        f /= base
+    return out
+
+
+def sample_blocks(
+    counts: np.ndarray, max_pulses: int, shape: tuple[int, int] | None = None
+) -> np.ndarray:
     """Blocks spread over the survey holding at most ``max_pulses`` pulses (sorted indices).
 
-    Every block with a pulse when they hold at most ``max_pulses``; else the blocks with a
-    pulse taken in van der Corput order of their rank in the layout (row by row from the
-    north-west: 0, 1/2, 1/4, 3/4, ... of the way through them, each prefix spread over the
-    survey) while their pulses stay within ``max_pulses``; at least one block.
+    Every block with a pulse when they hold at most ``max_pulses``. Else, for the Halton
+    points ``(h_2(k), h_3(k))``, ``k = 1, 2, ...`` over the layout (columns by rows, scaled
+    to 1), the block with a pulse nearest each not yet taken, while their pulses stay within
+    ``max_pulses``; at least one block. Halton points fill the square evenly at every
+    length, so every prefix is spread over both axes, whatever the layout's shape.
+
+    Parameters
+    ----------
+    counts : (n_blocks,) int
+        Pulses per block, the layout's order (row by row from the north-west).
+    max_pulses : int
+    shape : (int, int), optional
+        The layout's rows and columns; default one row.
     """
     used = np.flatnonzero(counts > 0)
     if used.size == 0 or counts[used].sum() <= max_pulses:
         return used
-    bits = max(1, int(used.size - 1).bit_length())
-    rank = np.array([int(f"{i:0{bits}b}"[::-1], 2) for i in range(used.size)])
-    spread = used[np.argsort(rank)]
-    total = np.cumsum(counts[spread])
-    n = max(1, int(np.searchsorted(total, max_pulses, side="right")))
-    return np.sort(spread[:n])
+    rows, cols = (1, counts.size) if shape is None else shape
+    row, col = np.divmod(used, cols)
+    u, v = (col + 0.5) / cols, (row + 0.5) / rows
+    free = np.ones(used.size, dtype=bool)
+    picked, total, k = [], 0, 0
+    while free.any():
+        k += 1
+        d = (u - _halton(k, 2)) ** 2 + (v - _halton(k, 3)) ** 2
+        j = int(np.argmin(np.where(free, d, np.inf)))
+        if picked and total + counts[used[j]] > max_pulses:
+            break
+        free[j] = False
+        picked.append(used[j])
+        total += int(counts[used[j]])
+    return np.sort(np.array(picked, dtype=np.int64))
+
+
+def blocks_to_process(layout: TileLayout, counts: np.ndarray, reach_m: float) -> np.ndarray:
+    """Blocks whose cells can hold a point: within a beam reach of a block with pulses.
+
+    A pulse's points lie up to ``reach_m`` from its position, so a block without pulses of
+    its own next to one with them can hold points in its cells (the edge of a swath). Sorted
+    indices of the blocks within ``ceil(reach / side)`` blocks of one with a pulse.
+    """
+    rows, cols = layout.shape
+    has = (counts > 0).reshape(rows, cols)
+    k = int(math.ceil(reach_m / layout.tile_m)) if reach_m > 0.0 else 0
+    near = has.copy()
+    for di in range(-k, k + 1):
+        for dj in range(-k, k + 1):
+            src = has[max(0, -di) : rows - max(0, di), max(0, -dj) : cols - max(0, dj)]
+            near[max(0, di) : rows - max(0, -di), max(0, dj) : cols - max(0, -dj)] |= src
+    return np.flatnonzero(near.ravel())
 
 
 def _grown_boxes(layout: TileLayout, blocks, halo: float) -> np.ndarray:
@@ -172,8 +223,9 @@ def load_blocks(store, layout: TileLayout, blocks, halo: float):
 
     Returns
     -------
-    returns : DetectedReturns
-    own : (n,) bool
+    returns : DetectedReturns or None
+        None: no stored pulse lies there.
+    own : (n,) bool or None
         The pulse's position lies in one of ``blocks``.
     """
     blocks = np.asarray(blocks, dtype=np.int64)
@@ -190,8 +242,8 @@ def load_blocks(store, layout: TileLayout, blocks, halo: float):
             near |= (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
         parts.append({k: v[near] for k, v in part.items()})
         owns.append(own[near])
-    if not parts:
-        raise ValueError(f"blocks {blocks.tolist()} hold no stored pulse")
+    if not parts or not sum(len(o) for o in owns):
+        return None, None
     keys = set.intersection(*(set(p) for p in parts))
     cat = {k: np.concatenate([p[k] for p in parts]) for k in keys}
     return detected_returns(cat), np.concatenate(owns)
@@ -249,3 +301,85 @@ class SurveyGridAccumulator:
         """``(grid, cells)`` of the survey."""
         grid = dataclasses.replace(self.grid, designated=self._designated, **self._g)
         return grid, dataclasses.replace(self.cells, **self._c)
+
+
+@dataclass
+class LineSums:
+    """Each flight line's pulse origins as sums, gathered part by part: its axis streamed.
+
+    The axis is :func:`~pipeline.process.facet_excess.line_axes`' (the major axis of the
+    origins' 2 x 2 scatter), from sums about the first origin seen of each line (the same
+    figure up to rounding).
+    """
+
+    line: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    ref: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    n: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    s: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    ss: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    def add(self, returns) -> None:
+        """Take in more pulses (``origin_meas_m``, ``line_id``)."""
+        xy = returns.origin_meas_m[:, :2]
+        ids, first, inv = np.unique(returns.line_id, return_index=True, return_inverse=True)
+        line = np.union1d(self.line, ids)
+        at_old, at_new = np.searchsorted(line, self.line), np.searchsorted(line, ids)
+        ref = np.zeros((line.size, 2))
+        ref[at_new] = xy[first]
+        ref[at_old] = self.ref  # a line keeps the first reference it had
+        grow = [np.zeros((line.size, *a.shape[1:])) for a in (self.n, self.s, self.ss)]
+        for g, a in zip(grow, (self.n, self.s, self.ss), strict=True):
+            g[at_old] = a
+        d = xy - ref[at_new][inv.ravel()]
+        k = at_new[inv.ravel()]
+        np.add.at(grow[0], k, 1.0)
+        np.add.at(grow[1], k, d)
+        np.add.at(grow[2], k, np.column_stack([d[:, 0] ** 2, d[:, 1] ** 2, d[:, 0] * d[:, 1]]))
+        self.line, self.ref, (self.n, self.s, self.ss) = line, ref, grow
+
+    def axes(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(line_ids (m,), unit axes (m, 2))``."""
+        n = np.maximum(self.n, 1.0)
+        sxx = self.ss[:, 0] - self.s[:, 0] ** 2 / n
+        syy = self.ss[:, 1] - self.s[:, 1] ** 2 / n
+        sxy = self.ss[:, 2] - self.s[:, 0] * self.s[:, 1] / n
+        ang = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
+        return self.line, np.column_stack([np.cos(ang), np.sin(ang)])
+
+
+def _with_more_lines(ids, axes, more_ids, more_axes):
+    """``ids, axes`` with the lines of ``more_ids`` they lack (sorted by line)."""
+    ids, axes = np.asarray(ids), np.asarray(axes).reshape(-1, 2)
+    missing = ~np.isin(more_ids, ids)
+    if not missing.any():
+        return ids, axes
+    all_ids = np.concatenate([ids, more_ids[missing]])
+    all_axes = np.concatenate([axes, more_axes[missing]])
+    order = np.argsort(all_ids, kind="stable")
+    return all_ids[order], all_axes[order]
+
+
+def with_survey_lines(figures, line_ids: np.ndarray, line_axes: np.ndarray):
+    """``figures`` whose line tables hold every line of the survey.
+
+    A sample of blocks may miss flight lines (or hold only a part of one): a block on a line
+    the sample missed needs its axis (the facet correction's and the TPU's along-track axes).
+    The sample's own lines keep the axes it measured (so a sample of every block keeps the
+    whole survey's); the others get the streamed ones (:class:`LineSums`).
+    """
+    wide, tw = figures.wide, figures.tpu_wide
+    if wide is not None and wide.sea.facets is not None:
+        f = wide.sea.facets
+        ids, axes = _with_more_lines(f.line_id, f.axis_xy, line_ids, line_axes)
+        sea = dataclasses.replace(
+            wide.sea, facets=dataclasses.replace(f, line_id=ids, axis_xy=axes)
+        )
+        wide = dataclasses.replace(wide, sea=sea)
+    if tw is not None:
+        ids, axes = _with_more_lines(tw.line_ids, tw.line_axes, line_ids, line_axes)
+        facets = tw.facets
+        if facets is not None:
+            f_ids, f_axes = _with_more_lines(facets.line_id, facets.axis_xy, line_ids, line_axes)
+            facets = dataclasses.replace(facets, line_id=f_ids, axis_xy=f_axes)
+        tw = dataclasses.replace(tw, line_ids=ids, line_axes=axes, facets=facets)
+    return dataclasses.replace(figures, wide=wide, tpu_wide=tw)

@@ -25,14 +25,17 @@ from pipeline.process.classify import (
 )
 from pipeline.process.returns import PointFlag
 from pipeline.survey_blocks import (
+    LineSums,
     SurveyGridAccumulator,
     _base_halo_m,
     _sub_layout,
     block_halo_m,
     block_layout,
+    blocks_to_process,
     load_blocks,
     pulse_counts,
     sample_blocks,
+    with_survey_lines,
 )
 from pipeline.survey_tiles import grid_by_tiles, points_tile_order
 
@@ -104,7 +107,6 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
     layout : TileLayout
         The grid's bounds and the points file's tiles.
     """
-    from pipeline.outputs.atomic import write_json
     from pipeline.outputs.las import LazTileWriter, las_header
     from pipeline.process_tiles import beam_reach_m
     from pipeline.survey_finish import finish_survey, log_cleanup
@@ -117,29 +119,38 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
     n_pulses = store.n_pulses
     with clock.stage("blocks"):
         base = _base_halo_m(ctx, ps)
-        blocks = block_layout(scene, layout.bounds_m, n_pulses, base)
-        counts = pulse_counts(store, blocks)
-        sample = sample_blocks(counts, run.sample_pulses)
+        pre = block_layout(scene, layout.bounds_m, n_pulses, base)
+        pre_counts = pulse_counts(store, pre)
+        sample = sample_blocks(pre_counts, run.sample_pulses, pre.shape)
         # the sample's own pulses only: a survey of its own, its blocks' edges its edges
-        sample_returns, _ = load_blocks(store, blocks, sample, 0.0)
-    used = np.flatnonzero(counts > 0)
+        sample_returns, _ = load_blocks(store, pre, sample, 0.0)
     log(
-        f"  blocks of {blocks.tile_m:g} m: {used.size} with pulses (at most "
-        f"{int(counts.max())} each); sample of {sample.size} blocks, {len(sample_returns)}"
-        " pulses (run.sample_pulses)"
+        f"  sample: {sample.size} blocks of {pre.tile_m:g} m spread over the survey, "
+        f"{len(sample_returns)} of its {n_pulses} pulses (run.sample_pulses)"
     )
     # the sample, processed as a survey of its own: the survey-wide figures
     made = process_survey(sample_returns, scene, plan, ctx, layout, clock, log)
-    figures = made.figures
     with clock.stage("blocks"):
-        # streamed maxima and ends: the beams' reach at the sample's level, the lines' ends
-        reach, lines = 0.0, LineEnds()
+        # streamed: the beams' reach at the sample's level, the lines' ends and axes
+        reach, lines, sums = 0.0, LineEnds(), LineSums()
         for c in range(len(store.chunks)):
             part = store.returns([c])
-            reach = max(reach, beam_reach_m(part, ctx, figures.wide))
+            reach = max(reach, beam_reach_m(part, ctx, made.figures.wide))
             lines.add(part)
+            sums.add(part)
+        figures = with_survey_lines(made.figures, *sums.axes())
         halo = block_halo_m(ctx, ps, reach)
-    log(f"  block halo {halo:.0f} m (beam reach {reach:.1f} m)")
+        blocks = block_layout(scene, layout.bounds_m, n_pulses, halo)
+        counts = pulse_counts(store, blocks)
+        todo = blocks_to_process(blocks, counts, reach)
+    used = np.flatnonzero(counts > 0)
+    load = ((blocks.tile_m + 2.0 * halo) / blocks.tile_m) ** 2
+    log(
+        f"  blocks of {blocks.tile_m:g} m ({todo.size} to process, {used.size} with pulses, at"
+        f" most {int(counts.max())} each), halo {halo:.0f} m (beam reach {reach:.1f} m): each"
+        f" loads ~{load:.1f} times its own area"
+        + (" (raise run.block_pulses: the halo dominates)" if load > 4.0 else "")
+    )
     empty = made.processed.points.select(np.zeros(0, dtype=np.int64))
     water = figures.datum.water_level_m
     empty_grid = grid_by_tiles(empty, layout, origin, fr.crs, water, ps)
@@ -151,9 +162,11 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
     air = ctx.instrument.air_index
     t0 = time.perf_counter()
     with LazTileWriter(out / "points.laz", header, ctx.instrument.amplitude_full_scale) as w:
-        for k, b in enumerate(used):
+        for k, b in enumerate(todo):
             with clock.stage("blocks"):
                 ret, own = load_blocks(store, blocks, [b], halo)
+            if ret is None:
+                continue
             sub, row0, col0 = _sub_layout(blocks, int(b), halo)
             blk = process_survey(ret, scene, plan, ctx, sub, clock, _quiet, figures)
             with clock.stage("outputs"):
@@ -188,31 +201,56 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
     sample_sim = dataclasses.replace(sim, returns=sample_returns)
 
     def deliver(unc, _grid):
-        # the points are written; the survey's grid with its cells' TPU (module notes)
+        # the points are written; the survey's grid with its cells' TPU, and in the cells
+        # where the sample's posteriors ran, the sample's cells (module notes)
         from pipeline.outputs.netcdf import write_grid_nc
         from pipeline.outputs.raster import write_grid_tif
 
+        out_cells = cells
+        if np.any(unc.cells.n_posterior > 0):
+            sampled = unc.cells.n_posterior > 0
+            out_cells = dataclasses.replace(
+                cells,
+                **{
+                    f.name: np.where(sampled, getattr(unc.cells, f.name), getattr(cells, f.name))
+                    for f in dataclasses.fields(cells)
+                },
+            )
         files = {
             "points": out / "points.laz",
-            "grid": write_grid_tif(out / "grid.tif", grid, cells),
-            "grid_nc": write_grid_nc(out / "grid.nc", grid, cells),
+            "grid": write_grid_tif(out / "grid.tif", grid, out_cells),
+            "grid_nc": write_grid_nc(out / "grid.nc", grid, out_cells),
         }
-        return files, made.processed.points
+        # the views' points in the order a points file of the sample would hold them
+        order, _ = points_tile_order(made.processed.points, sample_returns, layout, air)
+        return files, made.processed.points.select(order)
 
-    files, evaluation = finish_survey(
-        scene, plan, out, clock, log, progress, executor, sample_sim, ctx, made, covered, deliver
-    )
-    evaluation["blocked"] = {
+    blocked = {
         "block_m": blocks.tile_m,
-        "blocks": int(used.size),
+        "blocks": int(todo.size),
+        "blocks_with_pulses": int(used.size),
         "halo_m": halo,
         "sample_blocks": int(sample.size),
-        "sample_pulses": int(counts[sample].sum()),
+        "sample_block_m": pre.tile_m,
+        "sample_pulses": len(sample_returns),
         "survey_pulses": int(n_pulses),
         "evaluated_on": "the sample's blocks, processed as a survey of their own",
         "class43_points": n_obj,
         "rejected": rejected,
         "class45_withheld": withheld,
     }
-    write_json(files["evaluation"], evaluation)
-    return files, evaluation
+    return finish_survey(
+        scene,
+        plan,
+        out,
+        clock,
+        log,
+        progress,
+        executor,
+        sample_sim,
+        ctx,
+        made,
+        covered,
+        deliver,
+        extra={"blocked": blocked},
+    )

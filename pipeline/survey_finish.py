@@ -28,13 +28,14 @@ def log_cleanup(log, processed, n_objects: int, rejected, ps, covered: float) ->
 
 
 def finish_survey(
-    scene, plan, out, clock, log, progress, executor, sim, ctx, made, covered, deliver
+    scene, plan, out, clock, log, progress, executor, sim, ctx, made, covered, deliver, extra=None
 ):
     """Posteriors, outputs, views, evaluation and report of a processed survey.
 
     ``made``: :func:`~pipeline.survey_processing.process_survey` of ``sim.returns``;
     ``deliver(unc, grid) -> (files, view_points)`` writes the points and the grid (in the
-    outputs stage) and gives the points the views show, in the points file's order.
+    outputs stage) and gives the points the views show, in the points file's order;
+    ``extra``: entries added to ``evaluation.json`` (and the report) before the report.
 
     Returns
     -------
@@ -92,6 +93,11 @@ def finish_survey(
             log,
             area_covered=covered,
         )
+        if extra:
+            from pipeline.outputs.atomic import write_json
+
+            evaluation.update(extra)
+            write_json(files["evaluation"], evaluation)
         files["evaluation_points"] = out / "evaluation_points.npz"
         from pipeline.outputs.report import write_survey_report
 

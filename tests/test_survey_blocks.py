@@ -19,25 +19,42 @@ import pytest
 from pipeline.detection_store import DetectionStore, pulse_position_m
 from pipeline.outputs.las_fields import LineEnds, scan_angle_rad
 from pipeline.process.coverage import area_coverage
+from pipeline.process.facet_excess import line_axes
 from pipeline.process.returns import DetectedReturns
 from pipeline.run import run_scene
 from pipeline.scene import parse_scene
-from pipeline.survey_blocks import load_blocks, sample_blocks
+from pipeline.survey_blocks import LineSums, blocks_to_process, load_blocks, sample_blocks
 from pipeline.survey_blocks_run import CoverageAccumulator
 from pipeline.survey_tiles import TileLayout
 from tests.conftest import ROOT
 
 
-def test_sample_blocks_take_every_block_under_the_cap_else_a_spread_prefix():
+def test_sample_blocks_take_every_block_under_the_cap_else_a_spread_set():
     counts = np.array([0, 5, 7, 0, 3, 9, 4, 6, 8, 2])
     used = np.flatnonzero(counts)
     np.testing.assert_array_equal(sample_blocks(counts, 44), used)  # 44 = all of them
-    # the 8 used blocks in van der Corput order of their rank (0, 4, 2, 6, 1, 5, 3, 7):
-    # blocks 1, 6, 4, 8, 2, ... hold 5, 4, 3, 8, 7, ...: 5 + 4 + 3 + 8 = 20, the next 27
-    np.testing.assert_array_equal(sample_blocks(counts, 20), [1, 4, 6, 8])
-    np.testing.assert_array_equal(sample_blocks(counts, 19), [1, 4, 6])
+    # one row of 10 blocks, centres at 0.05, 0.15, ...: the Halton points' x 1/2, 1/4, 3/4,
+    # 1/8 take blocks 4 (tie with 5: the first), 2, 7, 1, holding 3, 7, 6, 5
+    np.testing.assert_array_equal(sample_blocks(counts, 20), [2, 4, 7])  # + 5 = 21 > 20
+    np.testing.assert_array_equal(sample_blocks(counts, 21), [1, 2, 4, 7])
+    np.testing.assert_array_equal(sample_blocks(counts, 15), [2, 4])
     assert sample_blocks(counts, 1).size == 1  # at least one block
     assert sample_blocks(np.zeros(4, dtype=np.int64), 10).size == 0
+
+
+@pytest.mark.parametrize("shape", [(8, 8), (6, 16), (16, 6), (1, 40), (40, 1)])
+def test_a_sample_of_blocks_spreads_over_both_axes_of_the_survey(shape):
+    # equal blocks, an eighth of them sampled: both halves of the rows and of the columns
+    # have some, and no row or column holds more than half of them (row-major ranks alone
+    # put every 8th block of an 8-wide layout in one column)
+    counts = np.full(shape[0] * shape[1], 100)
+    got = sample_blocks(counts, counts.sum() // 8, shape)
+    assert got.size == counts.size // 8
+    row, col = np.divmod(got, shape[1])
+    for idx, n in ((row, shape[0]), (col, shape[1])):
+        if n > 1:
+            assert np.unique(2 * idx // n).size == 2, (shape, got)
+            assert np.bincount(idx).max() <= max(1, got.size // 2), (shape, got)
 
 
 def _part(rng, n, id0, line):
@@ -108,6 +125,41 @@ def test_line_ends_gathered_part_by_part_give_the_whole_survey_scan_angles():
     assert not np.array_equal(scan_angle_rad(rets[2]), angle[600:900])
 
 
+def test_blocks_to_process_are_those_within_a_beam_reach_of_a_block_with_pulses():
+    layout = TileLayout(np.array([0.0, 70.0, 0.0, 50.0]), 5.0, 10.0)  # 5 rows, 7 columns
+    rng = np.random.default_rng(2)
+    counts = np.where(rng.random(35) < 0.15, 9, 0)
+    for reach in (0.0, 3.0, 10.0, 14.0):
+        k = int(np.ceil(reach / 10.0))
+        row, col = np.divmod(np.arange(35), 7)
+        with_pulses = np.flatnonzero(counts > 0)
+        want = [
+            b
+            for b in range(35)
+            if any(abs(row[b] - row[u]) <= k and abs(col[b] - col[u]) <= k for u in with_pulses)
+        ]
+        np.testing.assert_array_equal(blocks_to_process(layout, counts, reach), want)
+
+
+def test_line_axes_summed_part_by_part_are_the_whole_lines_axes():
+    rng = np.random.default_rng(9)
+    parts = [_part(rng, 500, 500 * i, i % 3) for i in range(6)]
+    for i, p in enumerate(parts):  # lines along three headings, with some scatter
+        ang = 0.3 + 0.9 * (i % 3)
+        t = np.arange(500) * 0.5 + 250.0 * (i // 3)
+        p["origin_meas_m"][:, 0] = 1e4 + t * np.cos(ang) + rng.normal(0, 2, 500)
+        p["origin_meas_m"][:, 1] = -3e3 + t * np.sin(ang) + rng.normal(0, 2, 500)
+    sums = LineSums()
+    for p in parts:
+        sums.add(DetectedReturns(**p))
+    cat = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    ids, axes = line_axes(cat["origin_meas_m"][:, :2], cat["line_id"])
+    got_ids, got_axes = sums.axes()
+    np.testing.assert_array_equal(got_ids, ids)
+    # the same axes up to rounding and sign (they enter squared)
+    np.testing.assert_allclose(np.abs(np.sum(got_axes * axes, axis=1)), 1.0, atol=1e-12)
+
+
 def test_coverage_gathered_block_by_block_is_the_whole_coverage():
     rng = np.random.default_rng(7)
     xy = rng.uniform(-20, 120, size=(300, 2)) * [1.0, 0.5]
@@ -119,14 +171,18 @@ def test_coverage_gathered_block_by_block_is_the_whole_coverage():
     assert 0.2 < acc.fraction() < 1.0
 
 
-def _scene(**run):
+def wave_survey_scene(area_m=(0.0, 60.0, 0.0, 60.0), prf_hz=15000.0, **run):
+    """``tests/test_process_tiles.py``'s survey (one Palmer line over ``area_m``), ``run`` keys.
+
+    Also flown 600 m long by ``benchmarks/blocks_exact.py``.
+    """
     data = tomllib.loads(
         (ROOT / "data_synthetic" / "scenes" / "palmer_survey_waves.toml").read_text()
     )
-    data["flight"]["area_m"] = [0.0, 60.0, 0.0, 60.0]
+    data["flight"]["area_m"] = list(area_m)
     data["flight"]["run_in_m"] = 0.0
     data["flight"]["altitude_m"] = 250.0
-    data["scanner"]["prf_hz"] = 15000.0
+    data["scanner"]["prf_hz"] = prf_hz
     data["water"]["extinction_per_m"] = 0.4  # turbid: class-45 claims on the deep side
     data["trace"] = {"subrays": 3}
     data["process"]["posterior_pulses_per_km2"] = 0.0
@@ -135,7 +191,7 @@ def _scene(**run):
     return parse_scene(data)
 
 
-def _points(out):
+def las_points_by_pulse(out):
     import laspy
 
     las = laspy.read(out / "points.laz")
@@ -145,7 +201,7 @@ def _points(out):
     return {d: v[order] for d, v in pts.items()}
 
 
-def _evaluation(out):
+def evaluation_figures(out):
     """The evaluation's figures: the clock's readings and the blocks' own summary left out."""
 
     def drop(x):
@@ -164,7 +220,7 @@ def runs(tmp_path_factory):
     lines = {}
     for name, run in (("whole", {}), ("blocks", {"block_m": 100.0})):
         got = []
-        run_scene(_scene(**run), root / name, log=got.append, workers=1)
+        run_scene(wave_survey_scene(**run), root / name, log=got.append, workers=1)
         lines[name] = got
     return root, lines
 
@@ -175,9 +231,11 @@ def test_a_blocked_survey_gives_the_whole_survey_points_grid_and_evaluation(runs
 
     root, lines = runs
     ev = json.loads((root / "blocks" / "evaluation.json").read_text())["blocked"]
-    assert ev["blocks"] >= 4 and ev["sample_blocks"] == ev["blocks"]  # every block sampled
+    # every block with pulses sampled (and processed, with the blocks next to them)
+    assert ev["blocks_with_pulses"] >= 4 and ev["sample_blocks"] == ev["blocks_with_pulses"]
+    assert ev["blocks"] >= ev["blocks_with_pulses"]
     assert ev["sample_pulses"] == ev["survey_pulses"] > 10_000
-    a, b = _points(root / "whole"), _points(root / "blocks")
+    a, b = las_points_by_pulse(root / "whole"), las_points_by_pulse(root / "blocks")
     assert a.keys() == b.keys() and len(a["X"]) > 20_000
     for d in a:
         np.testing.assert_array_equal(a[d], b[d], err_msg=d)
@@ -187,9 +245,9 @@ def test_a_blocked_survey_gives_the_whole_survey_points_grid_and_evaluation(runs
         rasterio.open(root / "blocks" / "grid.tif") as s,
     ):
         np.testing.assert_array_equal(r.read(), s.read())
-    assert json.dumps(_evaluation(root / "whole"), sort_keys=True, default=str) == json.dumps(
-        _evaluation(root / "blocks"), sort_keys=True, default=str
-    )
+    assert json.dumps(
+        evaluation_figures(root / "whole"), sort_keys=True, default=str
+    ) == json.dumps(evaluation_figures(root / "blocks"), sort_keys=True, default=str)
     # the counts logged are the survey's, not the sum of the blocks' overlapping halos
     for key in ("submerged objects", "class-45 claims withheld", "rejected bathymetric"):
         want = [s for s in lines["whole"] if key in s]

@@ -65,10 +65,12 @@ from pipeline.uncertainty.tpu_measured import (
     with_wave_entry,
 )
 from pipeline.uncertainty.tpu_neighbours import amplitude_fill
+from pipeline.uncertainty.tpu_settings import take_tpu  # re-exported: PointTpu's rows
 from pipeline.uncertainty.tpu_survey_wide import TpuSurveyWide, facet_sea, survey_tracks
 from pipeline.uncertainty.tpu_timing import split_timing_excess
 from pipeline.uncertainty.tpu_window import (
     WINDOW_TERM,
+    cell_relief_m,
     cell_window_sigma_m,
     window_footprint_sigma_m,
     with_random_term,
@@ -271,16 +273,23 @@ def survey_uncertainty(
     at40 = np.searchsorted(bottom_rows, tpu40.row)
     # survey-wide: each line's direction, from all its pulses
     tracks, line_ids, line_axes = survey_tracks(returns, wide)
+    cell_relief = None
     if group is not None:
         # one window, one detection: the seabed's spread under its shots (with the gradient's
         # uncertainty) and the sea's slope the planes miss (depth only)
         win = windows.of_points(points40.pulse_id, returns)
         xy40w, g40, gc40 = points40.xyz_m[:, :2], grad[at40], grad_cov[at40]
         if windows.cell_m > 0.0:  # a scan's cell, its bottom carried along its slope
-            # (process.photon_carry): the relief its plane misses is left; the sea is in the surface
-            # terms (a facet slope over 5 m read 0.034 m of flat water on tuning seed 46: err 0.010)
+            # (process.photon_carry): the relief its plane misses is left (survey-wide); the sea
+            # is in the surface terms (a facet slope over 5 m read 0.034 m of flat water on tuning
+            # seed 46: err 0.010)
             d40w, z40w, cell = points40.depth_m, points40.xyz_m[:, 2], windows.cell_m
-            seabed = spread = cell_window_sigma_m(xy40w, d40w, z40w, win, cell, g40, gc40)
+            cell_relief = None if wide is None else wide.cell_relief_sigma
+            if cell_relief is None:
+                cell_relief = cell_relief_m(xy40w, d40w, z40w, win, cell)
+            seabed = spread = cell_window_sigma_m(
+                xy40w, d40w, z40w, win, cell, g40, gc40, relief_m=cell_relief
+            )
         else:
             sea_cov = unresolved_slope_cov(vg, processed.surface, tracks[tpu40.row], rows=tpu40.row)
             seabed = window_footprint_sigma_m(xy40w, win, g40, gradient_cov=gc40)
@@ -341,6 +350,7 @@ def survey_uncertainty(
             line_ids=line_ids,
             line_axes=line_axes,
             facets=facets,
+            cell_relief_sigma=cell_relief,
         ),
     )
 
@@ -405,20 +415,6 @@ def with_posteriors(
     sigma[point_index[converged]] = np.asarray(std_m)[converged]
     cells = cell_uncertainty(grid, unc.tpu40, posterior_sigma_v_m=sigma, has_posterior=sampled)
     return dataclasses.replace(unc, cells=cells, summary=iho.order_summary(cells.order).to_dict())
-
-
-def take_tpu(tpu: PointTpu, index: np.ndarray) -> PointTpu:
-    """Rows ``index`` of a PointTpu (every per-point array and term)."""
-    kw = {}
-    for f in dataclasses.fields(tpu):
-        v = getattr(tpu, f.name)
-        if isinstance(v, dict):
-            kw[f.name] = {k: a[index] for k, a in v.items()}
-        elif isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == len(tpu):
-            kw[f.name] = v[index]
-        else:
-            kw[f.name] = v
-    return dataclasses.replace(tpu, **kw)
 
 
 def without_points(unc: SurveyUncertainty, keep: np.ndarray, grid: Grid) -> SurveyUncertainty:

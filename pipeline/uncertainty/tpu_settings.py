@@ -215,3 +215,17 @@ class PointTpu:
 
     def __len__(self) -> int:
         return int(self.row.shape[0])
+
+
+def take_tpu(tpu: PointTpu, index: np.ndarray) -> PointTpu:
+    """Rows ``index`` of a PointTpu (every per-point array and term)."""
+    kw = {}
+    for f in dataclasses.fields(tpu):
+        v = getattr(tpu, f.name)
+        if isinstance(v, dict):
+            kw[f.name] = {k: a[index] for k, a in v.items()}
+        elif isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == len(tpu):
+            kw[f.name] = v[index]
+        else:
+            kw[f.name] = v
+    return dataclasses.replace(tpu, **kw)

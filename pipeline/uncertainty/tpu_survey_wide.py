@@ -92,6 +92,7 @@ class TpuSurveyWide:
     line_ids: np.ndarray
     line_axes: np.ndarray
     facets: FacetWide | None = None
+    cell_relief_sigma: float | None = None
 
 
 def tpu_halo_m(st) -> float:

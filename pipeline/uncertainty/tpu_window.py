@@ -41,6 +41,7 @@ from pipeline.uncertainty.tpu_settings import DEPTH, PointTpu, Z
 __all__ = [
     "WINDOW_TERM",
     "cell_relief_sigma_m",
+    "cell_relief_m",
     "cell_window_sigma_m",
     "window_footprint_sigma_m",
     "with_random_term",
@@ -152,8 +153,31 @@ def cell_relief_sigma_m(xy_m, z_m, group, cell_m, neighbour_cells=2.5) -> float:
     return float(MAD_TO_SIGMA * np.median(np.abs(miss - np.median(miss))))
 
 
+def cell_relief_m(xy_m, depth_m, height_m, group, cell_m, neighbour_cells=2.5) -> float:
+    """The relief a carried cell's plane misses (m; :func:`cell_window_sigma_m`).
+
+    :func:`cell_relief_sigma_m` of the soundings' heights or of their depths, whichever is
+    smaller.
+    A figure of the whole survey (a pooled MAD): a block of a survey is handed its survey's
+    (``TpuSurveyWide.cell_relief_sigma``).
+    """
+    xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+    return min(
+        cell_relief_sigma_m(xy, depth_m, group, cell_m, neighbour_cells),
+        cell_relief_sigma_m(xy, height_m, group, cell_m, neighbour_cells),
+    )
+
+
 def cell_window_sigma_m(
-    xy_m, depth_m, height_m, group, cell_m, gradient, gradient_cov, neighbour_cells=2.5
+    xy_m,
+    depth_m,
+    height_m,
+    group,
+    cell_m,
+    gradient,
+    gradient_cov,
+    neighbour_cells=2.5,
+    relief_m: float | None = None,
 ) -> np.ndarray:
     """The window term of a scan's cell windows, per point, ``(n,)`` m.
 
@@ -167,7 +191,8 @@ def cell_window_sigma_m(
     height for all its shots: its term is the seabed's spread under them with the gradient's
     uncertainty (:func:`window_footprint_sigma_m`; on suite tuning seed 77, three windows of
     ~850 shots at a Palmer swath's edges over a 7.8° slope missed by 0.5-0.65 m sd while the
-    relief term, without neighbours, was 0).
+    relief term, without neighbours, was 0). ``relief_m``: the survey's relief figure
+    (:func:`cell_relief_m`), when the soundings are a block of it.
     """
     from scipy.spatial import cKDTree
 
@@ -183,10 +208,9 @@ def cell_window_sigma_m(
     c3 = np.column_stack([c, slab_of(keys) * SLAB_APART_M])
     n_near = cKDTree(c3).query_ball_point(c3, neighbour_cells * cell_m, return_length=True) - 1
     carried = (n_near >= 3)[inv]
-    relief = min(
-        cell_relief_sigma_m(xy, depth_m, group, cell_m, neighbour_cells),
-        cell_relief_sigma_m(xy, height_m, group, cell_m, neighbour_cells),
-    )
+    relief = relief_m
+    if relief is None:
+        relief = cell_relief_m(xy, depth_m, height_m, group, cell_m, neighbour_cells)
     spread = window_footprint_sigma_m(xy, group, gradient, gradient_cov=gradient_cov)
     return np.where(carried, relief, spread)
 

@@ -1,0 +1,80 @@
+"""A survey longer than its blocks' halo, processed whole and in blocks: the same outputs?
+
+Usage: ``PYTHONPATH=. python benchmarks/blocks_exact.py OUT [--block-m 100]`` (~4 min on 2 cores).
+
+``tests/test_survey_blocks.py`` makes the comparison on a survey small enough for CI, whose
+blocks' halo covers all of it. Here the survey of that test is flown 600 m long (one line, a
+7.5 kHz Palmer scan from 250 m over ``palmer_survey_waves.toml``'s wave sea, shore and turbid
+water: 75 000 pulses), so each block of 100 m loads only its halo's share: what is compared
+is whether every neighbour search stays inside the halo. Prints which outputs differ: every
+LAS dimension (points sorted by pulse and return), every ``grid.tif`` band and every figure
+of ``evaluation.json`` (the clock's readings and the blocks' own summary left out). Results:
+``RESULTS_e2e.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from pipeline.run import run_scene  # noqa: E402
+from tests.test_survey_blocks import (  # noqa: E402
+    evaluation_figures,
+    las_points_by_pulse,
+    wave_survey_scene,
+)
+
+
+def scene(block_m: float | None):
+    """The 600 m survey; ``block_m`` set: processed in blocks, every block in the sample."""
+    run = {} if block_m is None else {"block_m": block_m}
+    return wave_survey_scene((0.0, 60.0, 0.0, 600.0), 7500.0, **run)
+
+
+def compare(whole: Path, blocks: Path) -> list[str]:
+    """Lines naming what differs (none: the same outputs)."""
+    import rasterio
+
+    out = []
+    a, b = las_points_by_pulse(whole), las_points_by_pulse(blocks)
+    if len(a["X"]) != len(b["X"]):
+        return [f"points: {len(a['X'])} whole, {len(b['X'])} in blocks"]
+    for d in a:
+        if not np.array_equal(a[d], b[d]):
+            out.append(f"LAS {d}: {int(np.count_nonzero(a[d] != b[d]))} points differ")
+    with rasterio.open(whole / "grid.tif") as r, rasterio.open(blocks / "grid.tif") as s:
+        for i, name in enumerate(r.descriptions):
+            x, y = r.read(i + 1), s.read(i + 1)
+            if not np.array_equal(x, y, equal_nan=True):
+                same = (x == y) | (np.isnan(x) & np.isnan(y))
+                out.append(f"grid band {name}: {int(np.sum(~same))} cells differ")
+    if json.dumps(evaluation_figures(whole), sort_keys=True) != json.dumps(
+        evaluation_figures(blocks), sort_keys=True
+    ):
+        out.append("evaluation.json figures differ")
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out", type=Path)
+    ap.add_argument("--block-m", type=float, default=100.0)
+    args = ap.parse_args()
+    lines: list[str] = []
+    run_scene(scene(None), args.out / "whole", log=lambda s: None, workers=1)
+    run_scene(scene(args.block_m), args.out / "blocks", log=lines.append, workers=1)
+    print("\n".join(s for s in lines if "blocks of" in s or "halo" in s))
+    print(f"points: {len(las_points_by_pulse(args.out / 'whole')['X'])}")
+    diff = compare(args.out / "whole", args.out / "blocks")
+    print("\n".join(diff) if diff else "identical: every LAS dimension, grid band and figure")
+
+
+if __name__ == "__main__":
+    main()
