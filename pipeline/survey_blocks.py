@@ -9,12 +9,13 @@ After the chunk loop it runs in four passes, each holding a bounded part of the 
    pulses). A pulse belongs to the block of its position
    (:func:`~pipeline.detection_store.pulse_position_m`); one pass over the stored chunks counts
    them.
-2. **Sample.** Whole blocks spread over the survey, at most ``run.sample_pulses`` pulses in
-   all (:func:`sample_blocks`: every block when the survey has fewer), are loaded (no halo)
-   and processed as a survey of their own (:func:`~pipeline.survey_processing.process_survey`).
-   They give the survey-wide figures (:class:`~pipeline.survey_processing.SurveyFigures`:
-   processing's water level, sea and facet figures, the TPU's, the datum, the class-41 height
-   range) and they are what the posteriors, the evaluation, the views and the report see.
+2. **Sample.** Whole blocks (of about an eighth of ``run.sample_pulses`` each) spread over
+   the survey, at most ``run.sample_pulses`` pulses in all (:func:`sample_blocks`: every block
+   when the survey has fewer), are loaded (no halo) and processed as a survey of their own
+   (:func:`~pipeline.survey_processing.process_survey`). They give the survey-wide figures
+   (:class:`~pipeline.survey_processing.SurveyFigures`: processing's water level, sea and
+   facet figures, the TPU's, the datum, the class-41 height range) and they are what the
+   posteriors, the evaluation, the views and the report see.
 3. **Beam reach.** One pass over the chunks measures the farthest reach of a beam from its
    pulse's position (:func:`~pipeline.process_tiles.beam_reach_m`, a maximum: the same
    streamed) at the sample's water level; it sets the halo (:func:`block_halo_m`).
@@ -102,12 +103,14 @@ def block_halo_m(ctx, ps, beam_reach_m: float) -> float:
     return float(proc + base + beam_reach_m)
 
 
-def block_layout(scene, bounds_m: np.ndarray, n_pulses: int, halo_m: float) -> TileLayout:
+def block_layout(
+    scene, bounds_m: np.ndarray, n_pulses: int, halo_m: float, pulses: int | None = None
+) -> TileLayout:
     """The blocks over the grid ``bounds_m`` (``run.block_m``, else from the pulse density).
 
     Without ``run.block_m`` a block's side ``s`` is such that ``(s + 2 halo)²`` holds
-    ``run.block_pulses`` pulses at the survey's mean density over the bounds (at least the
-    halo, so the halo does not dominate the work), whole grid cells.
+    ``pulses`` (default ``run.block_pulses``) pulses at the survey's mean density over the
+    bounds (at least the halo, so the halo does not dominate the work), whole grid cells.
     """
     r = scene.process.grid_resolution_m
     w, e, s, n = bounds_m
@@ -115,7 +118,8 @@ def block_layout(scene, bounds_m: np.ndarray, n_pulses: int, halo_m: float) -> T
     side = scene.run.block_m
     if side is None:
         density = max(n_pulses, 1) / max((e - w) * (n - s), r * r)
-        side = max(math.sqrt(scene.run.block_pulses / density) - 2.0 * halo_m, halo_m, r)
+        want = scene.run.block_pulses if pulses is None else pulses
+        side = max(math.sqrt(want / density) - 2.0 * halo_m, halo_m, r)
     return TileLayout(np.asarray(bounds_m, dtype=np.float64), r, snap_tile_m(side, r, extent))
 
 

@@ -27,7 +27,6 @@ from pipeline.process.returns import PointFlag
 from pipeline.survey_blocks import (
     LineSums,
     SurveyGridAccumulator,
-    _base_halo_m,
     _sub_layout,
     block_halo_m,
     block_layout,
@@ -118,8 +117,8 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
     origin = (fr.origin_easting_m, fr.origin_northing_m, 0.0)
     n_pulses = store.n_pulses
     with clock.stage("blocks"):
-        base = _base_halo_m(ctx, ps)
-        pre = block_layout(scene, layout.bounds_m, n_pulses, base)
+        # the sample's blocks: about an eighth of it each, so it spreads over the survey
+        pre = block_layout(scene, layout.bounds_m, n_pulses, 0.0, run.sample_pulses // 8)
         pre_counts = pulse_counts(store, pre)
         sample = sample_blocks(pre_counts, run.sample_pulses, pre.shape)
         # the sample's own pulses only: a survey of its own, its blocks' edges its edges

@@ -215,10 +215,16 @@ def evaluation_figures(out):
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
-    """The survey processed whole, and by blocks of 100 m with every block in the sample."""
+    """The survey processed whole; by blocks of 100 m, every block in the sample; and by
+    blocks of 60 m, a few of them in the sample."""
     root = tmp_path_factory.mktemp("blocks")
     lines = {}
-    for name, run in (("whole", {}), ("blocks", {"block_m": 100.0})):
+    cases = (
+        ("whole", {}),
+        ("blocks", {"block_m": 100.0}),
+        ("sampled", {"block_m": 60.0, "sample_pulses": 3000}),
+    )
+    for name, run in cases:
         got = []
         run_scene(wave_survey_scene(**run), root / name, log=got.append, workers=1)
         lines[name] = got
@@ -252,3 +258,66 @@ def test_a_blocked_survey_gives_the_whole_survey_points_grid_and_evaluation(runs
     for key in ("submerged objects", "class-45 claims withheld", "rejected bathymetric"):
         want = [s for s in lines["whole"] if key in s]
         assert want and want == [s for s in lines["blocks"] if key in s], key
+
+
+def test_lines_the_sample_missed_join_the_figures_and_its_own_keep_their_axes():
+    from pipeline.process.facet_excess import FacetWide
+    from pipeline.process.survey_wide import SeaWide, SurveyWide
+    from pipeline.survey_blocks import with_survey_lines
+    from pipeline.survey_processing import SurveyFigures
+    from pipeline.uncertainty.tpu_survey_wide import TpuSurveyWide
+
+    own = np.array([[1.0, 0.0], [0.0, 1.0]])  # the sample's lines 0 and 2
+    facets = FacetWide(np.array([0, 2]), own, (1e-3, 2e-3))
+    wide = SurveyWide(None, SeaWide(None, None, facets))
+    tpu = TpuSurveyWide(None, None, None, None, (0.0, 0.0), None, np.array([0, 2]), own, facets)
+    streamed = np.array([[0.6, 0.8], [0.8, 0.6], [0.0, -1.0], [-0.6, 0.8]])  # lines 0..3
+    got = with_survey_lines(SurveyFigures(wide, tpu), np.arange(4), streamed)
+    for ids, axes in (
+        (got.wide.sea.facets.line_id, got.wide.sea.facets.axis_xy),
+        (got.tpu_wide.line_ids, got.tpu_wide.line_axes),
+        (got.tpu_wide.facets.line_id, got.tpu_wide.facets.axis_xy),
+    ):
+        np.testing.assert_array_equal(ids, [0, 1, 2, 3])
+        np.testing.assert_array_equal(axes, [own[0], streamed[1], own[1], streamed[3]])
+    assert got.wide.sea.facets.plane_var == (1e-3, 2e-3)
+
+
+def test_a_rewritten_position_field_moves_the_chunks_box(tmp_path):
+    rng = np.random.default_rng(4)
+    part = _part(rng, 200, 0, 0)
+    with DetectionStore(tmp_path, 1.0) as store:
+        before = store.append(part).bbox_m
+        # every surface return 30 m farther along its beam: the positions move with them
+        later = np.where(part["has_surface"], part["t_surface_s"] + 2e-7, 0.0)
+        store.replace_field(0, "t_surface_s", later)
+        xy = pulse_position_m({**part, "t_surface_s": later}, 1.0)
+        want = [xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()]
+        np.testing.assert_array_equal(store.chunks[0].bbox_m, want)
+        assert not np.array_equal(before, want)
+
+
+@pytest.mark.slow
+def test_a_sample_of_a_few_blocks_gives_the_survey_nearly_the_whole_runs_outputs(runs):
+    import rasterio
+
+    root, _ = runs
+    ev = json.loads((root / "sampled" / "evaluation.json").read_text())
+    blocked = ev["blocked"]
+    assert 0 < blocked["sample_pulses"] <= 3000 < blocked["survey_pulses"]
+    assert blocked["sample_blocks"] < blocked["blocks_with_pulses"]
+    assert ev["pulses"] == blocked["sample_pulses"]  # the evaluation is the sample's
+    a, b = las_points_by_pulse(root / "whole"), las_points_by_pulse(root / "sampled")
+    # every pulse is written (once), its points made with the sample's figures
+    np.testing.assert_array_equal(np.unique(a["pulse_id"]), np.unique(b["pulse_id"]))
+    assert abs(len(b["X"]) - len(a["X"])) < 0.01 * len(a["X"])
+    with (
+        rasterio.open(root / "whole" / "grid.tif") as r,
+        rasterio.open(root / "sampled" / "grid.tif") as s,
+    ):
+        x, y = r.read(1), s.read(1)
+    both = np.isfinite(x) & np.isfinite(y)
+    assert both.sum() > 0.95 * np.isfinite(x).sum()
+    # the figures of a few blocks, not of the survey: depths a few cm apart at most
+    assert np.median(np.abs(x[both] - y[both])) < 0.02
+    assert np.percentile(np.abs(x[both] - y[both]), 95) < 0.10
