@@ -90,6 +90,20 @@ _RULES = {
 }
 
 
+def _reached(returns, blocks, b: int, reach_m: float, air_index: float) -> bool:
+    """Whether a pulse of ``returns`` lies within a beam reach of block ``b``."""
+    from pipeline.survey_tiles import returns_position_m
+
+    xy = returns_position_m(returns, air_index)
+    x0, x1, y0, y1 = blocks.box_m(b)
+    x, y = xy[:, 0], xy[:, 1]
+    return bool(
+        np.any(
+            (x >= x0 - reach_m) & (x <= x1 + reach_m) & (y >= y0 - reach_m) & (y <= y1 + reach_m)
+        )
+    )
+
+
 def _quiet(*_args, **_kw) -> None:
     return None
 
@@ -145,7 +159,7 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
     used = np.flatnonzero(counts > 0)
     load = ((blocks.tile_m + 2.0 * halo) / blocks.tile_m) ** 2
     log(
-        f"  blocks of {blocks.tile_m:g} m ({todo.size} to process, {used.size} with pulses, at"
+        f"  blocks of {blocks.tile_m:g} m ({used.size} with pulses, at"
         f" most {int(counts.max())} each), halo {halo:.0f} m (beam reach {reach:.1f} m): each"
         f" loads ~{load:.1f} times its own area"
         + (" (raise run.block_pulses: the halo dominates)" if load > 4.0 else "")
@@ -159,15 +173,16 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
     n_obj, rejected, withheld = 0, {}, 0
     header = las_header(CLASSES, made.processed.points.amplitude is not None, fr.crs, origin)
     air = ctx.instrument.air_index
-    t0 = time.perf_counter()
+    t0, done = time.perf_counter(), 0
     with LazTileWriter(out / "points.laz", header, ctx.instrument.amplitude_full_scale) as w:
         for k, b in enumerate(todo):
             with clock.stage("blocks"):
                 ret, own = load_blocks(store, blocks, [b], halo)
-            if ret is None:
-                continue
+            if ret is None or (counts[b] == 0 and not _reached(ret, blocks, int(b), reach, air)):
+                continue  # no pulse near enough for a point of its to fall in the block
             sub, row0, col0 = _sub_layout(blocks, int(b), halo)
             blk = process_survey(ret, scene, plan, ctx, sub, clock, _quiet, figures)
+            done += 1
             with clock.stage("outputs"):
                 pts = blk.processed.points
                 mine = np.isin(pts.pulse_id, ret.pulse_id[own])
@@ -185,8 +200,11 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
             held = blk.processed.withheld_pulse_id
             withheld += int(np.count_nonzero(np.isin(held, ret.pulse_id[own])))
             del ret, own, blk, pts
-            if (k + 1) % 10 == 0 or k + 1 == used.size:
-                log(f"  block {k + 1}/{used.size} processed ({time.perf_counter() - t0:.0f} s)")
+            if (k + 1) % 10 == 0 or k + 1 == todo.size:
+                log(
+                    f"  {k + 1}/{todo.size} blocks looked at, {done} processed "
+                    f"({time.perf_counter() - t0:.0f} s)"
+                )
     grid, cells = acc.result()
     covered = cover.fraction()
     log_cleanup(
@@ -226,7 +244,7 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
 
     blocked = {
         "block_m": blocks.tile_m,
-        "blocks": int(todo.size),
+        "blocks": done,
         "blocks_with_pulses": int(used.size),
         "halo_m": halo,
         "sample_blocks": int(sample.size),
