@@ -73,34 +73,23 @@ def is_blocked(scene, n_pulses: int) -> bool:
     return run.block_m is not None or int(n_pulses) > run.block_pulses
 
 
-def _base_halo_m(ctx, ps) -> float:
-    """The neighbour searches' reach past a block, the beams' own reach left out."""
-    from pipeline.process_tiles import processing_halo_m
-    from pipeline.uncertainty.tpu_survey_wide import tpu_halo_m
-
-    # in turn: the class-43 and rejection tests read their neighbours' TPU (and the reference
-    # cells at the far edge), each TPU its neighbours' points, each point its processing's
-    # neighbours
-    proc = processing_halo_m(ctx, 0.0, classify=ps.classify)
-    tests = ps.objects.radius_m + math.sqrt(2.0) * ps.objects.reference_cell_m
-    return float(proc + tpu_halo_m(ctx.tpu) + tests)
-
-
 def block_halo_m(ctx, ps, beam_reach_m: float) -> float:
     """How far past a block its pulses are loaded (m).
 
-    Processing's halo (:func:`~pipeline.process_tiles.processing_halo_m`: the beam reach, the
-    surface fit's, kriging's, land's and the class-45 test's radii), plus the TPU's reach
-    (:func:`~pipeline.uncertainty.tpu_survey_wide.tpu_halo_m`) over the points processing
-    made, plus the class-43 and rejection tests' radius over those points' TPU, plus one
-    beam reach: a block's own cells hold the points of pulses positioned up to a beam reach
-    outside it.
+    In turn, from a block's own cells outwards: a cell holds the points of pulses positioned
+    up to a beam reach outside the block; the class-43 and rejection tests read their
+    neighbours' TPU within ``process.objects.radius_m`` (and the reference cells at the far
+    edge); each TPU its neighbours' points within the TPU's reach
+    (:func:`~pipeline.uncertainty.tpu_survey_wide.tpu_halo_m`); each point its processing's
+    neighbours (:func:`~pipeline.process_tiles.processing_halo_m`: the beam reach, the surface
+    fit's, kriging's, land's and the class-45 test's radii).
     """
     from pipeline.process_tiles import processing_halo_m
+    from pipeline.uncertainty.tpu_survey_wide import tpu_halo_m
 
     proc = processing_halo_m(ctx, beam_reach_m, classify=ps.classify)
-    base = _base_halo_m(ctx, ps) - processing_halo_m(ctx, 0.0, classify=ps.classify)
-    return float(proc + base + beam_reach_m)
+    tests = ps.objects.radius_m + math.sqrt(2.0) * ps.objects.reference_cell_m
+    return float(beam_reach_m + tests + tpu_halo_m(ctx.tpu) + proc)
 
 
 def block_layout(

@@ -23,6 +23,7 @@ from pipeline.process.classify import (
     WATER_COLUMN,
     WATER_SURFACE,
 )
+from pipeline.process.coverage import area_cells
 from pipeline.process.returns import PointFlag
 from pipeline.survey_blocks import (
     LineSums,
@@ -62,19 +63,12 @@ class CoverageAccumulator:
     """:func:`~pipeline.process.coverage.area_coverage` of points given block by block."""
 
     def __init__(self, area_m, cell_m: float) -> None:
-        self.xmin, self.xmax, self.ymin, self.ymax = (float(v) for v in area_m)
-        self.cell_m = float(cell_m)
-        self.nx = max(1, int(np.ceil((self.xmax - self.xmin) / cell_m)))
-        self.ny = max(1, int(np.ceil((self.ymax - self.ymin) / cell_m)))
-        self.seen = np.zeros(self.nx * self.ny, dtype=bool)
+        self.area_m, self.cell_m = area_m, float(cell_m)
+        self.seen = np.zeros(area_cells(np.zeros((0, 2)), area_m, cell_m)[1], dtype=bool)
 
     def add(self, xy_m: np.ndarray) -> None:
         """Mark the cells holding a point of ``xy_m`` ``(n, 2)``."""
-        x, y = xy_m[:, 0], xy_m[:, 1]
-        inside = (x >= self.xmin) & (x < self.xmax) & (y >= self.ymin) & (y < self.ymax)
-        i = np.minimum(((x[inside] - self.xmin) / self.cell_m).astype(np.int64), self.nx - 1)
-        j = np.minimum(((y[inside] - self.ymin) / self.cell_m).astype(np.int64), self.ny - 1)
-        self.seen[j * self.nx + i] = True
+        self.seen[area_cells(xy_m, self.area_m, self.cell_m)[0]] = True
 
     def fraction(self) -> float:
         """Fraction of the area's cells holding a point."""

@@ -77,7 +77,6 @@ from pipeline.process.scatter_bias import range_bias_m
 from pipeline.process.sea_kriging import sea_field
 from pipeline.process.surface_fit import SurfaceFitSettings, WaterSurface, fit_water_surface
 from pipeline.process.surface_points import returns_numbering, timing_sigma, water_surface_points
-from pipeline.process.surface_wide import surface_wide
 from pipeline.process.survey_wide import SurveyWide, sea_wide
 
 __all__ = [
@@ -373,10 +372,7 @@ def georeference(
     """
     st = surface_settings or SurfaceFitSettings()
     group = None if windows is None else windows.of_returns(returns)
-    # the survey-wide figures, measured here (or handed in for a tile): kept with the result,
-    # so a survey's sample can hand them to its blocks (pipeline.survey_blocks)
-    level = surface_wide(returns, st) if wide is None else wide.surface
-    surface = fit_water_surface(returns, st, level, group)
+    surface = fit_water_surface(returns, st, None if wide is None else wide.surface, group)
     sea = sea_wide(returns, surface, st, refraction_settings, group) if wide is None else wide.sea
     field = None
     if sea.covariance is not None:  # photon windows: one detection each, never kriged
@@ -402,5 +398,7 @@ def georeference(
         points,
         classify_points(raw, classify_settings),
         sea_change,
-        wide=SurveyWide(level, sea),
+        # the survey-wide figures used (measured here, or handed in for a tile): a survey's
+        # sample hands them to its blocks (pipeline.survey_blocks)
+        wide=SurveyWide(surface.wide, sea),
     )

@@ -364,4 +364,5 @@ def fit_water_surface(
         time_window_s=st.time_window_s if returns.t_emit_s is not None else None,
         own_weight=own_weight,
         own_shift_m=own_shift,
+        wide=wide,
     )

@@ -72,6 +72,9 @@ class WaterSurface:
         its flight line ``track_xy`` (:mod:`pipeline.process.facet_excess`); None: none.
     track_xy : (n, 2) or None
         Unit horizontal direction of each pulse's flight line (with ``facet_slope_var``).
+    wide : SurfaceWide or None
+        The survey-wide figures the fit used (measured from its pulses, or handed in:
+        :mod:`pipeline.process.surface_wide`).
     """
 
     entry_m: np.ndarray
@@ -97,6 +100,18 @@ class WaterSurface:
     sea_change_m: np.ndarray | None = None
     facet_slope_var: np.ndarray | None = None
     track_xy: np.ndarray | None = None
+    wide: object | None = None
+
+    #: The fields that are not one row per pulse (the rest are taken row by row).
+    SURVEY_FIELDS = (
+        "global_plane",
+        "global_sigma_m",
+        "air_index",
+        "time_window_s",
+        "sea_correlation",
+        "sea_field",
+        "wide",
+    )
 
     def __len__(self) -> int:
         return int(self.entry_m.shape[0])

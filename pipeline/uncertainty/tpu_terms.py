@@ -34,16 +34,7 @@ def _take_surface(surface: WaterSurface, index: np.ndarray) -> WaterSurface:
     rows = {
         f.name: getattr(surface, f.name)[index]
         for f in dataclasses.fields(surface)
-        if f.name
-        not in (
-            "global_plane",
-            "global_sigma_m",
-            "air_index",
-            "time_window_s",
-            "sea_correlation",
-            "sea_field",
-        )
-        and getattr(surface, f.name) is not None
+        if f.name not in WaterSurface.SURVEY_FIELDS and getattr(surface, f.name) is not None
     }
     return dataclasses.replace(surface, **rows)
 
