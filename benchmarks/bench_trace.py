@@ -56,8 +56,8 @@ def main() -> None:
     world = build_world(scene, truth, extent)
     t_world = time.perf_counter() - t0
     rss_world = peak_rss_mb()
-    n_tri = world.seabed.faces.shape[0]
-    print(f"world: {t_world:.1f} s, seabed {n_tri} triangles, peak RSS {rss_world:.0f} MB")
+    ty, tx = world.seabed.shape
+    print(f"world: {t_world:.1f} s, seabed {tx} x {ty} tiles, peak RSS {rss_world:.0f} MB")
 
     t_gen = t_trace = 0.0
     n = 0

@@ -12,20 +12,34 @@ from __future__ import annotations
 
 import math
 import os
+import shutil
+from pathlib import Path
 
 from pipeline.errors import SceneError
 
-__all__ = ["check_feasible", "machine_memory_bytes"]
+__all__ = ["check_disk", "check_feasible", "machine_memory_bytes"]
 
-#: Peak memory of a survey run today: 434 MB + 1.44 kB per pulse (measured with
-#: ``/usr/bin/time -v`` on the Palmer scene; the chunk loop streams, processing does not yet).
+#: Peak memory of a survey run held whole: 434 MB + 1.44 kB per pulse (measured with
+#: ``/usr/bin/time -v`` on the Palmer scene). A survey of more than ``run.block_pulses`` is
+#: processed block by block (:mod:`pipeline.survey_blocks`): it holds about
+#: ``max(run.block_pulses, run.sample_pulses)`` pulses at a time.
 BASE_BYTES = 434e6
 BYTES_PER_PULSE = 1.44e3
-#: Per node of the seabed height grid and its triangle mesh: float64 heights and gradients
-#: (24 B), open3d vertices and normals (48 B), two triangles (24 B), the roughness FFT grid.
-BYTES_PER_MESH_NODE = 128.0
+#: Per node of a meshed seabed tile (:mod:`pipeline.simulate.tiled_seabed`): float64 vertices
+#: (24 B), two triangles' indices, normals and points (144 B), open3d's float32 copy and BVH.
+BYTES_PER_MESH_NODE = 256.0
+#: Per node of the roughness field's periodic tile: heights, spline coefficients, the FFT's
+#: complex spectrum while it is synthesised.
+BYTES_PER_ROUGHNESS_NODE = 48.0
+#: Per node of the seabed grid's two axes (float64, kept whole for the tiles' exact nodes).
+BYTES_PER_AXIS_NODE = 8.0
 #: Share of the machine's memory a run may plan to use.
 MEMORY_SHARE = 0.8
+#: Disk a survey run writes per pulse: its detection store (337 B measured on the Palmer scene,
+#: plus the fields processing rewrites) and its points (41 B in LAZ).
+DISK_BYTES_PER_PULSE = 450.0
+#: Share of the free disk a run may plan to fill.
+DISK_SHARE = 0.9
 
 
 def machine_memory_bytes() -> float:
@@ -82,31 +96,69 @@ def _check_survey(scene) -> None:
     _check_photon_windows(scene)
     mem = MEMORY_SHARE * machine_memory_bytes()
     n = lines.n_pulses_total
-    need = BASE_BYTES + BYTES_PER_PULSE * n
+    held = n
+    run = getattr(scene, "run", None)
+    if run is not None and (run.block_m is not None or n > run.block_pulses):
+        held = min(n, max(run.block_pulses, run.sample_pulses))
+    need = BASE_BYTES + BYTES_PER_PULSE * held
     if need > mem:
         raise SceneError(
             f"`scanner.prf_hz` = {sc.prf_hz:g} over `flight.area_m` = {list(fl.area_m)} gives"
-            f" {n:.3g} pulses: about {need / 1e9:.3g} GB at {BYTES_PER_PULSE / 1e3:g} kB per"
-            f" pulse, more than {mem / 1e9:.3g} GB ({MEMORY_SHARE:.0%} of this machine's"
-            " memory); lower the pulse rate, the area or `flight.n_lines`."
+            f" {n:.3g} pulses, {held:.3g} held at a time (`run.block_pulses`,"
+            f" `run.sample_pulses`): about {need / 1e9:.3g} GB at {BYTES_PER_PULSE / 1e3:g} kB"
+            f" per pulse, more than {mem / 1e9:.3g} GB ({MEMORY_SHARE:.0%} of this machine's"
+            " memory); lower the pulse rate, the area, `flight.n_lines` or `run.block_pulses`."
         )
+    # `bathy run` writes under the working directory by default (out/<scene name>)
+    check_disk(n, Path.cwd())
     extent = survey_extent_m(scene, lines)
     _check_window_keys(scene, lines, extent)
     sb = scene.seabed
     if sb.kind == "dem":
         return
+    _check_seabed_grid(sb, extent, mem)
+
+
+def check_disk(n_pulses: int, out: Path) -> None:
+    """Raise :class:`SceneError` if ``n_pulses``' detections and points overfill ``out``'s disk.
+
+    ``out``: the output folder, or any path under which it will be (its nearest existing
+    parent is measured).
+    """
+    where = Path(out).absolute()
+    while not where.exists() and where != where.parent:
+        where = where.parent
+    free = DISK_SHARE * shutil.disk_usage(where).free
+    need = DISK_BYTES_PER_PULSE * n_pulses
+    if need > free:
+        raise SceneError(
+            f"the survey's {n_pulses:.3g} pulses need about {need / 1e9:.3g} GB of disk at"
+            f" {DISK_BYTES_PER_PULSE:g} B per pulse, more than the {free / 1e9:.3g} GB free at"
+            f" {where}; lower `scanner.prf_hz`, the area or `flight.n_lines`, or write elsewhere."
+        )
+
+
+def _check_seabed_grid(sb, extent, mem: float) -> None:
+    """The seabed's meshed tiles, grid axes and roughness tile fit in memory."""
+    from pipeline.simulate.tiled_seabed import CACHE_TILES, TILE_CELLS
+
     xmin, xmax, ymin, ymax = extent
-    spacing = sb.mesh_resolution_m
+    res = sb.mesh_resolution_m
+    axis_nodes = ((xmax - xmin) + (ymax - ymin)) / res if res > 1e-150 else math.inf
+    need = BYTES_PER_MESH_NODE * CACHE_TILES * (TILE_CELLS + 1) ** 2
+    need += BYTES_PER_AXIS_NODE * axis_nodes
     if sb.roughness_rms_m > 0:
-        spacing = min(spacing, sb.roughness_correlation_m / 4.0)
-    with_nodes = (xmax - xmin) * (ymax - ymin) / spacing**2 if spacing > 1e-150 else math.inf
-    need = BYTES_PER_MESH_NODE * with_nodes
+        sp = sb.roughness_spacing_m
+        px0, px1, py0, py1 = sb.roughness_period(extent)
+        nodes = (px1 - px0) * (py1 - py0) / sp**2 if sp > 1e-150 else math.inf
+        need += BYTES_PER_ROUGHNESS_NODE * nodes
     if need > mem:
         raise SceneError(
-            f"`seabed.mesh_resolution_m` = {sb.mesh_resolution_m:g} (grid spacing {spacing:g} m)"
-            f" over the {xmax - xmin:.0f} x {ymax - ymin:.0f} m survey extent is"
-            f" {with_nodes:.3g} nodes: about {need / 1e9:.3g} GB, more than {mem / 1e9:.3g} GB;"
-            " use a coarser resolution (or a longer `seabed.roughness_correlation_m`)."
+            f"`seabed.mesh_resolution_m` = {res:g} (roughness grid spacing"
+            f" {sb.roughness_spacing_m:g} m) over the {xmax - xmin:.0f} x {ymax - ymin:.0f} m"
+            f" survey extent is {axis_nodes:.3g} grid nodes along its sides: about"
+            f" {need / 1e9:.3g} GB, more than {mem / 1e9:.3g} GB; use a coarser resolution"
+            " (or a longer `seabed.roughness_correlation_m`)."
         )
 
 

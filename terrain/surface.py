@@ -27,13 +27,28 @@ import trimesh
 
 from terrain._validate import check_bounds, check_number, check_points
 
-__all__ = ["Bounds", "Surface", "Plane", "CompositeSurface", "UNBOUNDED", "grid_axis"]
+__all__ = ["Bounds", "Surface", "Plane", "CompositeSurface", "UNBOUNDED", "grid_axis", "grid_faces"]
 
 Bounds = tuple[float, float, float, float]
 UNBOUNDED: Bounds = (-math.inf, math.inf, -math.inf, math.inf)
 
 #: Default limit on the number of triangles :meth:`Surface.to_mesh` builds (about 0.5 GB).
 MAX_FACES = 20_000_000
+
+
+def grid_faces(nx: int, ny: int) -> np.ndarray:
+    """Triangles of a row-major ``(ny, nx)`` node grid, two per cell, ``(2 (nx-1)(ny-1), 3)``.
+
+    Every cell's lower-left to upper-right diagonal splits it; all first triangles come
+    before all second ones, wound counter-clockwise seen from above (normals up). A window
+    of a grid triangulated alone gives the same triangles as the whole grid does over it.
+    """
+    idx = np.arange(nx * ny, dtype=np.int64).reshape(ny, nx)
+    v00, v10 = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
+    v01, v11 = idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    return np.concatenate(
+        [np.column_stack([v00, v10, v11]), np.column_stack([v00, v11, v01])], axis=0
+    )
 
 
 def grid_axis(lo: float, hi: float, resolution_m: float) -> np.ndarray:
@@ -185,12 +200,7 @@ class Surface(ABC):
         xx, yy = np.meshgrid(x, y)
         z = self._height(xx, yy)
         vertices = np.column_stack([xx.ravel(), yy.ravel(), z.ravel()])
-        idx = np.arange(nx * ny, dtype=np.int64).reshape(ny, nx)
-        v00, v10 = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
-        v01, v11 = idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
-        faces = np.concatenate(
-            [np.column_stack([v00, v10, v11]), np.column_stack([v00, v11, v01])], axis=0
-        )
+        faces = grid_faces(nx, ny)
         return trimesh.Trimesh(vertices=vertices, faces=faces, process=False, validate=False)
 
     def __add__(self, other: Surface) -> CompositeSurface:

@@ -24,7 +24,15 @@ CASES = [
     ("[process]", '[frame]\ncrs = "text"\n\n[process]', "`frame.crs`", "text"),
     ("[process]", '[frame]\ncrs = "EPSG:4326"\n\n[process]', "`frame.crs`", "degree"),
     ("prf_hz = 35000.0", "prf_hz = 1e300", "`scanner.prf_hz`", "more pulses than can be counted"),
-    ("prf_hz = 35000.0", "prf_hz = 5e7", "`scanner.prf_hz`", "GB"),
+    # 1.4e12 pulses: held a block at a time, but no disk holds their detections
+    ("prf_hz = 35000.0", "prf_hz = 5e10", "`scanner.prf_hz`", "GB of disk"),
+    # 1.4e9 pulses in blocks of 1e9: no memory holds them
+    (
+        "[scanner]\nprf_hz = 35000.0",
+        "[run]\nblock_pulses = 1000000000\n\n[scanner]\nprf_hz = 5e7",
+        "`run.block_pulses`",
+        "GB",
+    ),
     ("mesh_resolution_m = 1.0", "mesh_resolution_m = 1e-300", "`seabed.mesh_resolution_m`", "GB"),
 ]
 

@@ -179,3 +179,34 @@ def test_moving_sea_paths_do_not_depend_on_the_chunking(survey_scene):
         np.testing.assert_array_equal(
             np.concatenate([getattr(p, name) for p in parts]), getattr(whole, name)
         )
+
+
+def test_a_large_world_holds_a_bounded_roughness_tile_and_no_mesh(survey_scene):
+    """20 x 30 km: the roughness repeats every 2048 nodes, the seabed is meshed only on demand."""
+    import tracemalloc
+
+    from pipeline.simulate.world import ROUGHNESS_MAX_NODES
+
+    extent = (0.0, 20_000.0, -1000.0, 29_000.0)
+    tracemalloc.start()
+    truth = build_truth(survey_scene, extent)
+    world = build_world(survey_scene, truth, extent)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    # the roughness tile alone is 2048^2 float64 = 34 MB (plus its FFT while made): not 600 M
+    # nodes of the whole extent, and no triangle yet
+    assert peak < 400e6
+    assert world.seabed.tiles_built == 0 and world.seabed.shape == (118, 79)
+    rough = truth.seabed.parts[1]
+    side = ROUGHNESS_MAX_NODES * survey_scene.seabed.roughness_spacing_m
+    assert rough.bounds == (0.0, side, -1000.0, -1000.0 + side)
+    x, y = np.array([10.3, 7000.7]), np.array([55.5, 20_000.2])
+    np.testing.assert_allclose(rough.height_m(x + side, y - side), rough.height_m(x, y), atol=1e-12)
+
+
+def test_the_roughness_period_is_the_users(survey_scene):
+    sb = replace(survey_scene.seabed, roughness_period_m=512.0)
+    truth = build_truth(replace(survey_scene, seabed=sb), (0.0, 300.0, 0.0, 600.0))
+    assert truth.seabed.parts[1].bounds == (0.0, 512.0, 0.0, 512.0)
+    with pytest.raises(SceneError, match="roughness_period_m"):
+        replace(survey_scene.seabed, roughness_period_m=10_000.0)
