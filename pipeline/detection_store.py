@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import pickle
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -93,6 +94,30 @@ def pulse_position_m(part: dict[str, np.ndarray], air_index: float) -> np.ndarra
     return o[:, :2] + d[:, :2] * r[:, None]
 
 
+def scratch_dir(out: Path) -> Path:
+    """Where a run's unnamed temporary files go: its output folder, else its nearest parent."""
+    out = Path(out)
+    return out if out.is_dir() else next(p for p in out.parents if p.is_dir())
+
+
+class SetAside:
+    """Objects pickled to an unnamed temporary file (:func:`scratch_dir`) until taken back.
+
+    What a blocked survey's sample made is needed again only after the blocks have run; held
+    meanwhile, it would add to every block's memory.
+    """
+
+    def __init__(self, out: Path, *objects) -> None:
+        self._file = tempfile.TemporaryFile(dir=scratch_dir(out))
+        pickle.dump(objects, self._file, protocol=pickle.HIGHEST_PROTOCOL)
+
+    def take(self) -> tuple:
+        """The objects, as they were; the file is closed (and so freed)."""
+        with self._file as f:
+            f.seek(0)
+            return pickle.load(f)
+
+
 class DetectionStore:
     """Per-chunk detections in one unnamed temporary file; a context manager.
 
@@ -112,9 +137,7 @@ class DetectionStore:
     """
 
     def __init__(self, out: Path, air_index: float) -> None:
-        out = Path(out)
-        where = out if out.is_dir() else next(p for p in out.parents if p.is_dir())
-        self._file = tempfile.TemporaryFile(dir=where)
+        self._file = tempfile.TemporaryFile(dir=scratch_dir(out))
         self._end = 0
         self.air_index = float(air_index)
         self.chunks: list[ChunkSummary] = []

@@ -109,8 +109,6 @@ def _check_survey(scene) -> None:
             f" per pulse, more than {mem / 1e9:.3g} GB ({MEMORY_SHARE:.0%} of this machine's"
             " memory); lower the pulse rate, the area, `flight.n_lines` or `run.block_pulses`."
         )
-    # `bathy run` writes under the working directory by default (out/<scene name>)
-    check_disk(n, Path.cwd())
     extent = survey_extent_m(scene, lines)
     _check_window_keys(scene, lines, extent)
     sb = scene.seabed

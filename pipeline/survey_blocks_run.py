@@ -6,10 +6,12 @@ The passes of :mod:`pipeline.survey_blocks`, wired and timed.
 from __future__ import annotations
 
 import dataclasses
+import gc
 import time
 
 import numpy as np
 
+from pipeline.detection_store import SetAside
 from pipeline.outputs.las_fields import LineEnds
 from pipeline.process.classify import (
     BATHYMETRIC_POINT,
@@ -167,6 +169,11 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
     n_obj, rejected, withheld = 0, {}, 0
     header = las_header(CLASSES, made.processed.points.amplitude is not None, fr.crs, origin)
     air = ctx.instrument.air_index
+    with clock.stage("blocks"):
+        # the sample's products wait on disk while the blocks run (each block's memory)
+        aside = SetAside(out, made, sample_returns)
+        del made, sample_returns, empty, empty_grid, empty_cells
+        gc.collect()
     t0, done = time.perf_counter(), 0
     with LazTileWriter(out / "points.laz", header, ctx.instrument.amplitude_full_scale) as w:
         for k, b in enumerate(todo):
@@ -201,6 +208,9 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
                 )
     grid, cells = acc.result()
     covered = cover.fraction()
+    del acc
+    with clock.stage("blocks"):
+        made, sample_returns = aside.take()
     log_cleanup(
         log,
         dataclasses.replace(made.processed, claims_withheld=withheld),

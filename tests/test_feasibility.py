@@ -24,8 +24,6 @@ CASES = [
     ("[process]", '[frame]\ncrs = "text"\n\n[process]', "`frame.crs`", "text"),
     ("[process]", '[frame]\ncrs = "EPSG:4326"\n\n[process]', "`frame.crs`", "degree"),
     ("prf_hz = 35000.0", "prf_hz = 1e300", "`scanner.prf_hz`", "more pulses than can be counted"),
-    # 1.4e12 pulses: held a block at a time, but no disk holds their detections
-    ("prf_hz = 35000.0", "prf_hz = 5e10", "`scanner.prf_hz`", "GB of disk"),
     # 1.4e9 pulses in blocks of 1e9: no memory holds them
     (
         "[scanner]\nprf_hz = 35000.0",
@@ -52,3 +50,17 @@ def test_unrunnable_scene_is_one_line_and_exit_2(tmp_path, capsys, command, old,
 
 def test_a_runnable_survey_passes(tmp_path):
     assert main(["validate", str(_scene(tmp_path, "[process]", "[process]"))]) == 0
+
+
+def test_a_survey_no_disk_holds_is_refused_by_run(tmp_path, capsys):
+    """1.4e12 pulses: held a block at a time, but no disk holds their detections.
+
+    ``bathy validate`` does not know where the outputs will go; ``bathy run`` checks there.
+    """
+    path = _scene(tmp_path, "prf_hz = 35000.0", "prf_hz = 5e10")
+    assert main(["validate", str(path)]) == 0
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "GB of disk" in err and str(tmp_path) in err
+    assert not out.exists()

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import open3d as o3d
@@ -103,6 +104,11 @@ class MeshCaster:
         normal : (n, 3) float64
             Upward unit normal of the hit triangle (0 where no hit).
         """
+        hit, t, nrm, _ = self.cast_faces(origin_m, direction, nthreads)
+        return hit, t, nrm
+
+    def cast_faces(self, origin_m: np.ndarray, direction: np.ndarray, nthreads: int = 0):
+        """:meth:`cast`'s results and the hit triangle of each ray, ``(n,)`` int64 (0: none)."""
         rays = np.empty((origin_m.shape[0], 6), dtype=np.float32)
         rays[:, :3] = origin_m
         rays[:, 3:] = direction
@@ -119,7 +125,7 @@ class MeshCaster:
         hit &= safe & (t >= 0.0)
         t = np.where(hit, t, 0.0)
         nrm = np.where(hit[:, None], nrm, 0.0)
-        return hit, t, nrm
+        return hit, t, nrm, idx
 
 
 @dataclass(frozen=True)
@@ -128,14 +134,15 @@ class World:
 
     Attributes
     ----------
-    water : MeshCaster
-    seabed : MeshCaster
+    water : MeshCaster or pipeline.simulate.wave_caster.WaveCaster
+    seabed : MeshCaster or pipeline.simulate.tiled_seabed.TiledSeabed
+        Anything with :meth:`MeshCaster.cast`.
     n_air, n_water : float
         Phase indices (Snell and Fresnel).
     """
 
-    water: MeshCaster
-    seabed: MeshCaster
+    water: Any
+    seabed: Any
     n_air: float
     n_water: float
 

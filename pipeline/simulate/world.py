@@ -33,8 +33,10 @@ __all__ = [
 ]
 
 FEATURE_KINDS = ("cube", "wreck", "ridge", "channel")
-#: Nodes a side of the roughness field's periodic tile by default (2048 m at 1 m: 256
-#: correlation lengths of 8 m, its RMS sampled to ~1 %; 33 MB, ~130 MB while synthesised).
+#: Nodes a side of the roughness field's periodic tile by default: 33 MB, ~130 MB while
+#: synthesised. The Palmer scene's 1 m nodes and 8 m correlation make it 256 correlation
+#: lengths (variance sampled to ~sqrt(pi) 8 / 2048 = 0.7 %); a finer mesh shortens it (0.1 m:
+#: 205 m, 26 lengths, ~7 %): set ``seabed.roughness_period_m`` for more.
 ROUGHNESS_MAX_NODES = 2048
 
 

@@ -128,3 +128,47 @@ def test_rays_from_high_up_mesh_only_the_tiles_they_reach():
     landed = {(int((100.0 + 3005.0 * math.tan(a)) // 128), int(y // 128)) for y in o[:, 1]}
     assert len(tiled._zmax) > 5 * len(landed)  # heights looked at along the way
     assert tiled.tiles_built == len(landed)  # meshed only where they land
+
+
+def test_hits_on_a_tile_edge_far_from_the_origin_are_kept():
+    """10 km out, float32 picks the triangle: rays landing within 2 mm of a tile edge all hit."""
+    extent = (10_000.0, 10_512.0, 8000.0, 8256.0)
+    plane = terrain.plane_seabed(20.0)
+    whole = MeshCaster.from_trimesh(seabed_mesh(plane, 1.0, extent))
+    tiled = TiledSeabed(plane, 1.0, extent)
+    assert tiled.bx[1] == 10_256.0
+    off = np.linspace(-2e-3, 2e-3, 4001)
+    a = math.radians(20.0)
+    d = np.tile([math.sin(a), 0.0, -math.cos(a)], (off.size, 1))
+    o = np.column_stack(
+        [10_256.0 + off - 520.0 * math.tan(a), np.full(off.size, 8128.3), np.full(off.size, 500.0)]
+    )
+    h0, t0, _ = whole.cast(o, d)
+    h1, t1, _ = tiled.cast(o, d)
+    assert h0.all() and h1.all()
+    np.testing.assert_allclose(t1, t0, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(t1, 520.0 / math.cos(a), rtol=0, atol=1e-3)  # z = -20 exactly
+
+
+def test_a_box_past_the_extent_edge_is_met():
+    """A 4 m cube across the extent's east edge and a tile row: its outer half, as one mesh."""
+    seabed = terrain.compose(terrain.plane_seabed(10.0), terrain.cube(64.0, 16.0, 4.0))
+    tiled = TiledSeabed(seabed, 1.0, (0.0, 64.0, 0.0, 64.0), tile_cells=16)
+    # straight down outside the extent onto the top (z = -6); and a ray leaving the extent in
+    # tile row 0 that meets the top's part over row 1, past the extent
+    o = np.array([[65.0, 17.0, 0.0], [63.0, 14.0, 0.0]])
+    d = np.array([[0.0, 0.0, -1.0], [2.0, 3.0, -7.0]])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    hit, t, nrm = tiled.cast(o, d)
+    assert hit.all()
+    np.testing.assert_allclose((o + t[:, None] * d)[:, 2], -6.0, atol=1e-9)
+    np.testing.assert_allclose(nrm, [[0, 0, 1], [0, 0, 1]], atol=1e-12)
+
+
+def test_a_seabed_smaller_than_the_extent_fails_when_built():
+    """A DEM-like grid not covering the extent: an error at build time, not in a worker's cast."""
+    from terrain.gridded import GridSurface
+
+    dem = GridSurface(0.0, 0.0, 1.0, 1.0, np.zeros((301, 301)))
+    with pytest.raises(ValueError, match="x_m"):
+        TiledSeabed(dem, 1.0, (-20.0, 280.0, 0.0, 300.0))
