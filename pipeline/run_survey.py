@@ -35,7 +35,7 @@ from pipeline.process.context import (
 )
 from pipeline.process.returns import DetectedReturns, DetectorFlag
 from pipeline.process.surface_echo_mix import mix_stored_echoes
-from pipeline.stages import Plan, StageClock
+from pipeline.stages import Plan, StageClock, trim_heap
 from pipeline.survey_blocks import is_blocked
 from pipeline.survey_chunks import NB_FIELDS, ChunkJob, no_bottom_limits, run_chunk
 from pipeline.survey_finish import finish_survey, log_cleanup
@@ -309,6 +309,7 @@ def run_survey(
     origin = (fr.origin_easting_m, fr.origin_northing_m, 0.0)
     with DetectionStore(out, ctx.instrument.air_index) as store:
         sim = simulate_detections(scene, plan, ctx, clock, store, log, progress, executor)
+        trim_heap()  # the chunk loop's arrays and seabed tiles, when it ran in this process
         ctx = _measured_water(ctx, sim, log)
         xmin, xmax, ymin, ymax = sim.extent_m
         bounds = snap_bounds_m(

@@ -177,6 +177,23 @@ def peak_rss_mb() -> float:
     return rss / 2**20 if sys.platform == "darwin" else rss / 1024.0
 
 
+def trim_heap() -> None:
+    """Hand the heap's freed pages back to the system (glibc's ``malloc_trim``; else nothing).
+
+    Freed arrays below glibc's mmap threshold stay in the process's heap: after the chunk loop
+    run in-process, 300 000 pulses left 586 MiB resident that a trim brought to 331. Called
+    between the stages and blocks whose arrays are done with, so the next one starts low.
+    """
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc
+        pass
+
+
 @dataclass
 class StageClock:
     """Wall and CPU seconds per stage, and the order in which stages ran.

@@ -27,6 +27,7 @@ from pipeline.process.classify import (
 )
 from pipeline.process.coverage import area_cells
 from pipeline.process.returns import PointFlag
+from pipeline.stages import trim_heap
 from pipeline.survey_blocks import (
     LineSums,
     SurveyGridAccumulator,
@@ -174,6 +175,7 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
         aside = SetAside(out, made, sample_returns)
         del made, sample_returns, empty, empty_grid, empty_cells
         gc.collect()
+        trim_heap()
     t0, done = time.perf_counter(), 0
     with LazTileWriter(out / "points.laz", header, ctx.instrument.amplitude_full_scale) as w:
         for k, b in enumerate(todo):
@@ -201,6 +203,7 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
             held = blk.processed.withheld_pulse_id
             withheld += int(np.count_nonzero(np.isin(held, ret.pulse_id[own])))
             del ret, own, blk, pts
+            trim_heap()
             if (k + 1) % 10 == 0 or k + 1 == todo.size:
                 log(
                     f"  {k + 1}/{todo.size} blocks looked at, {done} processed "
