@@ -26,7 +26,7 @@ import trimesh
 from terrain.features import Box
 from terrain.surface import CompositeSurface, Surface, grid_axis
 
-__all__ = ["WALL_FOOT_M", "box_triangles", "seabed_mesh"]
+__all__ = ["WALL_FOOT_M", "box_triangles", "seabed_mesh", "split_boxes"]
 
 #: walls reach this far below the base: under the base mesh's interpolation error
 WALL_FOOT_M = 0.5
@@ -75,6 +75,19 @@ def box_triangles(box: Box, base: Surface, resolution_m: float) -> tuple[np.ndar
     return verts, np.concatenate(faces, axis=0)
 
 
+def split_boxes(seabed: Surface) -> tuple[Surface, tuple[Box, ...]]:
+    """``(base, boxes)``: the seabed without its boxes, and the boxes meshed exactly.
+
+    A seabed of boxes alone (or none) is all base: it is meshed on the grid.
+    """
+    parts = seabed.parts if isinstance(seabed, CompositeSurface) else (seabed,)
+    boxes = tuple(p for p in parts if isinstance(p, Box))
+    rest = [p for p in parts if not isinstance(p, Box)]
+    if not boxes or not rest:
+        return seabed, ()
+    return (rest[0] if len(rest) == 1 else CompositeSurface(tuple(rest))), boxes
+
+
 def seabed_mesh(seabed: Surface, resolution_m: float, bounds=None) -> trimesh.Trimesh:
     """The seabed on a regular grid with its boxes as exact tops and walls (module docstring).
 
@@ -93,12 +106,9 @@ def seabed_mesh(seabed: Surface, resolution_m: float, bounds=None) -> trimesh.Tr
     trimesh.Trimesh
         The base grid's vertices first (row-major, as :meth:`Surface.to_mesh`), then each box's.
     """
-    parts = seabed.parts if isinstance(seabed, CompositeSurface) else (seabed,)
-    boxes = [p for p in parts if isinstance(p, Box)]
-    rest = [p for p in parts if not isinstance(p, Box)]
-    if not boxes or not rest:
+    base, boxes = split_boxes(seabed)
+    if not boxes:
         return seabed.to_mesh(resolution_m, bounds)
-    base = rest[0] if len(rest) == 1 else CompositeSurface(tuple(rest))
     mesh = base.to_mesh(resolution_m, bounds)
     verts, faces = [np.asarray(mesh.vertices)], [np.asarray(mesh.faces)]
     n = verts[0].shape[0]

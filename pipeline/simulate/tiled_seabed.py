@@ -41,18 +41,6 @@ TILE_CELLS = 256
 CACHE_TILES = 12
 
 
-def _split_boxes(seabed):
-    from terrain.features import Box
-    from terrain.surface import CompositeSurface
-
-    parts = seabed.parts if isinstance(seabed, CompositeSurface) else (seabed,)
-    boxes = tuple(p for p in parts if isinstance(p, Box))
-    rest = [p for p in parts if not isinstance(p, Box)]
-    if not boxes or not rest:  # as terrain.box_mesh.seabed_mesh: all on the grid
-        return seabed, ()
-    return (rest[0] if len(rest) == 1 else CompositeSurface(tuple(rest))), boxes
-
-
 def _box_xy_bounds(box) -> tuple[float, float, float, float]:
     """The footprint's corners' box ``(xmin, xmax, ymin, ymax)`` (walls are vertical)."""
     s, c = np.sin(box.heading_rad), np.cos(box.heading_rad)
@@ -88,9 +76,10 @@ class TiledSeabed:
         tile_cells: int = TILE_CELLS,
         cache_tiles: int = CACHE_TILES,
     ) -> None:
+        from terrain.box_mesh import split_boxes
         from terrain.surface import grid_axis
 
-        self.base, self.boxes = _split_boxes(seabed)
+        self.base, self.boxes = split_boxes(seabed)
         self.resolution_m = float(resolution_m)
         xmin, xmax, ymin, ymax = (float(v) for v in extent_m)
         self.x_m = grid_axis(xmin, xmax, self.resolution_m)
@@ -118,7 +107,7 @@ class TiledSeabed:
         for x, y in ((self.x_m, ymin), (self.x_m, ymax), (xmin, self.y_m), (xmax, self.y_m)):
             self.base.height_m(*np.broadcast_arrays(np.asarray(x), np.asarray(y)))
         self._tiles: OrderedDict = OrderedDict()
-        self._zmax: dict[tuple[int, int], float] = {}  # highest vertex of each tile built
+        self._zmax: dict[tuple[int, int], float] = {}  # of each tile asked (zmax)
         self.tiles_built = 0
 
     def _edges(self, n_cells: int) -> np.ndarray:
