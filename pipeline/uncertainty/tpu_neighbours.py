@@ -22,6 +22,7 @@ from pipeline.uncertainty.tpu_settings import (
     RANDOM_TERMS,
     TIMING_TERMS,
     TpuSettings,
+    Z,
 )
 from pipeline.uncertainty.tpu_terms import _inputs, _terms
 
@@ -315,6 +316,7 @@ def timing_from_scatter(
     max_sigma_s: float = math.inf,
     raise_only: bool = False,
     amplitude_fill: tuple[float, float] | None = None,
+    scatter_column: int = DEPTH,
 ) -> DetectedReturns:
     """``returns`` with the per-return timing sigmas that the measured depth scatter implies.
 
@@ -338,7 +340,8 @@ def timing_from_scatter(
     ----------
     depth_scatter_m : (n_bottom,) array_like
         Measured one-sigma random depth error of each bottom point (rows of
-        :func:`~pipeline.process.refraction.seabed_points`).
+        :func:`~pipeline.process.refraction.seabed_points`), or of its height with
+        ``scatter_column``.
     seabed_gradient : (n_bottom, 2) array_like, optional
         As for :func:`point_tpu`.
     max_sigma_s : float, optional
@@ -352,6 +355,12 @@ def timing_from_scatter(
     amplitude_fill : (float, float), optional
         The surface and bottom amplitude a return without one is weighted as
         (:func:`amplitude_fill`: the survey's median; default: that of ``returns``).
+    scatter_column : int, optional
+        What ``depth_scatter_m`` scatters: :data:`~pipeline.uncertainty.tpu_settings.DEPTH`
+        (default) or :data:`~pipeline.uncertainty.tpu_settings.Z`, the seabed point's height.
+        The terms' parts in that column are set against it (the timing's own and the other
+        random terms'): a height scatter sets the timing through the timing's height
+        derivatives, and the sigmas then propagate to the depth as every term does.
     """
     st = settings or TpuSettings()
     rst = refraction_settings or RefractionSettings()
@@ -364,9 +373,12 @@ def timing_from_scatter(
     if scatter.shape != (n,):
         raise ValueError(f"`depth_scatter_m` must be (n_bottom,) = ({n},); got {scatter.shape}")
     _, terms = _terms(inp, st_unit, RANDOM_TERMS)
-    js = terms["timing_surface"][:, DEPTH] / unit
-    jb = terms["timing_bottom"][:, DEPTH] / unit
-    other = sum(terms[k][:, DEPTH] ** 2 for k in RANDOM_TERMS if k not in TIMING_TERMS)
+    if scatter_column not in (DEPTH, Z):
+        raise ValueError(f"`scatter_column` must be DEPTH or Z; got {scatter_column!r}")
+    col = scatter_column
+    js = terms["timing_surface"][:, col] / unit
+    jb = terms["timing_bottom"][:, col] / unit
+    other = sum(terms[k][:, col] ** 2 for k in RANDOM_TERMS if k not in TIMING_TERMS)
     prior_s = returns.t_surface_sigma_s
     prior_b = returns.t_bottom_sigma_s
     if raise_only and prior_b is not None:

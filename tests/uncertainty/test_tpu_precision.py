@@ -14,6 +14,7 @@ from pipeline.uncertainty.tpu import (
     point_tpu,
     timing_from_scatter,
 )
+from pipeline.uncertainty.tpu_settings import DEPTH, Z
 from pipeline.uncertainty.tpu_window import (
     WINDOW_TERM,
     cell_relief_sigma_m,
@@ -57,6 +58,42 @@ def test_scatter_raises_a_detector_sigma_the_timing_does_not_reach():
     # estimate (64 pairs each) to ~9 %
     assert 0.62 <= np.mean(z <= 1.0) <= 0.75
     assert 0.92 <= np.mean(z <= 1.96) <= 0.975
+
+
+def test_heights_scatter_sets_the_timing_where_depths_read_a_sea():
+    """Depths read below a sea that differs between soundings 1.5 m apart (short waves of
+    3-6 m, added to the depths and to their truth alike: relief, no error) scatter more than
+    their errors, and the rise ``a h²`` removes only part of it: the TPU from the depths'
+    scatter is too wide. The seabed heights carry no sea: their scatter sets the timing
+    through its height derivatives, and the depth intervals hold the truth at their rates
+    (the same bounds as above). The errors are the analytic 12 m seabed's."""
+    ret, surf, pts, _ = _noisy(4e-10, 2e-11)
+    err = pts.depth_m - TRUE_DEPTH_M
+    xy = pts.xyz_m[:, :2]
+    wave_m, angle = np.array([0.06, 0.05, 0.04]), np.radians([10.0, 70.0, 135.0])
+    k = 2.0 * np.pi / np.array([3.3, 4.1, 5.7])
+    along = xy[:, :1] * np.cos(angle) + xy[:, 1:] * np.sin(angle)
+    sea = np.sum(wave_m * np.sin(k * along + [0.3, 1.1, 2.0]), axis=1)
+
+    def coverage(values, column):
+        scatter = pair_scatter(xy, values, order=ret.pulse_id)
+        raised = timing_from_scatter(
+            ret, surf, RST, depth_scatter_m=scatter, raise_only=True, scatter_column=column
+        )
+        z = np.abs(err) / point_tpu(raised, surf, RST).sigma_depth_m
+        return np.mean(z <= 1.0), np.mean(z <= 1.96)
+
+    from_depths = coverage(pts.depth_m + sea, DEPTH)
+    assert from_depths[0] > 0.8  # the sea read as timing noise
+    from_heights = coverage(-pts.xyz_m[:, 2], Z)
+    assert 0.62 <= from_heights[0] <= 0.75
+    assert 0.92 <= from_heights[1] <= 0.975
+    # without the sea the two agree to the estimator's noise (the surface's 0.1 ns enters
+    # the depth through the plane it helped fit, the height through its own entry)
+    plain = coverage(pts.depth_m, DEPTH)
+    assert abs(plain[0] - from_heights[0]) < 0.04
+    with pytest.raises(ValueError, match="scatter_column"):
+        timing_from_scatter(ret, surf, RST, depth_scatter_m=err, scatter_column=1)
 
 
 def test_a_detector_sigma_above_the_scatter_is_kept():
