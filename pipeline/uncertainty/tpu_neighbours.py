@@ -44,18 +44,17 @@ def pair_scatter(
     relief_slope_sigma: float | None = None,
     return_figures: bool = False,
 ):
-    """Local one-sigma random depth error of the soundings, measured from pairs of them.
+    """Local one-sigma random error of the soundings' depths (or heights), from their pairs.
 
     Each sounding (or each ``group`` of soundings sharing one detection, e.g. the shots of a
     photon-counting window, taken at their mean) is paired with the next one in ``order``
     (the acquisition order: the pulse number), or without ``order`` with its nearest one, if it
     lies within ``max_separation_m``. Their depth difference less the local slope times their
     separation, ``D = d_i - d_j - g . (p_i - p_j)``, holds the two soundings' own random errors
-    (timing, jitter, relief at the footprint scale) and not what they share (navigation, the
-    water surface over them, water indices): ``E[D²] = s_i² + s_j²``. Successive pulses share
-    nearly all but their own noise, which makes ``order`` the clean choice. At each query point
-    (default: each sounding) the estimate is ``sqrt(mean(D² / 2))`` over the ``neighbours``
-    nearest pairs. ``gradient`` (``(n, 2)``, :func:`seabed_gradient`) defaults to the one of
+    (timing, jitter, relief at the footprint scale) and not what they share (navigation, water
+    indices; successive pulses share nearly all else): ``E[D²] = s_i² + s_j²``. At each query
+    point (default: each sounding) the estimate is ``sqrt(mean(D² / 2))`` over the nearest
+    ``neighbours`` pairs. ``gradient`` (``(n, 2)``, :func:`seabed_gradient`) defaults to the one of
     the (grouped) soundings themselves: a group's shots share one depth, so only the groups
     show the slope.
 
@@ -325,7 +324,7 @@ def timing_from_scatter(
     terms', ``s_t² = max(scatter² - other², 0)``, split between the two returns (each through
     its own depth derivative: the surface's moves the entry by its weight) as for
     photon-limited timing, variance in proportion to ``1 / amplitude`` (equal without
-    amplitudes). Rows with a NaN scatter keep the a-priori sigma.
+    amplitudes); a NaN scatter keeps the a-priori sigma.
 
     The sigma is ``scatter / |d depth / d t|``, the derivative of the depth compared at the
     measured position: it tends to 0 where a beam runs along the local seabed gradient
@@ -357,10 +356,10 @@ def timing_from_scatter(
         (:func:`amplitude_fill`: the survey's median; default: that of ``returns``).
     scatter_column : int, optional
         What ``depth_scatter_m`` scatters: :data:`~pipeline.uncertainty.tpu_settings.DEPTH`
-        (default) or :data:`~pipeline.uncertainty.tpu_settings.Z`, the seabed point's height.
-        The terms' parts in that column are set against it (the timing's own and the other
-        random terms'): a height scatter sets the timing through the timing's height
-        derivatives, and the sigmas then propagate to the depth as every term does.
+        (default) or :data:`~pipeline.uncertainty.tpu_settings.Z`, the seabed point's height
+        (no sea between soundings). Its excess over the other random terms' height parts is
+        ranging, carried to the depth by the bottom timing's depth-to-height ratio and split
+        as a depth excess (not compared at the measured position: ~7 % off at 15° of slope).
     """
     st = settings or TpuSettings()
     rst = refraction_settings or RefractionSettings()
@@ -376,15 +375,24 @@ def timing_from_scatter(
     if scatter_column not in (DEPTH, Z):
         raise ValueError(f"`scatter_column` must be DEPTH or Z; got {scatter_column!r}")
     col = scatter_column
-    js = terms["timing_surface"][:, col] / unit
-    jb = terms["timing_bottom"][:, col] / unit
-    other = sum(terms[k][:, col] ** 2 for k in RANDOM_TERMS if k not in TIMING_TERMS)
+    skip = TIMING_TERMS + (("footprint",) if col == Z else ())  # moves it along the plane
+    other = sum(terms[k][:, col] ** 2 for k in RANDOM_TERMS if k not in skip)
     prior_s = returns.t_surface_sigma_s
     prior_b = returns.t_bottom_sigma_s
     if raise_only and prior_b is not None:
         ps = np.zeros(n) if prior_s is None else np.asarray(prior_s, np.float64)[inp.row]
-        other = other + (js * ps) ** 2 + (jb * np.asarray(prior_b, np.float64)[inp.row]) ** 2
+        pb = np.asarray(prior_b, np.float64)[inp.row]
+        for name, sig in (("timing_surface", ps), ("timing_bottom", pb)):
+            other = other + (terms[name][:, col] / unit * sig) ** 2
     excess = np.maximum(np.nan_to_num(scatter) ** 2 - other, 0.0)
+    js = terms["timing_surface"][:, DEPTH] / unit
+    jb = terms["timing_bottom"][:, DEPTH] / unit
+    if col == Z:
+        # not split in heights: a surface timing moves a depth read against the sea at the
+        # entry ~3 times as much as the height
+        jbz = terms["timing_bottom"][:, Z] / unit
+        ratio = np.divide(jb, jbz, out=np.ones(n), where=np.abs(jbz) > 0.0)
+        excess = excess * ratio**2
     ret = inp.ret
     hs = ret.has_surface
 
@@ -436,10 +444,7 @@ def amplitude_fill(returns: DetectedReturns) -> tuple[float, float]:
 
 def _amplitude_fill(ret) -> tuple[float, float]:
     def fill(a):
-        if a is None:
-            return 1.0
-        a = np.asarray(a, dtype=np.float64)
-        pos = a > 0
-        return float(np.median(a[pos])) if pos.any() else 1.0
+        pos = None if a is None else np.asarray(a, dtype=np.float64)
+        return float(np.median(pos[pos > 0])) if pos is not None and np.any(pos > 0) else 1.0
 
     return fill(ret.surface_amplitude), fill(ret.bottom_amplitude)

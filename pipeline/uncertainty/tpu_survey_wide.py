@@ -9,9 +9,10 @@ made):
 
 * ``relief_slope_sigma``: how far the seabed's local slope departs from the regional one
   (:func:`~pipeline.uncertainty.seabed_gradient.seabed_gradient`'s ``local_sigma``);
-* ``scatter_rise_per_m2``: the true depth's own rise between paired soundings, removed from
-  their scatter, and ``scatter_relief_slope_sigma``, the relief slope sigma of the gradient
-  the pairs are levelled by (:func:`~pipeline.uncertainty.tpu_neighbours.pair_scatter`);
+* ``scatter_rise_per_m2``: the true rise between paired soundings (of their heights; of
+  depths for photon windows), removed from their scatter, and ``scatter_relief_slope_sigma``,
+  the relief slope sigma of the gradient the pairs are levelled by
+  (:func:`~pipeline.uncertainty.tpu_neighbours.pair_scatter`);
 * ``turn_table``: the mean-square turn of a pulse's water plane against the plane over its
   sounding, against their offset (:func:`~pipeline.uncertainty.tpu_neighbours.
   surface_tilt_sigma`);
@@ -68,7 +69,8 @@ class TpuSurveyWide:
         Per-axis sigma of the local seabed slope about the regional one; None: no regional
         step.
     scatter_rise_per_m2 : float
-        ``a`` of the pair scatter, m² of depth per m² of lag (0: none told).
+        ``a`` of the pair scatter, m² (of height, or of depth for photon windows) per m² of
+        lag (0: none told).
     scatter_relief_slope_sigma : float or None
         ``local_sigma`` of the pair scatter's own seabed gradient.
     turn_table : tuple of two (k,) ndarray, or None

@@ -88,8 +88,7 @@ def test_heights_scatter_sets_the_timing_where_depths_read_a_sea():
     from_heights = coverage(-pts.xyz_m[:, 2], Z)
     assert 0.62 <= from_heights[0] <= 0.75
     assert 0.92 <= from_heights[1] <= 0.975
-    # without the sea the two agree to the estimator's noise (the surface's 0.1 ns enters
-    # the depth through the plane it helped fit, the height through its own entry)
+    # without the sea the two agree (here a height moves as its depth for every term)
     plain = coverage(pts.depth_m, DEPTH)
     assert abs(plain[0] - from_heights[0]) < 0.04
     with pytest.raises(ValueError, match="scatter_column"):
