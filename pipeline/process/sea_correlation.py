@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.parallel import thread_map
+from pipeline.parallel import thread_map, thread_map_rows
 from pipeline.process.returns import DetectedReturns, PointFlag
 
 __all__ = [
@@ -50,6 +50,7 @@ __all__ = [
     "SeaCorrelation",
     "SurfacePairs",
     "sea_correlation",
+    "reduced_surface_pairs",
     "surface_pairs",
     "surface_point_pairs",
     "time_pairs",
@@ -198,6 +199,50 @@ def surface_pairs(
     :func:`time_pairs` in emission-time order (pulse-id order, no time limit, without
     ``t_emit_s``); ``group``: pulses sharing one detection (never paired together).
     """
+    made = _pair_maker(returns, surface, max_dt_s, group)
+    if made is None:
+        return None
+    idx, i, j, pairs_of = made
+    s_i, s_j, lag, rise = (np.empty(i.size) for _ in range(4))
+
+    # side by side on the stage's threads (each block writes its own rows)
+    def block(lo: int) -> None:
+        b = slice(lo, lo + _PAIR_BLOCK)
+        p = pairs_of(b)
+        s_i[b], s_j[b], lag[b], rise[b] = p.s_i_m, p.s_j_m, p.lag_m, p.rise_m
+
+    thread_map(block, range(0, i.size, _PAIR_BLOCK))
+    return SurfacePairs(idx[i], idx[j], s_i, s_j, lag, rise)
+
+
+def reduced_surface_pairs(
+    returns: DetectedReturns, surface, reduce, *, max_dt_s: float | None, group=None
+) -> tuple[int, tuple] | None:
+    """:func:`surface_pairs` block by block, each block reduced by ``reduce`` as it is made.
+
+    ``reduce(pairs)`` takes a block's :class:`SurfacePairs` and returns a tuple of arrays of
+    what the caller keeps per pair (e.g. the pairs it uses, and only the figures it needs);
+    they are concatenated over the blocks in pair order. A survey's pairs and their
+    temporaries are then never all held at once: only the reduced figures.
+
+    Returns
+    -------
+    (n_pairs, reduced) or None
+        The number of pairs made and the concatenated tuple; None without any pair.
+    """
+    made = _pair_maker(returns, surface, max_dt_s, group)
+    if made is None:
+        return None
+    _, i, _, pairs_of = made
+    return i.size, thread_map_rows(lambda b: reduce(pairs_of(b)), i.size, _PAIR_BLOCK)
+
+
+def _pair_maker(returns, surface, max_dt_s, group):
+    """:func:`surface_point_pairs` and the maker of a slice's pairs.
+
+    Returns ``(idx, i, j, pairs_of)``, ``pairs_of(slice)`` the :class:`SurfacePairs` of pairs
+    ``i[slice], j[slice]``; None without pairs.
+    """
     idx, i, j = surface_point_pairs(returns, surface, max_dt_s=max_dt_s, group=group)
     if i.size == 0:
         return None
@@ -208,26 +253,21 @@ def surface_pairs(
     z_own = surface.surface_z_m(idx, x, y)
     s_own = z - z_own
     gz = surface.global_z_m(x, y)
-    s_i, s_j, lag, rise = (np.empty(i.size) for _ in range(4))
 
     # the pairs in blocks: elementwise, so the same figures, and the temporaries (the anchors'
-    # planes gathered per pair) stay small instead of hundreds of MB for a survey's pairs;
-    # side by side on the stage's threads (each block writes its own rows)
-    def block(lo: int) -> None:
-        b = slice(lo, lo + _PAIR_BLOCK)
+    # planes gathered per pair) stay small instead of hundreds of MB for a survey's pairs
+    def pairs_of(b: slice) -> SurfacePairs:
         a, p = i[b], j[b]
-        x_i, y_i, x_j, y_j = x[a], y[a], x[p], y[p]
+        x_j, y_j = x[p], y[p]
         g_j = gz[p]
         plane_j = surface.surface_z_m(idx[a], x_j, y_j)
-        s_i[b] = s_own[a]
-        s_j[b] = z[p] - plane_j
         # the anchor's level carried to the partner (WaterSurface.level_z_m, with the anchor
         # plane's height at the anchor already in hand)
-        rise[b] = plane_j - (z_own[a] + g_j - gz[a])
-        lag[b] = np.hypot(x_i - x_j, y_i - y_j)
+        rise = plane_j - (z_own[a] + g_j - gz[a])
+        lag = np.hypot(x[a] - x_j, y[a] - y_j)
+        return SurfacePairs(idx[a], idx[p], s_own[a], z[p] - plane_j, lag, rise)
 
-    thread_map(block, range(0, i.size, _PAIR_BLOCK))
-    return SurfacePairs(idx[i], idx[j], s_i, s_j, lag, rise)
+    return idx, i, j, pairs_of
 
 
 def sea_correlation(

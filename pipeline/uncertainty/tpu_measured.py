@@ -56,7 +56,7 @@ import numpy as np
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.returns import DetectedReturns
-from pipeline.process.sea_correlation import surface_pairs
+from pipeline.process.sea_correlation import reduced_surface_pairs
 from pipeline.process.surface_fit import WaterSurface
 from pipeline.uncertainty.tpu_settings import DEPTH, PointTpu
 from pipeline.uncertainty.tpu_window import with_random_term
@@ -235,20 +235,26 @@ def surface_variogram(
     -------
     SurfaceVariogram
     """
-    pairs = surface_pairs(returns, surface, max_dt_s=max_dt_s, group=group)
-    if pairs is None:
-        return SurfaceVariogram.empty()
-    d, lag = pairs.s_i_m - pairs.s_j_m, pairs.lag_m
-    # the local plane's own rise put back: heights above the global plane
-    d_raw = d if pairs.rise_m is None else d - pairs.rise_m
     # each pulse's incidence once, gathered per pair (each point is in ~50 pairs)
     inc, _ = _incidence_deg(returns, surface, np.arange(len(returns)))
-    inc_i, inc_j = inc[pairs.row_i], inc[pairs.row_j]
-    # pairs of like incidence only: the ranging error then is the same at every lag and only
-    # the sea makes the variogram rise (an oscillating scanner pairs nadir and edge otherwise)
-    like = np.abs(inc_i - inc_j) <= _LIKE_INCIDENCE_DEG
-    d, lag, inc_pair = d[like], lag[like], 0.5 * (inc_i + inc_j)[like]
-    d_raw = d_raw[like]
+
+    def kept(pairs):
+        # per block of pairs, only what the bins need of those kept: a survey's pairs and
+        # their temporaries are never all held at once
+        d = pairs.s_i_m - pairs.s_j_m
+        # the local plane's own rise put back: heights above the global plane
+        d_raw = d if pairs.rise_m is None else d - pairs.rise_m
+        inc_i, inc_j = inc[pairs.row_i], inc[pairs.row_j]
+        # pairs of like incidence only: the ranging error then is the same at every lag and
+        # only the sea makes the variogram rise (an oscillating scanner pairs nadir and edge
+        # otherwise)
+        like = np.abs(inc_i - inc_j) <= _LIKE_INCIDENCE_DEG
+        return d[like], d_raw[like], pairs.lag_m[like], 0.5 * (inc_i + inc_j)[like]
+
+    made = reduced_surface_pairs(returns, surface, kept, max_dt_s=max_dt_s, group=group)
+    if made is None:
+        return SurfaceVariogram.empty()
+    n_pairs, (d, d_raw, lag, inc_pair) = made
     edges = np.asarray(LAG_EDGES_M)
     n_lag = edges.size - 1
     lag_bin = np.digitize(lag, edges) - 1
@@ -285,9 +291,7 @@ def surface_variogram(
                 break
         if hs:
             nugget[b] = _nugget(np.array(hs), np.array(gs))
-    return SurfaceVariogram(
-        np.array(lags), np.array(gammas), nugget, int(pairs.row_i.size), rise, raw_rise
-    )
+    return SurfaceVariogram(np.array(lags), np.array(gammas), nugget, int(n_pairs), rise, raw_rise)
 
 
 def _incidence_deg(returns, surface, rows):
