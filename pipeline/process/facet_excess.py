@@ -48,7 +48,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.optics import refract_direction
-from pipeline.parallel import thread_map_rows
 from pipeline.process.returns import PointFlag
 from pipeline.process.sea_correlation import LAG_EDGES_M, MIN_PAIRS, surface_point_pairs
 
@@ -71,8 +70,6 @@ __all__ = [
 #: Step of the central second difference in facet slope (rad): its truncation error is
 #: ``O(h²)`` relative (1e-6) and its rounding ``eps / h²`` (2e-10) of the path length.
 _H = 1e-3
-#: Pairs per block of :func:`wave_sea`'s arithmetic (bounds its temporaries).
-_PAIR_BLOCK = 65_536
 
 
 def line_axes(origin_xy_m: np.ndarray, line_id=None) -> tuple[np.ndarray, np.ndarray]:
@@ -320,22 +317,15 @@ def wave_sea(returns, surface, group=None) -> bool:
         return False
     p = surface.surface_point_m[idx]
     h = p[:, 2] - surface.global_z_m(p[:, 0], p[:, 1])
+    lag = np.hypot(p[i, 0] - p[j, 0], p[i, 1] - p[j, 1])
     edges = np.asarray(LAG_EDGES_M)
+    b = np.digitize(lag, edges) - 1
+    inside = (b >= 0) & (b < edges.size - 1)
     nb = edges.size - 1
-
-    def binned(rows: slice):
-        # per block of pairs, only the binned ones' bins and squares are kept (the pairs'
-        # temporaries for a whole survey were ~60 B each)
-        a, q = i[rows], j[rows]
-        lag = np.hypot(p[a, 0] - p[q, 0], p[a, 1] - p[q, 1])
-        b = np.digitize(lag, edges) - 1
-        inside = (b >= 0) & (b < nb)
-        return b[inside], (h[a] - h[q])[inside] ** 2, lag[inside] ** 2
-
-    b, dd, ll = thread_map_rows(binned, i.size, _PAIR_BLOCK)
+    b = b[inside]
     count = np.bincount(b, minlength=nb)
-    d2 = np.bincount(b, weights=dd, minlength=nb)
-    lag2 = np.bincount(b, weights=ll, minlength=nb)
+    d2 = np.bincount(b, weights=(h[i] - h[j])[inside] ** 2, minlength=nb)
+    lag2 = np.bincount(b, weights=lag[inside] ** 2, minlength=nb)
     # two pools of consecutive bins from the shortest lag, each closed once it holds
     # MIN_PAIRS pairs (a bin that has them alone is a pool of its own)
     c = np.cumsum(count)

@@ -217,33 +217,6 @@ def test_wave_sea_is_the_heights_rise_with_lag(name, sea, noise_m, want):
     assert wave_sea(ret, surface, group=ret.pulse_id // 20) is want, name
 
 
-def test_wave_sea_sums_its_pairs_alike_in_any_blocks(monkeypatch):
-    """The pairs are binned block by block: the per-bin sums it decides on are the same,
-    bit for bit, for blocks of 997 pairs and for all at once (bincount's inputs in one order)."""
-    import pipeline.process.facet_excess as fe
-
-    ret, surface = _profile(lambda x, t: 0.03 * np.cos(2 * np.pi * (x - 2.3 * t) / 3.3), 0.005)
-    seen = []
-    real = np.bincount
-
-    def spy(*a, **k):
-        out = real(*a, **k)
-        seen.append(out)
-        return out
-
-    sums = []
-    for block in (10**9, 997):
-        monkeypatch.setattr(fe, "_PAIR_BLOCK", block)
-        seen.clear()
-        monkeypatch.setattr(fe.np, "bincount", spy)
-        assert wave_sea(ret, surface)
-        monkeypatch.setattr(fe.np, "bincount", real)
-        sums.append([a.copy() for a in seen])
-    assert len(sums[0]) == 3
-    for a, b in zip(*sums, strict=True):
-        np.testing.assert_array_equal(a, b)
-
-
 @pytest.mark.parametrize("sea_kind", ["waves", "flat"])
 def test_tpu_budgets_the_uncorrected_excess_as_the_correction_would_take_it(sea_kind):
     """With the correction off, the TPU's term is the rise the correction would have given
