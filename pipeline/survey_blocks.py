@@ -21,10 +21,13 @@ After the chunk loop it runs in four passes, each holding a bounded part of the 
    streamed) at the sample's water level; it sets the halo (:func:`block_halo_m`).
 4. **Every block** with its halo: processed with the sample's figures handed in; its own
    pulses' points are appended to ``points.laz`` (:class:`~pipeline.outputs.las.LazTileWriter`)
-   and its own cells go into the survey's grid and cell uncertainty. Nothing of a block stays.
+   and its own cells (:func:`own_cells`) go to disk at once, into the survey's grid
+   (:class:`~pipeline.outputs.grid_tiles.GridTiles`, which writes ``grid.tif`` and
+   ``grid.nc`` from there window by window). Nothing of a block stays.
 
-What stays in memory across blocks: the grid and its cells (a few arrays per cell, sized by
-the area), the sample's products and the kept waveforms (bounded by the posterior budget).
+What stays in memory across blocks: the coverage's cells (one byte per grid cell, sized by
+the area), the sample's products (set aside on disk while the blocks run; its own grid and
+cells span the survey's bounds) and the kept waveforms (bounded by the posterior budget).
 
 **Exact where the searches stay in the halo.** With every block in the sample, the figures
 are the whole survey's, and each block's own points, cells and TPU are the whole survey's
@@ -56,15 +59,10 @@ __all__ = [
     "sample_blocks",
     "blocks_to_process",
     "load_blocks",
-    "SurveyGridAccumulator",
+    "own_cells",
     "LineSums",
     "with_survey_lines",
 ]
-
-#: Grid fields copied cell by cell from a block's grid into the survey's.
-_GRID_FIELDS = ("depth_m", "median_depth_m", "spread_m", "z_m", "count", "mean_depth_m")
-#: The cell uncertainty's fields.
-_CELL_FIELDS = ("sigma_v_m", "sigma_h_m", "tvu95_m", "thu95_m", "count", "n_posterior", "order")
 
 
 def is_blocked(scene, n_pulses: int) -> bool:
@@ -259,41 +257,21 @@ def _sub_layout(layout: TileLayout, b: int, halo: float) -> tuple[TileLayout, in
     return sub, int(round((n - cn) / r)), int(round((cw - w) / r))
 
 
-class SurveyGridAccumulator:
-    """The survey's grid and cell uncertainty, filled with each block's own cells."""
+def own_cells(
+    layout: TileLayout, b: int, row0: int, col0: int
+) -> tuple[tuple[slice, slice], tuple[slice, slice]]:
+    """Block ``b``'s own cells, ``(dst, src)``: their rows and columns in the survey's grid.
 
-    def __init__(self, empty_grid, empty_cells) -> None:
-        self.grid, self.cells = empty_grid, empty_cells
-        self._g = {
-            k: getattr(empty_grid, k).copy()
-            for k in _GRID_FIELDS
-            if getattr(empty_grid, k) is not None
-        }
-        self._c = {k: getattr(empty_cells, k).copy() for k in _CELL_FIELDS}
-        self._designated = None
-
-    def add(self, layout: TileLayout, b: int, grid, cells, row0: int, col0: int) -> None:
-        """Copy block ``b``'s own cells from its grid (north-west cell at ``row0, col0``)."""
-        k = layout.cells_per_tile
-        ny, nx = layout.grid_shape
-        i, j = divmod(int(b), layout.shape[1])
-        r0, r1 = i * k, min((i + 1) * k, ny)
-        c0, c1 = j * k, min((j + 1) * k, nx)
-        src = (slice(r0 - row0, r1 - row0), slice(c0 - col0, c1 - col0))
-        dst = (slice(r0, r1), slice(c0, c1))
-        for name, a in self._g.items():
-            a[dst] = getattr(grid, name)[src]
-        for name, a in self._c.items():
-            a[dst] = getattr(cells, name)[src]
-        if grid.designated is not None:
-            if self._designated is None:
-                self._designated = np.zeros(self.grid.shape, dtype=bool)
-            self._designated[dst] = grid.designated[src]
-
-    def result(self):
-        """``(grid, cells)`` of the survey."""
-        grid = dataclasses.replace(self.grid, designated=self._designated, **self._g)
-        return grid, dataclasses.replace(self.cells, **self._c)
+    ``dst`` in the survey's grid, ``src`` in the block's grid, whose north-west cell is the
+    survey grid's ``row0, col0`` (:func:`_sub_layout`).
+    """
+    k = layout.cells_per_tile
+    ny, nx = layout.grid_shape
+    i, j = divmod(int(b), layout.shape[1])
+    r0, r1 = i * k, min((i + 1) * k, ny)
+    c0, c1 = j * k, min((j + 1) * k, nx)
+    dst = (slice(r0, r1), slice(c0, c1))
+    return dst, (slice(r0 - row0, r1 - row0), slice(c0 - col0, c1 - col0))
 
 
 @dataclass

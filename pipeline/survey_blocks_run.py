@@ -12,6 +12,7 @@ import time
 import numpy as np
 
 from pipeline.detection_store import SetAside
+from pipeline.outputs.grid_tiles import GridFrame, GridTiles
 from pipeline.outputs.las_fields import LineEnds
 from pipeline.process.classify import (
     BATHYMETRIC_POINT,
@@ -30,17 +31,17 @@ from pipeline.process.returns import PointFlag
 from pipeline.stages import trim_heap
 from pipeline.survey_blocks import (
     LineSums,
-    SurveyGridAccumulator,
     _sub_layout,
     block_halo_m,
     block_layout,
     blocks_to_process,
     load_blocks,
+    own_cells,
     pulse_counts,
     sample_blocks,
     with_survey_lines,
 )
-from pipeline.survey_tiles import grid_by_tiles, points_tile_order
+from pipeline.survey_tiles import points_tile_order
 
 __all__ = ["run_blocked", "CoverageAccumulator"]
 
@@ -121,8 +122,6 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
     from pipeline.process_tiles import beam_reach_m
     from pipeline.survey_finish import finish_survey, log_cleanup
     from pipeline.survey_processing import process_survey
-    from pipeline.uncertainty.cell_uncertainty import cell_uncertainty
-    from pipeline.uncertainty.survey_uncertainty import take_tpu
 
     ps, fr, run = scene.process, scene.frame, scene.run
     origin = (fr.origin_easting_m, fr.origin_northing_m, 0.0)
@@ -161,11 +160,12 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
         f" loads ~{load:.1f} times its own area"
         + (" (raise run.block_pulses: the halo dominates)" if load > 4.0 else "")
     )
-    empty = made.processed.points.select(np.zeros(0, dtype=np.int64))
     water = figures.datum.water_level_m
-    empty_grid = grid_by_tiles(empty, layout, origin, fr.crs, water, ps)
-    empty_cells = cell_uncertainty(empty_grid, take_tpu(made.unc.tpu40, np.zeros(0, np.int64)))
-    acc = SurveyGridAccumulator(empty_grid, empty_cells)
+    # the survey's grid, on disk: each block's own cells are written as the block ends
+    # (pipeline.outputs.grid_tiles), never an array of the whole area
+    frame = GridFrame.over(
+        layout.bounds_m, layout.resolution_m, origin, fr.crs, water, ps.grid_statistic
+    )
     cover = CoverageAccumulator(scene.flight.area_m, ps.grid_resolution_m)
     n_obj, rejected, withheld = 0, {}, 0
     header = las_header(CLASSES, made.processed.points.amplitude is not None, fr.crs, origin)
@@ -173,108 +173,98 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
     with clock.stage("blocks"):
         # the sample's products wait on disk while the blocks run (each block's memory)
         aside = SetAside(out, made, sample_returns)
-        del made, sample_returns, empty, empty_grid, empty_cells
+        del made, sample_returns
         gc.collect()
         trim_heap()
-    t0, done = time.perf_counter(), 0
-    with LazTileWriter(out / "points.laz", header, ctx.instrument.amplitude_full_scale) as w:
-        for k, b in enumerate(todo):
-            with clock.stage("blocks"):
-                ret, own = load_blocks(store, blocks, [b], halo)
-            if ret is None or (counts[b] == 0 and not _reached(ret, blocks, int(b), reach, air)):
-                continue  # no pulse near enough for a point of its to fall in the block
-            sub, row0, col0 = _sub_layout(blocks, int(b), halo)
-            blk = process_survey(ret, scene, plan, ctx, sub, clock, _quiet, figures)
-            done += 1
-            with clock.stage("outputs"):
-                pts = blk.processed.points
-                mine = np.isin(pts.pulse_id, ret.pulse_id[own])
-                pts = pts.select(mine)
-                order, starts = points_tile_order(pts, ret, layout, air)
-                for i in range(starts.size - 1):
-                    w.write(pts.select(order[starts[i] : starts[i + 1]]), ret, lines)
-                acc.add(blocks, int(b), blk.grid, blk.unc.cells, row0, col0)
-                cover.add(pts.xyz_m[:, :2])
-            # the block's own pulses' counts (its halo's are another block's)
-            n_obj += int(np.count_nonzero(pts.classification == SUBMERGED_OBJECT))
-            for name, flag in _RULES.items():
-                hit = (pts.flags & np.uint16(flag)) != 0
-                rejected[name] = rejected.get(name, 0) + int(np.count_nonzero(hit))
-            held = blk.processed.withheld_pulse_id
-            withheld += int(np.count_nonzero(np.isin(held, ret.pulse_id[own])))
-            del ret, own, blk, pts
-            trim_heap()
-            if (k + 1) % 10 == 0 or k + 1 == todo.size:
-                log(
-                    f"  {k + 1}/{todo.size} blocks looked at, {done} processed "
-                    f"({time.perf_counter() - t0:.0f} s)"
-                )
-    grid, cells = acc.result()
-    covered = cover.fraction()
-    del acc
-    with clock.stage("blocks"):
-        made, sample_returns = aside.take()
-    log_cleanup(
-        log,
-        dataclasses.replace(made.processed, claims_withheld=withheld),
-        n_obj,
-        rejected,
-        ps,
-        covered,
-    )
-    sample_sim = dataclasses.replace(sim, returns=sample_returns)
+    # the survey's grid on disk, removed when the survey is finished
+    with GridTiles(frame) as tiles:
+        t0, done = time.perf_counter(), 0
+        with LazTileWriter(out / "points.laz", header, ctx.instrument.amplitude_full_scale) as w:
+            for k, b in enumerate(todo):
+                with clock.stage("blocks"):
+                    ret, own = load_blocks(store, blocks, [b], halo)
+                if ret is None or (
+                    counts[b] == 0 and not _reached(ret, blocks, int(b), reach, air)
+                ):
+                    continue  # no pulse near enough for a point of its to fall in the block
+                sub, row0, col0 = _sub_layout(blocks, int(b), halo)
+                blk = process_survey(ret, scene, plan, ctx, sub, clock, _quiet, figures)
+                done += 1
+                with clock.stage("outputs"):
+                    pts = blk.processed.points
+                    mine = np.isin(pts.pulse_id, ret.pulse_id[own])
+                    pts = pts.select(mine)
+                    order, starts = points_tile_order(pts, ret, layout, air)
+                    for i in range(starts.size - 1):
+                        w.write(pts.select(order[starts[i] : starts[i + 1]]), ret, lines)
+                    dst, src = own_cells(blocks, int(b), row0, col0)
+                    tiles.put(dst, blk.grid, blk.unc.cells, src)
+                    cover.add(pts.xyz_m[:, :2])
+                # the block's own pulses' counts (its halo's are another block's)
+                n_obj += int(np.count_nonzero(pts.classification == SUBMERGED_OBJECT))
+                for name, flag in _RULES.items():
+                    hit = (pts.flags & np.uint16(flag)) != 0
+                    rejected[name] = rejected.get(name, 0) + int(np.count_nonzero(hit))
+                held = blk.processed.withheld_pulse_id
+                withheld += int(np.count_nonzero(np.isin(held, ret.pulse_id[own])))
+                del ret, own, blk, pts
+                trim_heap()
+                if (k + 1) % 10 == 0 or k + 1 == todo.size:
+                    log(
+                        f"  {k + 1}/{todo.size} blocks looked at, {done} processed "
+                        f"({time.perf_counter() - t0:.0f} s)"
+                    )
+        covered = cover.fraction()
+        with clock.stage("blocks"):
+            made, sample_returns = aside.take()
+        log_cleanup(
+            log,
+            dataclasses.replace(made.processed, claims_withheld=withheld),
+            n_obj,
+            rejected,
+            ps,
+            covered,
+        )
+        sample_sim = dataclasses.replace(sim, returns=sample_returns)
 
-    def deliver(unc, _grid):
-        # the points are written; the survey's grid with its cells' TPU, and in the cells
-        # where the sample's posteriors ran, the sample's cells (module notes)
-        from pipeline.outputs.netcdf import write_grid_nc
-        from pipeline.outputs.raster import write_grid_tif
+        def deliver(unc, _grid):
+            # the points are written; the survey's grid with its cells' TPU, and in the cells
+            # where the sample's posteriors ran, the sample's cells (module notes)
+            files = {
+                "points": out / "points.laz",
+                "grid": tiles.write_tif(out / "grid.tif", unc.cells),
+                "grid_nc": tiles.write_nc(out / "grid.nc", unc.cells),
+            }
+            # the views' points in the order a points file of the sample would hold them
+            order, _ = points_tile_order(made.processed.points, sample_returns, layout, air)
+            return files, made.processed.points.select(order)
 
-        out_cells = cells
-        if np.any(unc.cells.n_posterior > 0):
-            sampled = unc.cells.n_posterior > 0
-            out_cells = dataclasses.replace(
-                cells,
-                **{
-                    f.name: np.where(sampled, getattr(unc.cells, f.name), getattr(cells, f.name))
-                    for f in dataclasses.fields(cells)
-                },
-            )
-        files = {
-            "points": out / "points.laz",
-            "grid": write_grid_tif(out / "grid.tif", grid, out_cells),
-            "grid_nc": write_grid_nc(out / "grid.nc", grid, out_cells),
+        blocked = {
+            "block_m": blocks.tile_m,
+            "blocks": done,
+            "blocks_with_pulses": int(used.size),
+            "halo_m": halo,
+            "sample_blocks": int(sample.size),
+            "sample_block_m": pre.tile_m,
+            "sample_pulses": len(sample_returns),
+            "survey_pulses": int(n_pulses),
+            "evaluated_on": "the sample's blocks, processed as a survey of their own",
+            "class43_points": n_obj,
+            "rejected": rejected,
+            "class45_withheld": withheld,
         }
-        # the views' points in the order a points file of the sample would hold them
-        order, _ = points_tile_order(made.processed.points, sample_returns, layout, air)
-        return files, made.processed.points.select(order)
-
-    blocked = {
-        "block_m": blocks.tile_m,
-        "blocks": done,
-        "blocks_with_pulses": int(used.size),
-        "halo_m": halo,
-        "sample_blocks": int(sample.size),
-        "sample_block_m": pre.tile_m,
-        "sample_pulses": len(sample_returns),
-        "survey_pulses": int(n_pulses),
-        "evaluated_on": "the sample's blocks, processed as a survey of their own",
-        "class43_points": n_obj,
-        "rejected": rejected,
-        "class45_withheld": withheld,
-    }
-    return finish_survey(
-        scene,
-        plan,
-        out,
-        clock,
-        log,
-        progress,
-        executor,
-        sample_sim,
-        ctx,
-        made,
-        covered,
-        deliver,
-        extra={"blocked": blocked},
-    )
+        return finish_survey(
+            scene,
+            plan,
+            out,
+            clock,
+            log,
+            progress,
+            executor,
+            sample_sim,
+            ctx,
+            made,
+            covered,
+            deliver,
+            extra={"blocked": blocked},
+        )

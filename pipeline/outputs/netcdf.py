@@ -23,12 +23,14 @@ Variables, on dimensions ``(y, x)`` (row 0 north, as in ``grid.tif``):
   (standard deviation of the cell's depths, m); ``depth``'s ``ancillary_variables`` names them.
 
 Float variables are float32 with ``_FillValue = -9999`` (empty cells), ``iho_order`` int8 with
-``_FillValue = -1`` (the code of an empty cell), ``count`` int32 (0 where empty). Written
-atomically (temporary file, then rename).
+``_FillValue = -1`` (the code of an empty cell), ``count`` int32 (0 where empty), each in
+zlib-compressed chunks of 256 x 256 cells (:data:`NC_CHUNK`). Written atomically (temporary
+file, then rename).
 """
 
 from __future__ import annotations
 
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -41,7 +43,15 @@ from pipeline.outputs.raster import NODATA, depth_reference, grid_layers
 from pipeline.process.grid import Grid
 from pipeline.uncertainty.cell_uncertainty import CellUncertainty
 
-__all__ = ["DEPTH_STANDARD_NAME", "ORDER_FLAG_MEANINGS", "write_grid_nc"]
+__all__ = [
+    "DEPTH_STANDARD_NAME",
+    "ORDER_FLAG_MEANINGS",
+    "NC_VARIABLES",
+    "nc_variable",
+    "grid_dataset",
+    "save_grid_nc",
+    "write_grid_nc",
+]
 
 #: CF standard name of the grid's depth (see the module's docstring for why).
 DEPTH_STANDARD_NAME = "sea_floor_depth_below_sea_surface"
@@ -65,6 +75,158 @@ def _grid_mapping(crs: pyproj.CRS | None) -> dict[str, object]:
     return attrs
 
 
+#: The data variables of ``grid.nc``: the :func:`~pipeline.outputs.raster.grid_layers` layer
+#: each is made of, and its stored type.
+NC_VARIABLES = {
+    "depth": ("depth_m", np.float32),
+    "median_depth": ("median_depth_m", np.float32),
+    "tvu95": ("tvu95_m", np.float32),
+    "thu95": ("thu95_m", np.float32),
+    "iho_order": ("iho_order", np.int8),
+    "count": ("count", np.int32),
+    "spread": ("spread_m", np.float32),
+}
+#: Side of the variables' HDF5 chunks (cells): a grid written window by window
+#: (:mod:`pipeline.outputs.grid_tiles`) writes each chunk once, whole.
+NC_CHUNK = 256
+
+
+def nc_variable(name: str, layers: dict[str, np.ndarray]) -> np.ndarray:
+    """The stored values of data variable ``name`` from ``layers`` (or windows of them).
+
+    NaN stays NaN in the float variables (written as ``_FillValue``); ``iho_order``'s NaN
+    becomes ``NO_DATA``.
+    """
+    layer, dtype = NC_VARIABLES[name]
+    a = layers[layer]
+    if name == "iho_order":
+        a = np.where(np.isfinite(a), a, NO_DATA)
+    return a.astype(dtype)
+
+
+def grid_dataset(frame, variables: dict):
+    """``grid.nc`` as an :class:`xarray.Dataset`: attributes, coordinates and ``variables``.
+
+    Parameters
+    ----------
+    frame : Grid or GridFrame
+        The grid's geometry, CRS, datum and statistic (its arrays are not read).
+    variables : dict of str to (ny, nx) array
+        Each of :data:`NC_VARIABLES`, of its stored type (:func:`nc_variable`); numpy or dask
+        arrays (a dask array is written chunk by chunk).
+    """
+    import xarray as xr  # imported here: only the NetCDF writer needs xarray
+
+    dims = ("y", "x")
+    common = {"grid_mapping": "crs"}
+    depth_attrs = {
+        "standard_name": DEPTH_STANDARD_NAME,
+        "units": "m",
+        "positive": "down",
+        **({} if frame.datum_m is None else {"datum_water_level_m": float(frame.datum_m)}),
+        "comment": depth_reference(frame),
+        **common,
+    }
+    attrs = {
+        "depth": {
+            "long_name": f"{frame.statistic} depth of the cell's bathymetric points",
+            "cell_methods": f"area: {frame.statistic}",
+            "ancillary_variables": "tvu95 thu95 iho_order count spread",
+            **depth_attrs,
+        },
+        "median_depth": {
+            "long_name": "median depth of the cell's bathymetric points",
+            "cell_methods": "area: median",
+            **depth_attrs,
+        },
+        "tvu95": {
+            "long_name": "total vertical uncertainty of the cell depth, 95 % confidence",
+            "units": "m",
+            **common,
+        },
+        "thu95": {
+            "long_name": "total horizontal uncertainty of the cell position, 95 % confidence",
+            "units": "m",
+            **common,
+        },
+        "iho_order": {
+            "long_name": "strictest IHO S-44 (6th ed.) order met by the cell",
+            "flag_values": np.arange(NO_ORDER + 1, dtype=np.int8),
+            "flag_meanings": ORDER_FLAG_MEANINGS,
+            **common,
+        },
+        "count": {
+            "long_name": "bathymetric points in the cell",
+            "standard_name": f"{DEPTH_STANDARD_NAME} number_of_observations",
+            "units": "1",
+            **common,
+        },
+        "spread": {
+            "long_name": "standard deviation of the cell's point depths",
+            "cell_methods": "area: standard_deviation",
+            "units": "m",
+            **common,
+        },
+    }
+    data = {name: (dims, variables[name], attrs[name]) for name in NC_VARIABLES}
+    data["crs"] = ((), np.int32(0), _grid_mapping(frame.crs))
+    coords = {
+        "x": (
+            "x",
+            frame.x_m + frame.origin_m[0],
+            {
+                "standard_name": "projection_x_coordinate",
+                "long_name": "easting of the cell centre",
+                "units": "m",
+                "axis": "X",
+            },
+        ),
+        "y": (
+            "y",
+            frame.y_m + frame.origin_m[1],
+            {
+                "standard_name": "projection_y_coordinate",
+                "long_name": "northing of the cell centre",
+                "units": "m",
+                "axis": "Y",
+            },
+        ),
+    }
+    return xr.Dataset(
+        data,
+        coords=coords,
+        attrs={
+            "Conventions": "CF-1.8",
+            "title": "Bathymetric lidar grid",
+            "source": "bathy pipeline (airborne bathymetric lidar survey)",
+            "resolution_m": float(frame.resolution_m),
+            "origin_m": np.asarray(frame.origin_m, dtype=np.float64),
+            "registration": "cell centres; cells are resolution_m wide",
+        },
+    )
+
+
+def save_grid_nc(path: str | Path, ds) -> Path:
+    """Write ``grid.nc``'s dataset (:func:`grid_dataset`) as NetCDF-4, atomically."""
+    path = Path(path)
+    ny, nx = ds["depth"].shape
+    chunks = {"chunksizes": (min(ny, NC_CHUNK), min(nx, NC_CHUNK)), "zlib": True, "complevel": 4}
+    fill = {"_FillValue": np.float32(NODATA), **chunks}
+    encoding = {name: dict(fill) for name in ("depth", "median_depth", "tvu95", "thu95", "spread")}
+    encoding["iho_order"] = {"_FillValue": np.int8(NO_DATA), **chunks}
+    encoding["count"] = {"_FillValue": None, **chunks}
+    encoding["x"] = encoding["y"] = {"_FillValue": None}
+    # the HDF5 library under NetCDF-4 opens its file by name, more than once: it writes into a
+    # private folder of the system's temporary directory, and the finished bytes go to disk
+    # atomically (a run killed meanwhile leaves the output folder clean)
+    with tempfile.TemporaryDirectory(prefix="bathy-nc-") as d:
+        staged = Path(d) / "grid.nc"
+        ds.to_netcdf(staged, format="NETCDF4", engine="netcdf4", encoding=encoding)
+        with atomic_path(path) as tmp, open(staged, "rb") as src, open(tmp, "wb") as dst:
+            shutil.copyfileobj(src, dst, 1 << 20)  # by pieces: the file can be large
+    return path
+
+
 def write_grid_nc(path: str | Path, grid: Grid, cells: CellUncertainty | None = None) -> Path:
     """Write ``grid`` (and its cell uncertainty) as CF-1.8 NetCDF-4, atomically.
 
@@ -82,140 +244,5 @@ def write_grid_nc(path: str | Path, grid: Grid, cells: CellUncertainty | None = 
     Path
         ``path``.
     """
-    import xarray as xr  # imported here: only the NetCDF writer needs xarray
-
-    path = Path(path)
     layers = grid_layers(grid, cells)
-    dims = ("y", "x")
-    common = {"grid_mapping": "crs"}
-    depth_attrs = {
-        "standard_name": DEPTH_STANDARD_NAME,
-        "units": "m",
-        "positive": "down",
-        **({} if grid.datum_m is None else {"datum_water_level_m": float(grid.datum_m)}),
-        "comment": depth_reference(grid),
-        **common,
-    }
-
-    def f32(name: str) -> np.ndarray:
-        return layers[name].astype(np.float32)
-
-    order = layers["iho_order"]
-    data = {
-        "depth": (
-            dims,
-            f32("depth_m"),
-            {
-                "long_name": f"{grid.statistic} depth of the cell's bathymetric points",
-                "cell_methods": f"area: {grid.statistic}",
-                "ancillary_variables": "tvu95 thu95 iho_order count spread",
-                **depth_attrs,
-            },
-        ),
-        "median_depth": (
-            dims,
-            grid.median_depth_m.astype(np.float32),
-            {
-                "long_name": "median depth of the cell's bathymetric points",
-                "cell_methods": "area: median",
-                **depth_attrs,
-            },
-        ),
-        "tvu95": (
-            dims,
-            f32("tvu95_m"),
-            {
-                "long_name": "total vertical uncertainty of the cell depth, 95 % confidence",
-                "units": "m",
-                **common,
-            },
-        ),
-        "thu95": (
-            dims,
-            f32("thu95_m"),
-            {
-                "long_name": "total horizontal uncertainty of the cell position, 95 % confidence",
-                "units": "m",
-                **common,
-            },
-        ),
-        "iho_order": (
-            dims,
-            np.where(np.isfinite(order), order, NO_DATA).astype(np.int8),
-            {
-                "long_name": "strictest IHO S-44 (6th ed.) order met by the cell",
-                "flag_values": np.arange(NO_ORDER + 1, dtype=np.int8),
-                "flag_meanings": ORDER_FLAG_MEANINGS,
-                **common,
-            },
-        ),
-        "count": (
-            dims,
-            grid.count.astype(np.int32),
-            {
-                "long_name": "bathymetric points in the cell",
-                "standard_name": f"{DEPTH_STANDARD_NAME} number_of_observations",
-                "units": "1",
-                **common,
-            },
-        ),
-        "spread": (
-            dims,
-            f32("spread_m"),
-            {
-                "long_name": "standard deviation of the cell's point depths",
-                "cell_methods": "area: standard_deviation",
-                "units": "m",
-                **common,
-            },
-        ),
-        "crs": ((), np.int32(0), _grid_mapping(grid.crs)),
-    }
-    coords = {
-        "x": (
-            "x",
-            grid.x_m + grid.origin_m[0],
-            {
-                "standard_name": "projection_x_coordinate",
-                "long_name": "easting of the cell centre",
-                "units": "m",
-                "axis": "X",
-            },
-        ),
-        "y": (
-            "y",
-            grid.y_m + grid.origin_m[1],
-            {
-                "standard_name": "projection_y_coordinate",
-                "long_name": "northing of the cell centre",
-                "units": "m",
-                "axis": "Y",
-            },
-        ),
-    }
-    ds = xr.Dataset(
-        data,
-        coords=coords,
-        attrs={
-            "Conventions": "CF-1.8",
-            "title": "Bathymetric lidar grid",
-            "source": "bathy pipeline (airborne bathymetric lidar survey)",
-            "resolution_m": float(grid.resolution_m),
-            "origin_m": np.asarray(grid.origin_m, dtype=np.float64),
-            "registration": "cell centres; cells are resolution_m wide",
-        },
-    )
-    fill = {"_FillValue": np.float32(NODATA), "zlib": True, "complevel": 4}
-    encoding = {name: dict(fill) for name in ("depth", "median_depth", "tvu95", "thu95", "spread")}
-    encoding["iho_order"] = {"_FillValue": np.int8(NO_DATA), "zlib": True, "complevel": 4}
-    encoding["count"] = {"_FillValue": None, "zlib": True, "complevel": 4}
-    encoding["x"] = encoding["y"] = {"_FillValue": None}
-    # the HDF5 library under NetCDF-4 opens its file by name, more than once: it writes into a
-    # private folder of the system's temporary directory, and the finished bytes go to disk
-    # atomically (a run killed meanwhile leaves the output folder clean)
-    with tempfile.TemporaryDirectory(prefix="bathy-nc-") as d:
-        staged = Path(d) / "grid.nc"
-        ds.to_netcdf(staged, format="NETCDF4", engine="netcdf4", encoding=encoding)
-        with atomic_path(path) as tmp:
-            tmp.write_bytes(staged.read_bytes())
-    return path
+    return save_grid_nc(path, grid_dataset(grid, {k: nc_variable(k, layers) for k in NC_VARIABLES}))

@@ -44,6 +44,10 @@ __all__ = [
     "TIF_BANDS",
     "GridRaster",
     "grid_layers",
+    "tif_profile",
+    "describe_tif",
+    "tif_band",
+    "copy_as_cog",
     "write_grid_tif",
     "read_grid_tif",
     "depth_reference",
@@ -79,12 +83,14 @@ class GridRaster:
 def grid_layers(grid: Grid, cells: CellUncertainty | None) -> dict[str, np.ndarray]:
     """Every written layer as float64 ``(ny, nx)``, NaN where a cell has no value.
 
-    ``iho_order`` is NaN where the cell is empty (code -1); without ``cells`` the uncertainty
-    layers are NaN throughout.
+    The bands of :data:`TIF_BANDS` and ``median_depth_m`` (``grid.nc``'s). ``iho_order`` is
+    NaN where the cell is empty (code -1); without ``cells`` the uncertainty layers are NaN
+    throughout.
     """
     nan = np.full(grid.shape, np.nan)
     out = {
         "depth_m": grid.depth_m.astype(np.float64),
+        "median_depth_m": grid.median_depth_m.astype(np.float64),
         "count": grid.count.astype(np.float64),
         "spread_m": grid.spread_m.astype(np.float64),
         "tvu95_m": nan,
@@ -117,6 +123,65 @@ def _overview_count(shape: tuple[int, int]) -> int:
     return max(1, math.ceil(math.log2(max(max(shape) / _TILE, 1.0))))
 
 
+def tif_profile(frame) -> dict:
+    """The rasterio profile of ``grid.tif``'s GeoTIFF before the COG copy.
+
+    ``frame``: a :class:`~pipeline.process.grid.Grid` or anything with its ``shape``,
+    ``crs`` and ``transform`` (:class:`~pipeline.outputs.grid_tiles.GridFrame`).
+    """
+    if frame.crs is None:
+        raise ValueError("`grid.crs` is required for a GeoTIFF; grid with `crs=...`")
+    ny, nx = frame.shape
+    return {
+        "driver": "GTiff",
+        "width": nx,
+        "height": ny,
+        "count": len(TIF_BANDS),
+        "dtype": "float32",
+        "crs": rasterio.crs.CRS.from_wkt(frame.crs.to_wkt()),
+        "transform": frame.transform,
+        "nodata": NODATA,
+    }
+
+
+def describe_tif(dst, frame) -> None:
+    """Set the band descriptions, units and dataset tags of ``grid.tif`` on ``dst`` (open)."""
+    for i, (name, unit) in enumerate(TIF_BANDS, start=1):
+        dst.set_band_description(i, name)
+        dst.set_band_unit(i, unit)
+    dst.update_tags(
+        origin_easting_m=repr(float(frame.origin_m[0])),
+        origin_northing_m=repr(float(frame.origin_m[1])),
+        origin_height_m=repr(float(frame.origin_m[2])),
+        resolution_m=repr(float(frame.resolution_m)),
+        depth=depth_reference(frame),
+        datum_water_level_m="" if frame.datum_m is None else repr(float(frame.datum_m)),
+        iho_order="0 exclusive, 1 special, 2 order 1a/1b, 3 order 2, 4 none met",
+        tvu95_m="95 % total vertical uncertainty of the cell depth",
+        thu95_m="95 % total horizontal uncertainty of the cell position",
+        registration="cell-centre (area): transform gives cell corners",
+    )
+
+
+def tif_band(layer: np.ndarray) -> np.ndarray:
+    """A layer of :func:`grid_layers` (or a window of it) as its band's float32 values."""
+    return np.where(np.isfinite(layer), layer, NODATA).astype(np.float32)
+
+
+def copy_as_cog(src, dest: str, shape: tuple[int, int]) -> None:
+    """GDAL's COG copy of the open dataset ``src`` to ``dest`` (the creation options above)."""
+    rasterio.shutil.copy(
+        src,
+        dest,
+        driver="COG",
+        compress="DEFLATE",
+        predictor=3,
+        blocksize=_TILE,
+        overview_resampling="NEAREST",
+        overview_count=_overview_count(shape),
+    )
+
+
 def write_grid_tif(path: str | Path, grid: Grid, cells: CellUncertainty | None = None) -> Path:
     """Write ``grid`` (and its cell uncertainty) as a Cloud Optimized GeoTIFF, atomically.
 
@@ -134,53 +199,18 @@ def write_grid_tif(path: str | Path, grid: Grid, cells: CellUncertainty | None =
     Path
         ``path``.
     """
-    if grid.crs is None:
-        raise ValueError("`grid.crs` is required for a GeoTIFF; grid with `crs=...`")
+    profile = tif_profile(grid)
     path = Path(path)
     layers = grid_layers(grid, cells)
-    ny, nx = grid.shape
-    profile = {
-        "driver": "GTiff",
-        "width": nx,
-        "height": ny,
-        "count": len(TIF_BANDS),
-        "dtype": "float32",
-        "crs": rasterio.crs.CRS.from_wkt(grid.crs.to_wkt()),
-        "transform": grid.transform,
-        "nodata": NODATA,
-    }
     with MemoryFile() as mem:
         with mem.open(**profile) as dst:
-            for i, (name, unit) in enumerate(TIF_BANDS, start=1):
-                a = layers[name]
-                dst.write(np.where(np.isfinite(a), a, NODATA).astype(np.float32), i)
-                dst.set_band_description(i, name)
-                dst.set_band_unit(i, unit)
-            dst.update_tags(
-                origin_easting_m=repr(float(grid.origin_m[0])),
-                origin_northing_m=repr(float(grid.origin_m[1])),
-                origin_height_m=repr(float(grid.origin_m[2])),
-                resolution_m=repr(float(grid.resolution_m)),
-                depth=depth_reference(grid),
-                datum_water_level_m="" if grid.datum_m is None else repr(float(grid.datum_m)),
-                iho_order="0 exclusive, 1 special, 2 order 1a/1b, 3 order 2, 4 none met",
-                tvu95_m="95 % total vertical uncertainty of the cell depth",
-                thu95_m="95 % total horizontal uncertainty of the cell position",
-                registration="cell-centre (area): transform gives cell corners",
-            )
+            for i, (name, _) in enumerate(TIF_BANDS, start=1):
+                dst.write(tif_band(layers[name]), i)
+            describe_tif(dst, grid)
         # the COG driver writes side files next to its target (overviews): it writes into
         # GDAL's memory filesystem, and the finished bytes go to disk atomically
         with mem.open() as src, MemoryFile() as cog:
-            rasterio.shutil.copy(
-                src,
-                cog.name,
-                driver="COG",
-                compress="DEFLATE",
-                predictor=3,
-                blocksize=_TILE,
-                overview_resampling="NEAREST",
-                overview_count=_overview_count(grid.shape),
-            )
+            copy_as_cog(src, cog.name, grid.shape)
             cog.seek(0)
             data = cog.read()
         with atomic_path(path) as tmp:

@@ -49,6 +49,7 @@ from pipeline.process.returns import Points
 __all__ = [
     "Grid",
     "GRID_STATISTICS",
+    "cell_centres_m",
     "cell_index",
     "cell_statistics",
     "designate_objects",
@@ -220,6 +221,14 @@ def grid_points(
     return grid_from_statistics(st, bounds, r, origin, crs, statistic)
 
 
+def cell_centres_m(bounds_m, resolution_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Local ``x_m (nx,)`` (east) and ``y_m (ny,)`` (south from row 0) of the cell centres."""
+    w, e, s, n = bounds_m
+    r = resolution_m
+    nx, ny = int(round((e - w) / r)), int(round((n - s) / r))
+    return w + (np.arange(nx) + 0.5) * r, n - (np.arange(ny) + 0.5) * r
+
+
 def grid_from_statistics(
     st: dict, bounds_m: np.ndarray, resolution_m: float, origin_m, crs, statistic: str
 ) -> Grid:
@@ -233,6 +242,7 @@ def grid_from_statistics(
 
     count, has = st["count"], st["count"] > 0
     robust = statistic == "median"
+    x_m, y_m = cell_centres_m(bounds_m, r)
     return Grid(
         depth_m=shaped(st["median"] if robust else st["mean"], has),
         median_depth_m=shaped(st["median"], has),
@@ -241,8 +251,8 @@ def grid_from_statistics(
         spread_m=shaped(st["spread"], count >= 2),
         z_m=shaped(st["zmedian"] if robust else st["zmean"], has),
         count=count.reshape(ny, nx).astype(np.int64),
-        x_m=w + (np.arange(nx) + 0.5) * r,
-        y_m=n - (np.arange(ny) + 0.5) * r,
+        x_m=x_m,
+        y_m=y_m,
         resolution_m=r,
         bounds_m=np.asarray(bounds_m, dtype=np.float64),
         origin_m=np.asarray(origin_m, dtype=np.float64),
