@@ -2,8 +2,10 @@
 
 A survey processed block by block (:mod:`pipeline.survey_blocks`) hands over each block's own
 cells as the block ends. :class:`GridTiles` writes them at once into a raw file of the whole
-grid's cells in a private folder of the system's temporary directory, and at the end writes
-``grid.tif`` and ``grid.nc`` from that file a 256 x 256 window at a time. No array of the
+grid's cells, an unnamed file in the system's temporary directory (``O_TMPFILE``: nothing is
+left behind, even by a kill; elsewhere a file in a private folder), and at the end writes
+``grid.tif`` and ``grid.nc`` from that file a 256 x 256 window at a time (through named
+files in private folders, as :func:`~pipeline.outputs.netcdf.write_grid_nc` does). No array of the
 whole area's size is made: memory is bounded by one block's window while filling and by one
 window of :data:`TILE` cells (and GDAL's and HDF5's caches, bounded below) while writing.
 
@@ -37,6 +39,7 @@ import numpy as np
 import pyproj
 
 from pipeline.iho import NO_DATA
+from pipeline.outputs.atomic import _anonymous_file as anonymous_file
 from pipeline.outputs.atomic import atomic_path
 from pipeline.process.grid import Grid, cell_centres_m
 
@@ -134,14 +137,21 @@ class GridTiles:
     folder : str or Path, optional
         Where the private folder goes (default: the system's temporary directory).
 
-    Use as a context manager (or call :meth:`close`): the folder is removed on exit.
+    Use as a context manager (or call :meth:`close`): the cells' file is removed on exit.
     """
 
     def __init__(self, frame: GridFrame, folder: str | Path | None = None) -> None:
         self.frame = frame
-        self._dir = tempfile.TemporaryDirectory(prefix="bathy-grid-", dir=folder)
-        path = Path(self._dir.name) / "cells.raw"
-        self._fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o600)
+        self._folder = folder
+        # an unnamed file where the system has them: freed by the kernel when the process
+        # ends, even killed; else a named one in a private folder, removed by close()
+        self._dir = None
+        fd = anonymous_file(Path(tempfile.gettempdir() if folder is None else folder))
+        if fd is None:
+            self._dir = tempfile.TemporaryDirectory(prefix="bathy-grid-", dir=folder)
+            path = Path(self._dir.name) / "cells.raw"
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o600)
+        self._fd = fd
         ny, nx = frame.shape
         # every cell empty: written a strip of about 1 MiB at a time
         rows = max(1, (1 << 20) // max(nx * _CELL.itemsize, 1))
@@ -162,7 +172,8 @@ class GridTiles:
         if self._fd >= 0:
             os.close(self._fd)
             self._fd = -1
-        self._dir.cleanup()
+        if self._dir is not None:
+            self._dir.cleanup()
 
     def _pwrite(self, a: np.ndarray, r0: int, c0: int) -> None:
         """Write the records ``a`` ``(r, c)`` (C-contiguous) to the cells from ``(r0, c0)``."""
@@ -262,7 +273,7 @@ class GridTiles:
 
         profile = tif_profile(self.frame)
         with (
-            tempfile.TemporaryDirectory(prefix="tif-", dir=self._dir.name) as d,
+            tempfile.TemporaryDirectory(prefix="bathy-tif-", dir=self._folder) as d,
             rasterio.Env(GDAL_CACHEMAX=_GDAL_CACHE_MB),
         ):
             source, cog = Path(d) / "source.tif", Path(d) / "grid.tif"

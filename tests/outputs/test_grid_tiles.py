@@ -187,9 +187,7 @@ def test_tiles_filled_by_blocks_write_the_in_memory_writers_files(tmp_path, bloc
         fill_by_blocks(tiles, grid, cells, block, rng, skip)
         tiles.write_tif(got / "grid.tif", sample)
         tiles.write_nc(got / "grid.nc", sample)
-        staged = list(tmp_path.glob("bathy-grid-*"))
-        assert len(staged) == 1
-    assert not staged[0].exists()  # the layers' folder is removed
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["memory", "tiles"]  # nothing left
     assert_same_tif(want / "grid.tif", got / "grid.tif")
     assert_same_nc(want / "grid.nc", got / "grid.nc")
 
@@ -264,21 +262,26 @@ def test_tiles_write_atomically_with_the_umasks_mode(tmp_path, monkeypatch, way)
     import os
     import stat
 
-    from pipeline.outputs import atomic
+    from pipeline.outputs import atomic, grid_tiles
 
-    if way == "beside":  # the fallback: a hidden temporary file beside the target, renamed
+    if way == "beside":  # the fallbacks: named files beside the target and for the cells
         monkeypatch.setattr(atomic, "_anonymous_file", lambda folder: None)
+        monkeypatch.setattr(grid_tiles, "anonymous_file", lambda folder: None)
     rng = np.random.default_rng(5)
     grid, cells = random_cells(rng, FRAME.shape)
     old = os.umask(0o027)
     try:
-        with GridTiles(FRAME) as tiles:
+        (tmp_path / "tmp").mkdir()
+        with GridTiles(FRAME, folder=tmp_path / "tmp") as tiles:
             fill_by_blocks(tiles, grid, cells, 400, rng)
+            named = list((tmp_path / "tmp").iterdir())
+            assert len(named) == (way == "beside")  # the cells' file has a name only there
             out = tmp_path / "out"
             tiles.write_tif(out / "grid.tif")
             tiles.write_nc(out / "grid.nc")
     finally:
         os.umask(old)
     assert sorted(p.name for p in out.iterdir()) == ["grid.nc", "grid.tif"]  # nothing else
+    assert list((tmp_path / "tmp").iterdir()) == []
     for name in ("grid.nc", "grid.tif"):
         assert stat.S_IMODE((out / name).stat().st_mode) == 0o640
