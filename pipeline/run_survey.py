@@ -34,7 +34,7 @@ from pipeline.process.context import (
     with_measured_attenuation,
 )
 from pipeline.process.returns import DetectedReturns, DetectorFlag
-from pipeline.process.surface_echo_mix import mix_stored_echoes
+from pipeline.process.surface_echo_mix import NULL_FIELD, mix_stored_echoes
 from pipeline.stages import Plan, StageClock, trim_heap
 from pipeline.survey_blocks import is_blocked
 from pipeline.survey_chunks import NB_FIELDS, ChunkJob, no_bottom_limits, run_chunk
@@ -234,8 +234,18 @@ def simulate_detections(
             done = min((c + 1) * chunk, lines.n_pulses_total)
             log(f"  chunk {c + 1}/{n_chunk}: {done} pulses simulated and detected")
     bar.close()
+    if not job.waveform:  # a photon detector resamples no surface echo
+        store.drop_field(NULL_FIELD)
     if job.waveform:  # an ambiguous surface echo's time from the survey's share of clear ones
-        mix_stored_echoes(store, ps.detect.surface_echo_prevalence_half, log)
+        dt = ps.detect
+        mix_stored_echoes(
+            store,
+            dt.surface_echo_prevalence_half,
+            log,
+            null_z=dt.surface_echo_null_z,
+            null_excess=dt.surface_echo_null_excess,
+            null_max_clear=dt.surface_echo_null_max_clear,
+        )
     no_bottom = None
     if not job.waveform:
         no_bottom = agg.photon_summary()

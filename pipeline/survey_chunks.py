@@ -162,6 +162,8 @@ def _waveform_chunk(job: ChunkJob, clock: StageClock, paths):
             shot_noise_counts=ins.shot_noise_counts,
             # the digitiser's top code, 2^bit_depth − 1 (its datasheet)
             top_code=ins.amplitude_full_scale - 1.0,
+            # the weak-echo test's resampled pulses and their noise keys (surface_echo_null)
+            pulse_id=wf.pulse_id,
         )
     nb = None
     if job.no_bottom:

@@ -55,6 +55,7 @@ from pipeline.process.detect_settings import DetectSettings
 from pipeline.process.detect_timing import parabolic_peak
 from pipeline.process.flank_trend import flank_trend
 from pipeline.process.returns import DetectorFlag
+from pipeline.process.surface_echo_null import null_shifts
 from pipeline.process.surface_step import ECHO_FIELDS, surface_step_fit
 
 __all__ = [
@@ -75,7 +76,8 @@ class WaveformDetections:
     """Detected returns per waveform, shapes ``(n_pulses,)``.
 
     Times are from the start of each waveform's time axis (``t0_s``): round-trip times.
-    Absent returns have their mask False and 0 in the other fields (never NaN). The in-column
+    Absent returns have their mask False and 0 in the other fields (never NaN; but
+    ``surface_echo_null_shift_s``, NaN where not resampled). The in-column
     return (``has_column`` ...) is optional: left out (None), it is filled with "none found".
     ``t_no_bottom_s`` (a pulse without a bottom: the time down to which none is established, 0
     where unknown) is the photon detector's; the full-waveform one comes from
@@ -90,7 +92,9 @@ class WaveformDetections:
     −1; else 0): ``t_surface_s`` there is
     ``t_surface_onset_s + w surface_echo_shift_s``, ``w`` from the block's share of clear
     echoes until the survey sets it from all of them
-    (:func:`~pipeline.process.surface_echo_mix.echo_weight`).
+    (:func:`~pipeline.process.surface_echo_mix.echo_weight`). ``surface_echo_null_shift_s``:
+    that shift on noise alone, for the pulses resampled
+    (:func:`~pipeline.process.surface_echo_null.null_shifts`; NaN elsewhere).
     """
 
     has_surface: np.ndarray
@@ -114,6 +118,7 @@ class WaveformDetections:
     surface_echo_state: np.ndarray | None = None
     t_surface_onset_s: np.ndarray | None = None
     surface_echo_shift_s: np.ndarray | None = None
+    surface_echo_null_shift_s: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         # detectors without column returns (photon counting) leave them out; concatenating
@@ -132,6 +137,8 @@ class WaveformDetections:
         ):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, np.zeros(n))
+        if self.surface_echo_null_shift_s is None:  # none resampled (surface_echo_null)
+            object.__setattr__(self, "surface_echo_null_shift_s", np.full(n, np.nan))
 
 
 def _confidence(snr: np.ndarray, threshold: float) -> np.ndarray:
@@ -154,6 +161,7 @@ def detect_full_waveform(
     noise_samples: int | None = None,
     shot_noise_counts: float = 0.0,
     top_code: float | None = None,
+    pulse_id: np.ndarray | None = None,
 ) -> WaveformDetections:
     """Find the surface and bottom returns in a batch of waveforms.
 
@@ -178,6 +186,10 @@ def detect_full_waveform(
         The digitiser's top code (``2^bits − 1``): a pulse with a sample there is flagged
         SATURATED and its clipped echo timed from the plateau's edges
         (:mod:`pipeline.process.detect_clipped`). None: samples are never clipped.
+    pulse_id : (n_pulses,) int array_like, optional
+        Pulse numbers: every ``settings.surface_echo_null_every``-th ambiguous surface echo is
+        resampled on noise alone, keyed by its number (:mod:`pipeline.process.surface_echo_null`).
+        None: none is.
 
     Returns
     -------
@@ -186,9 +198,10 @@ def detect_full_waveform(
     """
     s = settings or DetectSettings()
     samples = np.asarray(samples)
+    ids = None if pulse_id is None else np.asarray(pulse_id, dtype=np.int64)
     if samples.shape[0] <= BLOCK_PULSES:
         return _detect_block(
-            samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_counts, top_code
+            samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_counts, top_code, ids
         )
     blocks = [
         _detect_block(
@@ -199,6 +212,7 @@ def detect_full_waveform(
             noise_samples,
             shot_noise_counts,
             top_code,
+            None if ids is None else ids[i : i + BLOCK_PULSES],
         )
         for i in range(0, samples.shape[0], BLOCK_PULSES)
     ]
@@ -210,7 +224,9 @@ def detect_full_waveform(
     )
 
 
-def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_counts, top_code):
+def _detect_block(
+    samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_counts, top_code, pulse_id=None
+):
     """:func:`detect_full_waveform` on one block of waveforms."""
     y = np.asarray(samples, dtype=np.float64)
     n, m = y.shape
@@ -246,6 +262,7 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
     gap = max(2, math.ceil(1.5 * fwhm_samples))
     t_echo_s = t_idx_s  # the start of the merged fit, which models the echo itself
     echo_state = t_onset_s = shift_s = np.zeros(n)
+    null_s = np.full(n, np.nan)
     if s.surface_step:
         # the column's own decay, past the surface echo: the onset the surface sits on
         k_col = None
@@ -271,6 +288,12 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
         )
         t_onset_s = parts.t_onset
         shift_s = parts.t_mix_echo - parts.t_onset
+        if pulse_id is not None and s.surface_echo_null_every > 0:
+            floor = np.std(y[:, :k], axis=1, ddof=1)  # the pre-trigger's: no column in it
+            null_s = null_shifts(
+                filt, i_s, k_col, sigma_samples, parts, floor, shot_noise_counts, pulse_id,
+                s.surface_echo_null_every, s.surface_echo_sigma,
+            )  # fmt: skip
     # a surface echo clipped at the top code: its filtered peak sits anywhere on the plateau;
     # the plateau's edges time it (one echo), or bound it (run on into the column: "merged")
     clip_s = clip_merged = np.zeros(n, dtype=bool)
@@ -420,4 +443,5 @@ def _detect_block(samples, dt_s, pulse_fwhm_s, s, noise_samples, shot_noise_coun
         surface_echo_state=echo_state,
         t_surface_onset_s=np.where(echo_state < 0, t_onset_s * dt_s, zero),
         surface_echo_shift_s=np.where(echo_state < 0, shift_s * dt_s, zero),
+        surface_echo_null_shift_s=np.where(echo_state < 0, null_s * dt_s, np.nan),
     )

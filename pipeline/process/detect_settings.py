@@ -57,6 +57,42 @@ class DetectSettings:
         "of benchmarks/wave_refraction (seeds 7, 8: 5 m/s waves, flat 5 and 1.5 m/s) as the "
         "smallest sum of squared surface-time biases among 0.005, 0.01, 0.02, 0.05",
     )
+    surface_echo_null_every: int = setting(
+        16,
+        ge=0,
+        le=1_000_000,
+        doc="one ambiguous surface echo in this many (by pulse number) is fitted again on noise "
+        "alone (a parametric bootstrap of its onset-alone fit and the receiver's noise): the "
+        "survey's echo-kept shifts against those tell a sea of weak echoes (light wind off "
+        "nadir) from noise (pipeline/process/surface_echo_null.py); 0: no such test",
+    )
+    surface_echo_null_z: float = setting(
+        3.0,
+        gt=0.0,
+        doc="the survey's ambiguous echoes are echoes (their times take the echo-kept fit) "
+        "where the mean of their shifts less the null's stands this many standard errors "
+        "above 0 (one-sided) ...",
+    )
+    surface_echo_null_excess: float = setting(
+        0.20,
+        ge=0.0,
+        doc="... and that mean is at least this share of the null's own mean shift (so a noise "
+        "model slightly off on a large survey is not read as echoes). Set on the light-wind "
+        "tuning scene 7102's geometry at six altitudes, waters and angles "
+        "(benchmarks/surface_glint.py): calm flat water read -8 to +12 % (the most at 761 m, "
+        "where the signal is weakest), the weak glints it should find at 2.7 m/s +25 to +37 %",
+    )
+    surface_echo_null_max_clear: float = setting(
+        0.01,
+        ge=0.0,
+        le=1.0,
+        doc="... and the survey's clear echoes are rarer than this share of those judged: flat "
+        "water in a light wind glints weakly in every footprint, a wave sea's facets glint "
+        "clearly in some and not in others, where the clear share's weight stands (set on the "
+        "suite's tuning scenes: 7102, light wind on flat water, 0-0.3 % clear, the depths "
+        "+0.045 -> -0.003 m; the wave scenes 6 and 25, 5.5 and 2.8 % clear, whose biases the "
+        "echo-kept fit made worse: +0.004 -> -0.004 and -0.025 -> -0.053 m)",
+    )
     trend_fwhm: float = setting(
         8.0, ge=2.0, le=100.0, doc="running-median width (system FWHMs) of the column trend"
     )

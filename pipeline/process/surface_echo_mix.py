@@ -10,16 +10,28 @@ chunk is detected, from integer counts, so the times do not depend on the chunki
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["StepParts", "echo_weight", "mixed_time", "mix_stored_echoes", "ECHO_FIELDS"]
+__all__ = [
+    "StepParts",
+    "echo_weight",
+    "mixed_time",
+    "mix_stored_echoes",
+    "weak_echo_test",
+    "ECHO_FIELDS",
+    "NULL_FIELD",
+]
 
 #: The step fit's parts the survey mixes once its share of clear echoes is known
 #: (:func:`echo_weight`, :func:`mix_stored_echoes`; the detector stores them per pulse, the
 #: survey drops them after)
 ECHO_FIELDS = ("surface_echo_state", "t_surface_onset_s", "surface_echo_shift_s")
+#: The echo-kept shift on noise alone of the pulses the detector resampled (seconds; NaN
+#: elsewhere: :func:`~pipeline.process.surface_echo_null.null_shifts`)
+NULL_FIELD = "surface_echo_null_shift_s"
 
 
 class StepParts(NamedTuple):
@@ -81,12 +93,24 @@ def mixed_time(parts: StepParts, weight: float) -> np.ndarray:
     return np.where(parts.mixable, mix, parts.t_echo)
 
 
-def mix_stored_echoes(store, half: float, log=print) -> float:
+def mix_stored_echoes(
+    store,
+    half: float,
+    log=print,
+    null_z: float = 3.0,
+    null_excess: float = 0.20,
+    null_max_clear: float = 0.01,
+) -> float:
     """Set each stored ambiguous surface echo's time from the survey's share of clear echoes.
 
     Each chunk's detection weighed its ambiguous echoes by its own blocks' share; the survey's
-    share, from integer counts, makes every pulse's time independent of the chunking. The
-    parts (:data:`ECHO_FIELDS`) are dropped from the store.
+    share, from integer counts, makes every pulse's time independent of the chunking. Where
+    the detector resampled some of them on noise alone (:data:`NULL_FIELD`), the survey's
+    shifts against those may show its ambiguous echoes to be echoes (:func:`weak_echo_test`):
+    where its clear echoes are also rarer than ``null_max_clear`` (a sea whose glints are
+    weak in every footprint, not one whose facets glint in some), they take the echo-kept
+    fit (weight 1). The parts (:data:`ECHO_FIELDS`, :data:`NULL_FIELD`) are dropped from the
+    store.
 
     Parameters
     ----------
@@ -95,6 +119,10 @@ def mix_stored_echoes(store, half: float, log=print) -> float:
     half : float
         ``half`` of :func:`echo_weight`.
     log : callable
+    null_z, null_excess : float
+        ``z_min`` and ``excess_min`` of the weak-echo test.
+    null_max_clear : float
+        Largest share of clear echoes among the judged at which the test's verdict counts.
 
     Returns
     -------
@@ -102,20 +130,81 @@ def mix_stored_echoes(store, half: float, log=print) -> float:
         The weight of the echo-kept time.
     """
     n_clear = n_mix = 0
+    shifts, nulls = [], []
     for c in range(len(store.chunks)):
-        state = store.load_chunk(c, ["surface_echo_state"])["surface_echo_state"]
+        has_null = NULL_FIELD in store.fields(c)
+        names = ["surface_echo_state", *(("surface_echo_shift_s", NULL_FIELD) if has_null else ())]
+        d = store.load_chunk(c, names)
+        state = d["surface_echo_state"]
         n_clear += int(np.count_nonzero(state == 1))  # a clear echo on a column onset
         n_mix += int(np.count_nonzero(state < 0))
+        if has_null:
+            pair = (state < 0) & np.isfinite(d[NULL_FIELD])
+            shifts.append(d["surface_echo_shift_s"][pair])
+            nulls.append(d[NULL_FIELD][pair])
     w = echo_weight(n_clear, n_mix, half)
+    if shifts:
+        shift, null = np.concatenate(shifts), np.concatenate(nulls)
+        weak, fig = weak_echo_test(shift, null, null_z, null_excess)
+        clear_share = n_clear / max(n_clear + n_mix, 1)
+        taken = weak and clear_share < null_max_clear
+        if fig["z"] is not None:
+            verdict = "no echoes told from the noise"
+            if taken:
+                verdict = "echoes: the ambiguous ones take the echo-kept fit"
+            elif weak:
+                verdict = f"echoes, but {100.0 * clear_share:.1f} % are clear: their share weighs"
+            log(
+                f"  weak surface echoes: the echo-kept shift exceeds noise's by "
+                f"{100.0 * fig['excess']:.0f} % (z = {fig['z']:.1f}, "
+                f"{fig['pairs']} pulses resampled): {verdict}"
+            )
+        if taken:
+            w = 1.0
     for c in range(len(store.chunks)):
         d = store.load_chunk(c, ["t_surface_s", *ECHO_FIELDS])
         mix = d["surface_echo_state"] < 0
         t = np.where(mix, d["t_surface_onset_s"] + w * d["surface_echo_shift_s"], d["t_surface_s"])
         store.replace_field(c, "t_surface_s", t)
-    for k in ECHO_FIELDS:
+    for k in (*ECHO_FIELDS, NULL_FIELD):
         store.drop_field(k)
     log(
         f"  surface echoes: {n_clear} clear of {n_clear + n_mix} judged; an ambiguous one's "
         f"time weighs the echo-kept fit {w:.3f}"
     )
     return w
+
+
+def weak_echo_test(
+    shift_s: np.ndarray, null_s: np.ndarray, z_min: float, excess_min: float
+) -> tuple[bool, dict]:
+    """Whether a survey's ambiguous surface echoes are echoes, from its pulses' shifts.
+
+    Parameters
+    ----------
+    shift_s, null_s : (k,) ndarray
+        The observed and the null echo-kept shifts of the resampled pulses (any unit; finite).
+    z_min : float
+        Smallest ``mean(d) / se(d)``, ``d = shift - null``, that counts (one-sided).
+    excess_min : float
+        Smallest ``mean(d) / mean(null)``: the excess must also be large against what noise
+        alone gives, so a noise model slightly off on a large survey is not read as echoes.
+
+    Returns
+    -------
+    (bool, dict)
+        The verdict and its figures (``pairs``, ``z``, ``excess``, ``null_mean``), JSON-ready.
+        Sums are exact (:func:`math.fsum`): the same figures in any order of the pulses.
+    """
+    d = np.asarray(shift_s, dtype=np.float64) - np.asarray(null_s, dtype=np.float64)
+    k = d.size
+    fig = {"pairs": int(k), "z": None, "excess": None, "null_mean": None}
+    if k < 30:
+        return False, fig
+    mean_d = math.fsum(d.tolist()) / k
+    var_d = math.fsum(((d - mean_d) ** 2).tolist()) / (k - 1)
+    null_mean = math.fsum(np.asarray(null_s, dtype=np.float64).tolist()) / k
+    z = mean_d / math.sqrt(var_d / k) if var_d > 0.0 else 0.0
+    excess = mean_d / null_mean if null_mean > 0.0 else 0.0
+    fig.update(z=float(z), excess=float(excess), null_mean=float(null_mean))
+    return bool(z >= z_min and excess >= excess_min), fig
