@@ -13,11 +13,12 @@ from __future__ import annotations
 import math
 import os
 import shutil
+import tempfile
 from pathlib import Path
 
 from pipeline.errors import SceneError
 
-__all__ = ["check_disk", "check_feasible", "machine_memory_bytes"]
+__all__ = ["blocked_grid_cells", "check_disk", "check_feasible", "machine_memory_bytes"]
 
 #: Peak memory of a survey run held whole: 434 MB + 1.44 kB per pulse (measured with
 #: ``/usr/bin/time -v`` on the Palmer scene). A survey of more than ``run.block_pulses`` is
@@ -40,6 +41,13 @@ MEMORY_SHARE = 0.8
 DISK_BYTES_PER_PULSE = 450.0
 #: Share of the free disk a run may plan to fill.
 DISK_SHARE = 0.9
+#: Temporary disk a blocked survey's grid takes per cell at its fullest
+#: (:class:`~pipeline.outputs.grid_tiles.GridTiles`, in the system's temporary directory): the
+#: cells' raw file (29 B, for the whole run), and while ``grid.tif`` is written the tiled
+#: GeoTIFF it is copied from (6 float32 bands, uncompressed: 24 B) beside the finished COG
+#: (at most those bands and their overviews, 32 B: DEFLATE only shrinks them). ``grid.nc`` is
+#: staged there after the GeoTIFFs are gone (compressed, less than them).
+TEMP_BYTES_PER_CELL = 29.0 + 24.0 + 32.0
 
 
 def machine_memory_bytes() -> float:
@@ -117,15 +125,48 @@ def _check_survey(scene) -> None:
     _check_seabed_grid(sb, extent, mem)
 
 
-def check_disk(n_pulses: int, out: Path) -> None:
-    """Raise :class:`SceneError` if ``n_pulses``' detections and points overfill ``out``'s disk.
-
-    ``out``: the output folder, or any path under which it will be (its nearest existing
-    parent is measured).
-    """
-    where = Path(out).absolute()
+def _existing(path: Path) -> Path:
+    """``path``'s nearest existing ancestor (itself when it exists), absolute."""
+    where = Path(path).absolute()
     while not where.exists() and where != where.parent:
         where = where.parent
+    return where
+
+
+def blocked_grid_cells(scene, lines) -> int:
+    """Cells of the grid a blocked survey writes through temporary disk; 0: not blocked.
+
+    The grid's bounds are the survey's extent (:func:`~pipeline.run_survey.survey_extent_m`)
+    snapped outwards to whole cells: at most one more cell each way than the extent holds.
+    """
+    from pipeline.run_survey import survey_extent_m
+    from pipeline.survey_blocks import is_blocked
+
+    if not is_blocked(scene, lines.n_pulses_total):
+        return 0
+    xmin, xmax, ymin, ymax = survey_extent_m(scene, lines)
+    r = scene.process.grid_resolution_m
+    return (math.ceil((xmax - xmin) / r) + 1) * (math.ceil((ymax - ymin) / r) + 1)
+
+
+def check_disk(n_pulses: int, out: Path, grid_cells: int = 0, resolution_m: float = 0.0) -> None:
+    """Raise :class:`SceneError` if the run's files overfill ``out``'s or the temporary disk.
+
+    Parameters
+    ----------
+    n_pulses : int
+        The survey's pulses: their detections and points go under ``out``.
+    out : Path
+        The output folder, or any path under which it will be (its nearest existing parent
+        is measured).
+    grid_cells : int
+        Cells of a blocked survey's grid (:func:`blocked_grid_cells`), written through the
+        system's temporary directory (``tempfile.gettempdir()``: ``TMPDIR``, else ``/tmp``);
+        0: none.
+    resolution_m : float
+        Their side (``process.grid_resolution_m``), for the message.
+    """
+    where = _existing(out)
     free = DISK_SHARE * shutil.disk_usage(where).free
     need = DISK_BYTES_PER_PULSE * n_pulses
     if need > free:
@@ -133,6 +174,23 @@ def check_disk(n_pulses: int, out: Path) -> None:
             f"the survey's {n_pulses:.3g} pulses need about {need / 1e9:.3g} GB of disk at"
             f" {DISK_BYTES_PER_PULSE:g} B per pulse, more than the {free / 1e9:.3g} GB free at"
             f" {where}; lower `scanner.prf_hz`, the area or `flight.n_lines`, or write elsewhere."
+        )
+    if grid_cells <= 0:
+        return
+    tmp = _existing(Path(tempfile.gettempdir()))
+    tmp_free = DISK_SHARE * shutil.disk_usage(tmp).free
+    tmp_need = TEMP_BYTES_PER_CELL * grid_cells
+    # one disk for both: the outputs' share of it is taken already
+    same = os.stat(tmp).st_dev == os.stat(where).st_dev
+    total = tmp_need + (need if same else 0.0)
+    if total > tmp_free:
+        also = f" (with the outputs' {need / 1e9:.3g} GB: the same disk)" if same else ""
+        raise SceneError(
+            f"`process.grid_resolution_m` = {resolution_m:g} gives the blocked survey's grid"
+            f" {grid_cells:.3g} cells: about {tmp_need / 1e9:.3g} GB of temporary disk at"
+            f" {TEMP_BYTES_PER_CELL:g} B per cell{also}, more than the {tmp_free / 1e9:.3g} GB"
+            f" free at {tmp} (the system's temporary directory, TMPDIR); raise"
+            " `process.grid_resolution_m`, lower the area, or set TMPDIR to a larger disk."
         )
 
 

@@ -103,12 +103,14 @@ def run_scene(
     evaluation = None
     execution = {"workers": 1, "scheduler": None, "engine": "serial", "map_wall_s": 0.0}
     if the_plan.runs("terrain"):
-        from pipeline.feasibility import check_disk
+        from pipeline.feasibility import blocked_grid_cells, check_disk
         from pipeline.parallel import Executor, stage_threads
         from pipeline.run_survey import run_survey
         from pipeline.simulate.trajectory import plan_lines
 
-        check_disk(plan_lines(scene.flight, scene.scanner).n_pulses_total, out)
+        lines = plan_lines(scene.flight, scene.scanner)
+        cells = blocked_grid_cells(scene, lines)
+        check_disk(lines.n_pulses_total, out, cells, scene.process.grid_resolution_m)
 
         with Executor(workers, scheduler) as executor, stage_threads(executor.local_threads):
             survey_files, evaluation = run_survey(

@@ -64,3 +64,57 @@ def test_a_survey_no_disk_holds_is_refused_by_run(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "GB of disk" in err and str(tmp_path) in err
     assert not out.exists()
+
+
+def test_a_blocked_grid_no_temporary_disk_holds_is_refused_by_run(tmp_path, capsys, monkeypatch):
+    """1 cm cells over a 3 x 6 km blocked survey: its grid's temporary files fill no disk.
+
+    The pulses (a slow pulse rate) fit the output folder's disk; the grid written by tiles
+    (:class:`~pipeline.outputs.grid_tiles.GridTiles`, 85 B per cell in the temporary
+    directory) does not. ``bathy validate`` does not know the disks; ``bathy run`` checks both.
+    """
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    monkeypatch.setenv("TMPDIR", str(scratch))
+    monkeypatch.setattr("tempfile.tempdir", None)  # read TMPDIR again
+    area = ("area_m = [0.0, 300.0, 0.0, 600.0]", "area_m = [0.0, 3000.0, 0.0, 6000.0]")
+    text = PALMER.replace(*area)
+    path = tmp_path / "s.toml"
+    path.write_text(
+        text.replace("prf_hz = 35000.0", "prf_hz = 350.0")
+        .replace("grid_resolution_m = 5.0", "grid_resolution_m = 0.01")
+        .replace("[scanner]\n", "[run]\nblock_m = 500.0\n\n[scanner]\n", 1)
+    )
+    assert main(["validate", str(path)]) == 0
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    assert "`process.grid_resolution_m` = 0.01" in err and "GB of temporary disk" in err
+    assert str(scratch) in err and "TMPDIR" in err
+    assert not out.exists()
+
+
+def test_the_temporary_disk_is_the_one_measured(tmp_path, monkeypatch):
+    """The temporary directory's free space is checked, with the outputs' on a shared disk."""
+    import collections
+    import shutil
+
+    from pipeline.errors import SceneError
+    from pipeline.feasibility import DISK_SHARE, TEMP_BYTES_PER_CELL, check_disk
+
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    monkeypatch.setenv("TMPDIR", str(scratch))
+    monkeypatch.setattr("tempfile.tempdir", None)
+    usage = collections.namedtuple("usage", "total used free")
+    free = {str(tmp_path): 1e12, str(scratch): 1e9}
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(0, 0, free[str(p)]))
+    fits = int(DISK_SHARE * 1e9 / TEMP_BYTES_PER_CELL)
+    check_disk(1000, tmp_path / "out", 0, 5.0)  # not blocked: no temporary grid
+    check_disk(0, tmp_path / "out", fits, 5.0)
+    with pytest.raises(SceneError, match="temporary disk"):
+        check_disk(0, tmp_path / "out", fits + 10, 5.0)
+    # the same disk (tmp_path and scratch are): the outputs' pulses take their share of it
+    with pytest.raises(SceneError, match="the same disk"):
+        check_disk(1000, tmp_path / "out", fits, 5.0)
