@@ -70,6 +70,9 @@ class SimulatedSurvey:
     median_surface_range_m : float or None
         Median slant range to the surface returns (on the bounded sample of
         :class:`~pipeline.detection_store.SurveyAggregates`); None without any.
+    surface_echoes : dict or None
+        How the survey timed its ambiguous surface echoes
+        (:func:`~pipeline.process.surface_echo_mix.mix_stored_echoes`); None: photon counting.
     """
 
     returns: DetectedReturns | None
@@ -81,6 +84,7 @@ class SimulatedSurvey:
     pulse_flags: dict[str, int]
     no_bottom: dict[str, Any] | None
     median_surface_range_m: float | None = None
+    surface_echoes: dict[str, Any] | None = None
 
 
 def survey_extent_m(scene, lines) -> tuple[float, float, float, float]:
@@ -234,11 +238,12 @@ def simulate_detections(
             done = min((c + 1) * chunk, lines.n_pulses_total)
             log(f"  chunk {c + 1}/{n_chunk}: {done} pulses simulated and detected")
     bar.close()
+    surface_echoes = None
     if not job.waveform:  # a photon detector resamples no surface echo
         store.drop_field(NULL_FIELD)
     if job.waveform:  # an ambiguous surface echo's time from the survey's share of clear ones
         dt = ps.detect
-        mix_stored_echoes(
+        _, surface_echoes = mix_stored_echoes(
             store,
             dt.surface_echo_prevalence_half,
             log,
@@ -272,6 +277,7 @@ def simulate_detections(
         pulse_flags=pulse_flags,
         no_bottom=no_bottom,
         median_surface_range_m=agg.median_surface_range_m(),
+        surface_echoes=surface_echoes,
     )
 
 

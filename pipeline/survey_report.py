@@ -153,6 +153,9 @@ def evaluate_survey(
         "receiver": scene.detector.mode,
         "bottom_detected_fraction": float(np.mean(sim.returns.has_bottom)),
         "datum": {**datum.to_dict(), "true_mean_water_level_m": true_level_m},
+        # how the ambiguous surface echoes were timed: the clear share's weight, or the
+        # weak-echo test's verdict (pipeline.process.surface_echo_mix)
+        "surface_echoes": sim.surface_echoes,
         # the detection limits, and the depths of the class-45 points they placed: the
         # survey's measured extinction depth
         "no_bottom": {

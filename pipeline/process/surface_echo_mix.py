@@ -126,11 +126,14 @@ def mix_stored_echoes(
 
     Returns
     -------
-    float
-        The weight of the echo-kept time.
+    (float, dict)
+        The weight of the echo-kept time, and the figures behind it (JSON-ready: the
+        evaluation records them): ``clear``, ``ambiguous``, ``weight``, ``weak_echoes`` (the
+        test's figures and ``taken``; None without resampled pulses).
     """
     n_clear = n_mix = 0
     shifts, nulls = [], []
+    weak_figures = None
     for c in range(len(store.chunks)):
         has_null = NULL_FIELD in store.fields(c)
         names = ["surface_echo_state", *(("surface_echo_shift_s", NULL_FIELD) if has_null else ())]
@@ -161,6 +164,15 @@ def mix_stored_echoes(
             )
         if taken:
             w = 1.0
+        weak_figures = {
+            "pairs": fig["pairs"],
+            "z": fig["z"],
+            "excess": fig["excess"],
+            "null_mean_shift_s": fig["null_mean"],  # the shifts are stored in seconds
+            "echoes": bool(weak),
+            "clear_share": clear_share,
+            "taken": taken,
+        }
     for c in range(len(store.chunks)):
         d = store.load_chunk(c, ["t_surface_s", *ECHO_FIELDS])
         mix = d["surface_echo_state"] < 0
@@ -172,7 +184,8 @@ def mix_stored_echoes(
         f"  surface echoes: {n_clear} clear of {n_clear + n_mix} judged; an ambiguous one's "
         f"time weighs the echo-kept fit {w:.3f}"
     )
-    return w
+    summary = {"clear": n_clear, "ambiguous": n_mix, "weight": w, "weak_echoes": weak_figures}
+    return w, summary
 
 
 def weak_echo_test(

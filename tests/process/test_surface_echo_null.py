@@ -184,7 +184,7 @@ def test_the_survey_mix_takes_the_echoes_in_any_chunking_and_drops_the_null(ligh
         with DetectionStore(tmp, N_AIR) as st:
             for rows in np.array_split(np.arange(n), chunks):
                 st.append({k: v[rows] for k, v in p.items()})
-            w = mix_stored_echoes(
+            w, summary = mix_stored_echoes(
                 st,
                 ds.surface_echo_prevalence_half,
                 log=lambda *a: None,
@@ -196,6 +196,7 @@ def test_the_survey_mix_takes_the_echoes_in_any_chunking_and_drops_the_null(ligh
                 [st.load_chunk(c, ["t_surface_s"])["t_surface_s"] for c in range(len(st.chunks))]
             )
             left = set().union(*(st.fields(c) for c in range(len(st.chunks))))
+        assert summary["weight"] == w and summary["weak_echoes"]["pairs"] > 30
         return w, t, left
 
     import tempfile
