@@ -105,6 +105,22 @@ def write_survey_report(
         ["grid cell (m)", res],
         ["seed", scene.scene.seed],
     ]
+    echoes = evaluation.get("surface_echoes")
+    if echoes:  # how the surface was timed where its echo was ambiguous (surface_echo_mix)
+        weak = echoes.get("weak_echoes") or {}
+        found = (
+            f"; weak echoes found (excess {100.0 * weak['excess']:.0f} % over noise's, "
+            f"z {weak['z']:.1f}){'' if weak['taken'] else ', not taken: clear echoes common'}"
+            if weak.get("echoes")
+            else ""
+        )
+        info.append(
+            [
+                "surface echoes: clear, ambiguous",
+                f"{echoes['clear']}, {echoes['ambiguous']}: an ambiguous one weighs the "
+                f"echo-kept fit {echoes['weight']:.3f}{found}",
+            ]
+        )
     s.append("<h2 id='scene'>1. Scene and stage plan</h2>" + table(["", ""], info))
     s.append(
         table(["stage", "", "wall (s)", "CPU (s)", "what / why not"], _stage_rows(plan, clock))

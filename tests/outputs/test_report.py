@@ -67,6 +67,9 @@ def test_every_survey_run_writes_report_html_listed_in_the_manifest(report):
     # posteriors did not run: the waveform section says why there is no figure
     assert "No waveform was kept" in text
     assert "Rule: a cube is detected" in text
+    # how the surface was timed, as evaluation.json records it (a full-waveform survey)
+    echoes = json.loads((path.parent / "evaluation.json").read_text())["surface_echoes"]
+    assert f"{echoes['clear']}, {echoes['ambiguous']}: an ambiguous one weighs" in text
 
 
 def test_report_is_self_contained_and_every_image_is_a_png(report):
