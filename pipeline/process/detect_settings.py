@@ -70,17 +70,17 @@ class DetectSettings:
         3.0,
         gt=0.0,
         doc="the survey's ambiguous echoes are echoes (their times take the echo-kept fit) "
-        "where the mean of their shifts less the null's stands this many standard errors "
-        "above 0 (one-sided) ...",
+        "where their shifts exceed (1 + surface_echo_null_excess) times the null's by this "
+        "many standard errors (one-sided) ...",
     )
     surface_echo_null_excess: float = setting(
         0.20,
         ge=0.0,
-        doc="... and that mean is at least this share of the null's own mean shift (so a noise "
-        "model slightly off on a large survey is not read as echoes). Set on the light-wind "
-        "tuning scene 7102's geometry at six altitudes, waters and angles "
-        "(benchmarks/surface_glint.py): calm flat water read -8 to +12 % (the most at 761 m, "
-        "where the signal is weakest), the weak glints it should find at 2.7 m/s +25 to +37 %",
+        doc="... the margin, a share of the null's mean shift: the null is a model of the "
+        "noise, a little off where the signal is weakest. Set on the light-wind tuning scene "
+        "7102's geometry at six altitudes, waters and angles (benchmarks/surface_glint.py, "
+        "every pulse resampled): calm flat water read -8 to +16 % (the most at 761 m), the "
+        "weak glints at 2.7 m/s +27 to +42 %",
     )
     surface_echo_null_max_clear: float = setting(
         0.01,

@@ -159,7 +159,8 @@ def mix_stored_echoes(
                 verdict = f"echoes, but {100.0 * clear_share:.1f} % are clear: their share weighs"
             log(
                 f"  weak surface echoes: the echo-kept shift exceeds noise's by "
-                f"{100.0 * fig['excess']:.0f} % (z = {fig['z']:.1f}, "
+                f"{100.0 * fig['excess']:.0f} % (z = {fig['z']:.1f}; beyond the margin "
+                f"{fig['z_excess']:.1f}, "
                 f"{fig['pairs']} pulses resampled): {verdict}"
             )
         if taken:
@@ -168,6 +169,7 @@ def mix_stored_echoes(
             "pairs": fig["pairs"],
             "z": fig["z"],
             "excess": fig["excess"],
+            "z_excess": fig["z_excess"],
             "null_mean_shift_s": fig["null_mean"],  # the shifts are stored in seconds
             "echoes": bool(weak),
             "clear_share": clear_share,
@@ -193,31 +195,47 @@ def weak_echo_test(
 ) -> tuple[bool, dict]:
     """Whether a survey's ambiguous surface echoes are echoes, from its pulses' shifts.
 
+    The observed shifts must exceed the null's by more than ``excess_min`` of them, with
+    significance: ``mean(e) / se(e) >= z_min`` for ``e = shift - (1 + excess_min) null``
+    (one-sided). The margin is there because the null is a model of the noise, a little off
+    where the signal is weakest (calm water from 761 m read +10 % over 3300 pulses); testing
+    the margin itself, not a point estimate of the excess against it, keeps a small survey's
+    scatter from reading as echoes (the same calm water, 840 pulses, read +25 % once).
+
     Parameters
     ----------
     shift_s, null_s : (k,) ndarray
         The observed and the null echo-kept shifts of the resampled pulses (any unit; finite).
     z_min : float
-        Smallest ``mean(d) / se(d)``, ``d = shift - null``, that counts (one-sided).
+        Smallest significance of the excess beyond the margin.
     excess_min : float
-        Smallest ``mean(d) / mean(null)``: the excess must also be large against what noise
-        alone gives, so a noise model slightly off on a large survey is not read as echoes.
+        The margin, a share of the null's mean shift.
 
     Returns
     -------
     (bool, dict)
-        The verdict and its figures (``pairs``, ``z``, ``excess``, ``null_mean``), JSON-ready.
-        Sums are exact (:func:`math.fsum`): the same figures in any order of the pulses.
+        The verdict and its figures, JSON-ready: ``pairs``, ``z`` (of ``shift - null``),
+        ``excess`` (``mean(shift - null) / mean(null)``), ``z_excess`` (the verdict's) and
+        ``null_mean``. Sums are exact (:func:`math.fsum`): the same figures in any order of
+        the pulses.
     """
-    d = np.asarray(shift_s, dtype=np.float64) - np.asarray(null_s, dtype=np.float64)
-    k = d.size
-    fig = {"pairs": int(k), "z": None, "excess": None, "null_mean": None}
+    shift = np.asarray(shift_s, dtype=np.float64)
+    null = np.asarray(null_s, dtype=np.float64)
+    k = shift.size
+    fig = {"pairs": int(k), "z": None, "excess": None, "z_excess": None, "null_mean": None}
     if k < 30:
         return False, fig
-    mean_d = math.fsum(d.tolist()) / k
-    var_d = math.fsum(((d - mean_d) ** 2).tolist()) / (k - 1)
-    null_mean = math.fsum(np.asarray(null_s, dtype=np.float64).tolist()) / k
-    z = mean_d / math.sqrt(var_d / k) if var_d > 0.0 else 0.0
+
+    def mean_z(d):
+        mean = math.fsum(d.tolist()) / k
+        var = math.fsum(((d - mean) ** 2).tolist()) / (k - 1)
+        return mean, (mean / math.sqrt(var / k) if var > 0.0 else 0.0)
+
+    mean_d, z = mean_z(shift - null)
+    _, z_excess = mean_z(shift - (1.0 + excess_min) * null)
+    null_mean = math.fsum(null.tolist()) / k
     excess = mean_d / null_mean if null_mean > 0.0 else 0.0
-    fig.update(z=float(z), excess=float(excess), null_mean=float(null_mean))
-    return bool(z >= z_min and excess >= excess_min), fig
+    fig.update(
+        z=float(z), excess=float(excess), z_excess=float(z_excess), null_mean=float(null_mean)
+    )
+    return bool(z_excess >= z_min), fig
