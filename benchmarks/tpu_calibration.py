@@ -19,17 +19,19 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import pickle
+import tempfile
 import time
 import tomllib
 from pathlib import Path
 
 import numpy as np
 
+from pipeline.detection_store import DetectionStore
 from pipeline.process.context import processing_context
 from pipeline.process.grid import grid_seabed
 from pipeline.process.refraction import seabed_points
 from pipeline.process.survey_points import process_detections
-from pipeline.run_survey import simulate_detections
+from pipeline.run_survey import _measured_water, simulate_detections
 from pipeline.scene import load_scene, parse_scene
 from pipeline.stages import StageClock, plan
 from pipeline.uncertainty.survey_uncertainty import survey_uncertainty
@@ -52,12 +54,19 @@ def _simulate(scene, cache: Path | None):
     if cache is not None and cache.exists():
         with cache.open("rb") as f:
             return pickle.load(f)
-    sim = simulate_detections(
-        scene, plan(scene), processing_context(scene), StageClock(), log=lambda s: None
-    )
+    ctx = processing_context(scene)
+    with (
+        tempfile.TemporaryDirectory() as tmp,
+        DetectionStore(Path(tmp), ctx.instrument.air_index) as st,
+    ):
+        sim = simulate_detections(scene, plan(scene), ctx, StageClock(), st, log=lambda s: None)
     if cache is not None:
-        with cache.open("wb") as f:
-            pickle.dump(sim, f)
+        try:
+            blob = pickle.dumps(sim)
+        except (AttributeError, pickle.PicklingError) as exc:  # the truth's pulse-time lookup
+            print(f"not cached ({exc})")
+        else:
+            cache.write_bytes(blob)
     return sim
 
 
@@ -102,7 +111,8 @@ def _row(name, err, sig):
 def process(scene, sim):
     """The bathymetric points, their TPU and the processed survey, as ``bathy run`` makes them."""
     ps = scene.process
-    ctx = processing_context(scene)
+    # as bathy run: the forward-scattering correction at the water the columns measured
+    ctx = _measured_water(processing_context(scene), sim, log=lambda s: None)
     processed = process_detections(sim.returns, ctx, ps.classify)
     grid = grid_seabed(processed.points, ps.grid_resolution_m)
     unc = survey_uncertainty(sim.returns, processed, ctx, grid)

@@ -56,8 +56,10 @@ bottom)                    ``timing_sigma_s``; the full-waveform detector gives 
                            or sets it when the detector gives none (photon counting).
 pointing jitter        R   per-pulse beam direction noise (scanner encoder), two axes.
 wave height            R   the local water surface off its fitted plane: the fit's residual
-                           sigma in excess of its points' ranging noise (as the fit height:
-                           with the own echo it is mostly in the depth below the plane).
+                           variance in excess of its points' ranging noise, averaged over a
+                           cell of ``wave_pool_cell_m`` (:mod:`pipeline.uncertainty.wave_pool`;
+                           as the fit height: with the own echo it is mostly in the depth
+                           below the plane).
 wave slope             R   facet slope under the footprint not in the fitted plane
                            (``wave_slope_sigma_rad`` per axis; :func:`cox_munk_slope_sigma`).
                            Default 0: the survey then measures it (``wave_facet_along/across``,

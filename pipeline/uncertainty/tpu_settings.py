@@ -93,6 +93,12 @@ class TpuSettings:
     temperature_c: float = setting(20.0, ge=-2.0, le=35.0, doc="nominal water temperature")
     salinity_psu: float = setting(35.0, ge=0.0, le=40.0, doc="nominal salinity")
     wave_slope_sigma_rad: float = setting(0.0, ge=0.0, le=1.0, doc="residual facet slope/axis")
+    wave_pool_cell_m: float = setting(
+        25.0,
+        ge=0.0,
+        le=200.0,
+        doc="cell the planes' wave residual is pooled over (0: pulse by pulse)",
+    )
     beam_divergence_mrad: float | None = setting(
         1.0, ge=0.0, le=100.0, doc="full angle, 1/e² (None: scanner.beam_divergence_mrad)"
     )

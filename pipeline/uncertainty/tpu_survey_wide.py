@@ -104,15 +104,17 @@ def tpu_halo_m(st) -> float:
     takes it from), then its local plane's radius, for the TPU's gradient (``st``:
     :class:`~pipeline.uncertainty.tpu_settings.TpuSettings`) and for the pair scatter's own
     (:func:`~pipeline.uncertainty.seabed_gradient.seabed_gradient`'s defaults), plus
-    :data:`PAIR_ALLOWANCE_M`. A tile with this halo, given the survey's
-    :class:`TpuSurveyWide`, gets the survey's TPU (``tests/uncertainty/
+    :data:`PAIR_ALLOWANCE_M`, or a wave pool's cell diagonal if larger. A tile with this halo,
+    given the survey's :class:`TpuSurveyWide`, gets the survey's TPU (``tests/uncertainty/
     test_tpu_survey_wide.py``).
     """
     from pipeline.uncertainty.seabed_gradient import RADIUS_M, REGIONAL_CELL_M, REGIONAL_RADIUS_M
 
     regional = max(st.gradient_regional_radius_m, REGIONAL_RADIUS_M)
     local = max(st.gradient_radius_m, RADIUS_M)
-    return float(regional + np.sqrt(2.0) * REGIONAL_CELL_M + local + PAIR_ALLOWANCE_M)
+    reach = regional + np.sqrt(2.0) * REGIONAL_CELL_M + local + PAIR_ALLOWANCE_M
+    # the wave residual's pool: every pulse of a sounding's cell (pipeline.uncertainty.wave_pool)
+    return float(max(reach, np.sqrt(2.0) * st.wave_pool_cell_m))
 
 
 def line_table(line_id: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

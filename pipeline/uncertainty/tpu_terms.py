@@ -28,6 +28,7 @@ from pipeline.uncertainty.tpu_settings import (
     TpuSettings,
     index_derivatives,
 )
+from pipeline.uncertainty.wave_pool import pooled_wave_sigma_m
 
 
 def _take_surface(surface: WaterSurface, index: np.ndarray) -> WaterSurface:
@@ -116,7 +117,14 @@ def _inputs(returns, surface, rst, st, seabed_gradient=None, surface_tilt_sigma_
     # wave height: the fit residual in excess of the surface points' own ranging noise
     cos_i = np.abs(np.sum(ret.direction_meas * surf.normal, axis=1))
     ranging = _C * np.where(ret.has_surface, sig_ts, st.timing_sigma_s) / 2.0 * cos_i
-    wave_h = np.sqrt(np.maximum(surf.fit_sigma_m**2 - ranging**2, 0.0))
+    wave_h = pooled_wave_sigma_m(
+        surf.entry_m[:, :2],
+        surf.fit_sigma_m,
+        ranging,
+        surf.is_water & ret.has_surface,
+        ret.pulse_id,
+        st.wave_pool_cell_m,
+    )
     wave_h = np.where(surf.is_water, wave_h, 0.0)
     return _Inputs(ret, surf, rst, sig_ts, sig_tb, wave_h, row, grad)
 
