@@ -60,6 +60,8 @@ __all__ = [
     "blocks_to_process",
     "load_blocks",
     "own_cells",
+    "tests_reach_m",
+    "tpu_points",
     "LineSums",
     "with_survey_lines",
 ]
@@ -86,8 +88,48 @@ def block_halo_m(ctx, ps, beam_reach_m: float) -> float:
     from pipeline.uncertainty.tpu_survey_wide import tpu_halo_m
 
     proc = processing_halo_m(ctx, beam_reach_m, classify=ps.classify)
-    tests = ps.objects.radius_m + math.sqrt(2.0) * ps.objects.reference_cell_m
-    return float(beam_reach_m + tests + tpu_halo_m(ctx.tpu) + proc)
+    return float(beam_reach_m + tests_reach_m(ps) + tpu_halo_m(ctx.tpu) + proc)
+
+
+def tests_reach_m(ps) -> float:
+    """How far the class-43 and rejection tests of a point read other points' TPU (m).
+
+    The rejection test (:func:`~pipeline.process.seabed_outliers.reject_seabed_outliers`)
+    fits its plane to the reference points (a cell median each) of the soundings within
+    ``process.objects.radius_m`` that are still class 40: which they are depends on their
+    own TPU (their class-43 test and the TVU rule), up to a reference cell's diagonal
+    further. The class-43 test reads only the point's own TPU.
+    """
+    return float(ps.objects.radius_m + math.sqrt(2.0) * ps.objects.reference_cell_m)
+
+
+def tpu_points(points, own_pulse_id: np.ndarray, box_m, reach_m: float) -> np.ndarray:
+    """The points whose TPU a block keeps, ``(n_points,)`` bool.
+
+    A block keeps the TPU of its own pulses' points and of the points in its own cells, and
+    the tests of those read the TPU of the points within ``reach_m`` (:func:`tests_reach_m`).
+    So: every point within ``reach_m`` of the box holding the block (``box_m``, ``(w, e, s,
+    n)``) and its own pulses' points (a beam reach beyond it, at most), a square margin (a
+    superset of the round one).
+
+    Parameters
+    ----------
+    points : Points
+        The block's points, its halo's included, ``(n_points,)``.
+    own_pulse_id : (n_own,) int
+        The block's own pulses.
+    box_m : (4,) float
+        The block's own cells, ``(w, e, s, n)`` (m, local frame).
+    reach_m : float
+    """
+    own = np.isin(points.pulse_id, own_pulse_id)
+    x, y = points.xyz_m[:, 0], points.xyz_m[:, 1]
+    w, e, s, n = (float(v) for v in box_m)
+    if own.any():
+        w, e = min(w, float(x[own].min())), max(e, float(x[own].max()))
+        s, n = min(s, float(y[own].min())), max(n, float(y[own].max()))
+    near = (x >= w - reach_m) & (x <= e + reach_m) & (y >= s - reach_m) & (y <= n + reach_m)
+    return near | own
 
 
 def block_layout(

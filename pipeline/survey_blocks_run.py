@@ -6,6 +6,7 @@ The passes of :mod:`pipeline.survey_blocks`, wired and timed.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import gc
 import time
 
@@ -39,6 +40,8 @@ from pipeline.survey_blocks import (
     own_cells,
     pulse_counts,
     sample_blocks,
+    tests_reach_m,
+    tpu_points,
     with_survey_lines,
 )
 from pipeline.survey_tiles import points_tile_order
@@ -188,7 +191,15 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
                 ):
                     continue  # no pulse near enough for a point of its to fall in the block
                 sub, row0, col0 = _sub_layout(blocks, int(b), halo)
-                blk = process_survey(ret, scene, plan, ctx, sub, clock, _quiet, figures)
+                # the TPU of the points the block keeps, and of those its tests read (one
+                # grid cell more: a point on the block's edge may fall in either cell)
+                keep = functools.partial(
+                    tpu_points,
+                    own_pulse_id=ret.pulse_id[own],
+                    box_m=blocks.box_m(int(b)),
+                    reach_m=tests_reach_m(ps) + ps.grid_resolution_m,
+                )
+                blk = process_survey(ret, scene, plan, ctx, sub, clock, _quiet, figures, keep)
                 done += 1
                 with clock.stage("outputs"):
                     pts = blk.processed.points

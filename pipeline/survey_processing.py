@@ -84,6 +84,7 @@ def process_survey(
     clock: StageClock,
     log=print,
     figures: SurveyFigures | None = None,
+    tpu_keep=None,
 ) -> SurveyProducts:
     """Process, grid and propagate the TPU of ``returns`` (``bathy run``'s stages, in order).
 
@@ -101,6 +102,10 @@ def process_survey(
     log : callable
     figures : SurveyFigures, optional
         The survey's figures, for a block of it; default: measured from ``returns``.
+    tpu_keep : callable, optional
+        ``tpu_keep(points) -> (n_points,) bool``: the points whose TPU the caller keeps (a
+        block's, :func:`~pipeline.survey_blocks.tpu_points`; the others' is not propagated,
+        so their classes and cells are not the survey's); needs ``figures``. Default: all.
     """
     from pipeline.process.datum import survey_datum
     from pipeline.process.seabed_outliers import water_surface_range_m
@@ -137,7 +142,8 @@ def process_survey(
 
         grid = make_grid(processed.points)
     with clock.stage("tpu"):
-        unc = survey_uncertainty(returns, processed, ctx, grid, wide=fig.tpu_wide)
+        keep = None if tpu_keep is None else tpu_keep(processed.points)
+        unc = survey_uncertainty(returns, processed, ctx, grid, wide=fig.tpu_wide, keep=keep)
         processed = dataclasses.replace(processed, points=with_tpu(processed.points, unc))
     left_on = unc.tpu40.terms.get(UNCORRECTED_TERM)
     if left_on is not None and left_on.size:

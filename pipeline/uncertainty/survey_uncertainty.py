@@ -45,6 +45,7 @@ from pipeline.uncertainty.seabed_gradient import (
     horizontal_cov,
     plane_gradient,
 )
+from pipeline.uncertainty.survey_cells import with_posteriors, without_points  # re-exported
 from pipeline.uncertainty.tpu import (
     PointTpu,
     pair_scatter,
@@ -66,6 +67,7 @@ from pipeline.uncertainty.tpu_measured import (
 )
 from pipeline.uncertainty.tpu_neighbours import amplitude_fill
 from pipeline.uncertainty.tpu_settings import DEPTH, Z, take_tpu  # re-exported: take_tpu
+from pipeline.uncertainty.tpu_subset import propagated_bottoms
 from pipeline.uncertainty.tpu_survey_wide import TpuSurveyWide, facet_sea, survey_tracks
 from pipeline.uncertainty.tpu_timing import split_timing_excess
 from pipeline.uncertainty.tpu_window import (
@@ -127,6 +129,7 @@ def survey_uncertainty(
     ctx: ProcessingContext,
     grid: Grid,
     wide: TpuSurveyWide | None = None,
+    keep: np.ndarray | None = None,
 ) -> SurveyUncertainty:
     """TPU of the bathymetric points, cell uncertainty and the IHO order met per cell.
 
@@ -144,6 +147,14 @@ def survey_uncertainty(
         The survey-wide figures, as measured over the whole survey these pulses are part of
         (:mod:`pipeline.uncertainty.tpu_survey_wide`; a tile's pulses within their halo);
         default: measured from these pulses. What was used is ``SurveyUncertainty.wide``.
+    keep : (n_points,) bool, optional
+        The points of ``processed`` whose TPU the caller keeps (a block of a survey: those its
+        own pulses, own cells and tests need, :mod:`pipeline.survey_blocks`); needs ``wide``.
+        Only their pulses are propagated, while the neighbour searches (gradient, pair
+        scatter) still read every sounding: each kept point gets the TPU it would get without
+        ``keep`` (:mod:`pipeline.uncertainty.tpu_subset`). The other bathymetric points are
+        left as if not bathymetric (not in ``points40``, the cells, ``no_tpu`` or
+        ``left_out``). Default: every point.
     """
     st, refr, ins = ctx.tpu, ctx.refraction, ctx.instrument
     held = with_held_sea(returns, processed.surface, refr, held_m=processed.sea_change_m)
@@ -155,6 +166,9 @@ def survey_uncertainty(
     xy40, d40 = points40.xyz_m[:, :2], points40.depth_m
     windows = ins.windows  # photon counting: the detector's windows of shots
     group = None if windows is None else windows.of_points(points40.pulse_id, returns)
+    # the pulses propagated (`keep`'s, else all) become the only bottoms of `returns`; `q`
+    # picks them among the bottom rows (of bottom_xy)
+    returns, q, is40_kept = propagated_bottoms(returns, pts, is40, keep, wide, windows)
     # a scan's cell windows count as one sounding each (their shots share one depth): the
     # gradient's planes reach over neighbouring windows, so their radii and cells are at
     # least 2.5, 5 and 1 cell sides (a profiler's windows, 0.4 m, change nothing)
@@ -177,7 +191,7 @@ def survey_uncertainty(
     grad, grad_cov, relief_sigma = seabed_gradient(
         xy40,
         -points40.xyz_m[:, 2],
-        bottom_xy,
+        bottom_xy[q],
         group=group,
         return_cov=True,
         return_local_sigma=True,
@@ -190,17 +204,20 @@ def survey_uncertainty(
     grad = grad + plane_gradient(processed.surface, bottom_rows)
     # the water surface measured over each sounding against its pulse's plane there: the
     # plane's tilt uncertainty, averaged over the bathymetric points
-    bottom_ids = returns.pulse_id[returns.has_bottom]
-    by_id = np.argsort(bottom_ids)
-    rows40 = by_id[np.searchsorted(bottom_ids[by_id], points40.pulse_id)]
-    # survey-wide: E[T²] against the offset, pooled over the survey's bathymetric points
+    # survey-wide: E[T²] against the offset, pooled over the survey's bathymetric points (a
+    # survey's table given: only each pulse's offset is read, no pool)
     if wide is not None and wide.turn_table is None:
         tilt, turn_table = np.zeros(bottom_rows.size), None  # the survey measured no turn
     else:
+        rows40 = None
+        if wide is None:
+            bottom_ids = returns.pulse_id[returns.has_bottom]
+            by_id = np.argsort(bottom_ids)
+            rows40 = by_id[np.searchsorted(bottom_ids[by_id], points40.pulse_id)]
         tilt, turn_table = surface_tilt_sigma(
             returns,
             processed.surface,
-            bottom_xy,
+            bottom_xy[q],
             pool=rows40,
             turn_table=None if wide is None else wide.turn_table,
             return_table=True,
@@ -218,7 +235,7 @@ def survey_uncertainty(
         -points40.xyz_m[:, 2] if by_height else d40,
         order=points40.pulse_id,
         group=group,
-        query_xy_m=bottom_xy,
+        query_xy_m=bottom_xy[q],
         max_separation_m=st.pair_max_separation_m,
         neighbours=st.scatter_neighbours,
         rise_per_m2=None if wide is None else wide.scatter_rise_per_m2,
@@ -265,8 +282,8 @@ def survey_uncertainty(
     tpu = split_timing_excess(tpu, detector, returns)
     # pulses the TPU could not propagate: their points keep the a-priori uncertainty and are
     # left out of the cell uncertainty and the TPU check
-    no_tpu = is40 & np.isin(pts.pulse_id, tpu.left_out.pulse_id)
-    is40 = is40 & ~no_tpu
+    no_tpu = is40_kept & np.isin(pts.pulse_id, tpu.left_out.pulse_id)
+    is40 = is40_kept & ~no_tpu
     points40 = pts.select(is40)
     # TPU rows are per pulse with a bottom; keep those of the bathymetric points, same order
     order = np.argsort(tpu.pulse_id)
@@ -393,58 +410,3 @@ def with_tpu(points: Points, unc: SurveyUncertainty) -> Points:
     flags = points.flags.copy()
     flags[unc.no_tpu] |= np.uint16(PointFlag.NO_TPU)
     return points.replace(uncertainty_v_m=v, uncertainty_h_m=h, flags=flags)
-
-
-def with_posteriors(
-    unc: SurveyUncertainty, grid: Grid, point_index: np.ndarray, converged: np.ndarray, std_m
-) -> SurveyUncertainty:
-    """Cell uncertainty again, the converged posteriors' depth sigma in place of the timing.
-
-    The posterior covers the waveform timing of both returns (and its nuisances), which the
-    TPU's timing terms approximate; in the cells where points were sampled their variance
-    replaces those terms (:func:`pipeline.uncertainty.cell_uncertainty.cell_uncertainty`).
-
-    Parameters
-    ----------
-    point_index : (k,) int
-        Rows of ``unc.points40`` that were sampled.
-    converged : (k,) bool
-    std_m : (k,) float
-        Posterior depth sigma of each.
-    """
-    n = len(unc.points40)
-    sampled = np.zeros(n, dtype=bool)
-    sigma = np.zeros(n)
-    sampled[point_index[converged]] = True
-    sigma[point_index[converged]] = np.asarray(std_m)[converged]
-    cells = cell_uncertainty(grid, unc.tpu40, posterior_sigma_v_m=sigma, has_posterior=sampled)
-    return dataclasses.replace(unc, cells=cells, summary=iho.order_summary(cells.order).to_dict())
-
-
-def without_points(unc: SurveyUncertainty, keep: np.ndarray, grid: Grid) -> SurveyUncertainty:
-    """The uncertainty of the kept bathymetric points only, cells again on ``grid``.
-
-    Processing that rejects soundings after the TPU
-    (:mod:`pipeline.process.seabed_outliers`) leaves the other points' TPU as it was; the
-    rejected ones leave the TPU check and the cells (``grid``: gridded without them).
-
-    Parameters
-    ----------
-    unc : SurveyUncertainty
-    keep : (len(unc.points40),) bool
-        The bathymetric points that stay.
-    grid : Grid
-    """
-    keep = np.asarray(keep, dtype=bool)
-    tpu40 = take_tpu(unc.tpu40, np.flatnonzero(keep))
-    is40 = unc.is40.copy()
-    is40[np.flatnonzero(unc.is40)[~keep]] = False
-    cells = cell_uncertainty(grid, tpu40)
-    return dataclasses.replace(
-        unc,
-        tpu40=tpu40,
-        points40=unc.points40.select(keep),
-        is40=is40,
-        cells=cells,
-        summary=iho.order_summary(cells.order).to_dict(),
-    )
