@@ -285,19 +285,27 @@ def seabed_gradient(
         # (the regional slope varies over tens of metres, a cell is 5 m)
         reg = None
         if cells is not None:
-            m = len(cells[1])
-            reg = _robust_bayes(
+            tree = cKDTree(cells[1])
+            # each cell's plane is its own: with the relief's figure given, only the cells
+            # some query takes are fitted (the same values), else all (the relief reads them)
+            at = slice(None) if local_sigma is None else np.unique(tree.query(q, workers=-1)[1])
+            m = len(cells[1][at])
+            fit = _robust_bayes(
                 cells[1],
                 cells[2],
-                cells[1],
+                cells[1][at],
                 regional_neighbours,
                 regional_radius_m,
                 np.zeros((m, 2)),
                 np.tile(np.eye(2) / s0**2, (m, 1, 1)),
             )
+            reg = fit
             if local_sigma is None:
                 local_sigma = _relief_slope_sigma(xy, dep, cells, reg[0], regional_cell_m)
-            tree = cKDTree(cells[1])
+            else:  # the cells' rows (those no query takes stay 0: never read)
+                n_cells = len(cells[1])
+                reg = (np.zeros((n_cells, 2)), np.zeros((n_cells, 2, 2)))
+                reg[0][at], reg[1][at] = fit
             if local_sigma is None:
                 local_sigma = s0  # nothing measured it
         tree_xy = cKDTree(xy)

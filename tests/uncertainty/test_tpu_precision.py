@@ -224,6 +224,7 @@ def test_a_random_term_adds_in_quadrature():
 
 
 def test_neighbour_searches_in_blocks_give_the_same_figures(monkeypatch):
+    import pipeline.uncertainty.pair_scatter as ps
     import pipeline.uncertainty.tpu_neighbours as tn
     from pipeline.process.surface_fit import fit_water_surface
     from tests.uncertainty.test_tpu import FIT
@@ -235,6 +236,7 @@ def test_neighbour_searches_in_blocks_give_the_same_figures(monkeypatch):
     assert surf.time_window_s is not None
     over = tn.surface_over_sounding(ret, surf, pts.xyz_m[:, :2])
     monkeypatch.setattr(tn, "_QUERY_BLOCK", 37)  # blocks cut anywhere
+    monkeypatch.setattr(ps, "_QUERY_BLOCK", 37)
     assert len(ret) > 20 * 37
     np.testing.assert_array_equal(
         pair_scatter(pts.xyz_m[:, :2], pts.depth_m, order=ret.pulse_id), scatter

@@ -113,3 +113,51 @@ def test_blocks_of_rows_on_threads_give_the_whole_survey_tpu(survey, monkeypatch
     assert blocks.tpu40.terms.keys() == whole.tpu40.terms.keys()
     for name, term in whole.tpu40.terms.items():
         np.testing.assert_array_equal(blocks.tpu40.terms[name], term, err_msg=name)
+
+
+def test_the_kept_points_alone_get_the_survey_tpu_to_the_bit(survey):
+    # a block keeps some points' TPU: only their pulses are propagated, while every search
+    # (gradient, pair scatter) still reads all the soundings (pipeline.uncertainty.tpu_subset)
+    returns, processed, ctx, grid = survey
+    whole = survey_uncertainty(returns, processed, ctx, grid)
+    keep = processed.points.xyz_m[:, 0] <= -60.0
+    part = survey_uncertainty(returns, processed, ctx, grid, wide=whole.wide, keep=keep)
+    kept = keep[whole.is40]
+    assert 300 < kept.sum() < 0.7 * kept.size, kept.sum()
+    np.testing.assert_array_equal(part.is40, whole.is40 & keep)
+    np.testing.assert_array_equal(part.points40.pulse_id, whole.points40.pulse_id[kept])
+    np.testing.assert_array_equal(part.tpu40.sigma_depth_m, whole.tpu40.sigma_depth_m[kept])
+    np.testing.assert_array_equal(part.tpu40.sigma_v_m, whole.tpu40.sigma_v_m[kept])
+    assert part.tpu40.terms.keys() == whole.tpu40.terms.keys()
+    for name, term in whole.tpu40.terms.items():
+        np.testing.assert_array_equal(part.tpu40.terms[name], term[kept], err_msg=name)
+    with pytest.raises(ValueError, match="`keep` needs the survey-wide"):
+        survey_uncertainty(returns, processed, ctx, grid, keep=keep)
+
+
+def test_searches_at_some_queries_give_their_rows_of_all(survey):
+    # the pair scatter's own gradient made only where the queries' pairs read it, and the
+    # regional planes only at the cells the queries take: the same figures to the bit
+    from pipeline.process.classify import BATHYMETRIC_POINT
+    from pipeline.uncertainty.tpu_neighbours import pair_scatter, seabed_gradient
+
+    _, processed, _, _ = survey
+    pts = processed.points
+    pts = pts.select(pts.classification == BATHYMETRIC_POINT)
+    xy, h = pts.xyz_m[:, :2], -pts.xyz_m[:, 2]
+    q = xy[::7] + 0.3
+    # the relief figure measured (every cell's plane) against given (the queries' cells)
+    g, cov, relief = seabed_gradient(xy, h, q, return_cov=True, return_local_sigma=True)
+    g2, cov2 = seabed_gradient(xy, h, q, return_cov=True, local_sigma=relief)
+    np.testing.assert_array_equal(g2, g)
+    np.testing.assert_array_equal(cov2, cov)
+    g_all = seabed_gradient(xy, h, local_sigma=relief)
+    _, fig = pair_scatter(xy, h, g_all, order=pts.pulse_id, return_figures=True)
+    rise = fig["rise_per_m2"]
+    assert rise > 0.0
+    ref = pair_scatter(xy, h, g_all, order=pts.pulse_id, query_xy_m=q, rise_per_m2=rise)
+    lazy = pair_scatter(
+        xy, h, order=pts.pulse_id, query_xy_m=q, rise_per_m2=rise, relief_slope_sigma=relief
+    )
+    assert np.isfinite(ref).all()
+    np.testing.assert_array_equal(lazy, ref)
