@@ -7,7 +7,6 @@ handed with its cells (and order summary) made again; the points' TPU stays as i
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -16,15 +15,10 @@ from pipeline.process.grid import Grid
 from pipeline.uncertainty.cell_uncertainty import cell_uncertainty
 from pipeline.uncertainty.tpu_settings import take_tpu
 
-if TYPE_CHECKING:
-    from pipeline.uncertainty.survey_uncertainty import SurveyUncertainty
-
 __all__ = ["with_posteriors", "without_points"]
 
 
-def with_posteriors(
-    unc: SurveyUncertainty, grid: Grid, point_index: np.ndarray, converged: np.ndarray, std_m
-) -> SurveyUncertainty:
+def with_posteriors(unc, grid: Grid, point_index: np.ndarray, converged: np.ndarray, std_m):
     """Cell uncertainty again, the converged posteriors' depth sigma in place of the timing.
 
     The posterior covers the waveform timing of both returns (and its nuisances), which the
@@ -48,7 +42,7 @@ def with_posteriors(
     return dataclasses.replace(unc, cells=cells, summary=iho.order_summary(cells.order).to_dict())
 
 
-def without_points(unc: SurveyUncertainty, keep: np.ndarray, grid: Grid) -> SurveyUncertainty:
+def without_points(unc, keep: np.ndarray, grid: Grid):
     """The uncertainty of the kept bathymetric points only, cells again on ``grid``.
 
     Processing that rejects soundings after the TPU
