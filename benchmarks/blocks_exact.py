@@ -8,8 +8,8 @@ blocks' halo covers all of it. Here the survey of that test is flown 600 m long 
 water: 75 000 pulses), so each block of 100 m loads only its halo's share: what is compared
 is whether every neighbour search stays inside the halo. Prints which outputs differ: every
 LAS dimension (points sorted by pulse and return), every ``grid.tif`` band and every figure
-of ``evaluation.json`` (the clock's readings and the blocks' own summary left out). Results:
-``RESULTS_e2e.md``.
+of ``evaluation.json`` (the clock's readings and the blocks' own summary left out), and each
+run's wall and CPU seconds with its stages' CPU. Results: ``RESULTS_e2e.md``.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -62,14 +63,24 @@ def compare(whole: Path, blocks: Path) -> list[str]:
     return out
 
 
+def timed(data: dict, out: Path, log) -> None:
+    """``run_scene`` with 1 worker; prints its wall and CPU seconds and its stages' CPU."""
+    w0, c0 = time.perf_counter(), time.process_time()
+    manifest = run_scene(data, out, log=log, workers=1)
+    wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+    stages = {s["stage"]: s.get("cpu_s") for s in manifest["plan"]}
+    parts = ", ".join(f"{k} {v:.1f}" for k, v in stages.items() if v is not None and v > 0.5)
+    print(f"{out.name}: wall {wall:.1f} s, CPU {cpu:.1f} s (stages, CPU s: {parts})")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path)
     ap.add_argument("--block-m", type=float, default=100.0)
     args = ap.parse_args()
     lines: list[str] = []
-    run_scene(scene(None), args.out / "whole", log=lambda s: None, workers=1)
-    run_scene(scene(args.block_m), args.out / "blocks", log=lines.append, workers=1)
+    timed(scene(None), args.out / "whole", lambda s: None)
+    timed(scene(args.block_m), args.out / "blocks", lines.append)
     print("\n".join(s for s in lines if "blocks of" in s or "halo" in s))
     print(f"points: {len(las_points_by_pulse(args.out / 'whole')['X'])}")
     diff = compare(args.out / "whole", args.out / "blocks")

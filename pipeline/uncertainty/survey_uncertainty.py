@@ -77,6 +77,7 @@ from pipeline.uncertainty.tpu_window import (
     window_footprint_sigma_m,
     with_random_term,
 )
+from pipeline.uncertainty.wave_pool import pooled_wave
 
 __all__ = [
     "SurveyUncertainty",
@@ -168,6 +169,7 @@ def survey_uncertainty(
     group = None if windows is None else windows.of_points(points40.pulse_id, returns)
     # the pulses propagated (`keep`'s, else all) become the only bottoms of `returns`; `q`
     # picks them among the bottom rows (of bottom_xy)
+    every_bottom = returns  # the wave pool's soundings: the same whichever are propagated
     returns, q, is40_kept = propagated_bottoms(returns, pts, is40, keep, wide, windows)
     # a scan's cell windows count as one sounding each (their shots share one depth): the
     # gradient's planes reach over neighbouring windows, so their radii and cells are at
@@ -275,7 +277,13 @@ def survey_uncertainty(
     )
     returns = with_surface_ranging(returns, processed.surface, vg)
     tpu = point_tpu(
-        returns, processed.surface, refr, st, seabed_gradient=grad, surface_tilt_sigma_rad=tilt
+        returns,
+        processed.surface,
+        refr,
+        st,
+        seabed_gradient=grad,
+        surface_tilt_sigma_rad=tilt,
+        wave_sigma_m=pooled_wave(every_bottom, processed.surface, vg, st),
     )
     # what the scatter and the variogram added to the detector's sigmas is not the
     # waveform's: a posterior of the waveform replaces only the detector's share

@@ -170,6 +170,7 @@ def point_tpu(
     *,
     seabed_gradient: Any = None,
     surface_tilt_sigma_rad: Any = None,
+    wave_sigma_m: Any = None,
 ) -> PointTpu:
     """First-order propagated uncertainty of the refraction-corrected bottom points.
 
@@ -190,6 +191,10 @@ def point_tpu(
         A measured tilt uncertainty of each bottom pulse's local water plane
         (:func:`surface_tilt_sigma`); the fitted-tilt terms use the larger of it and the fit's
         own standard error (``WaterSurface.normal_sigma_rad``). Default: the fit's alone.
+    wave_sigma_m : (n_pulses,) array_like, optional
+        The sea each pulse's plane cannot follow
+        (:func:`~pipeline.uncertainty.wave_pool.surface_wave_sigma_m`). Default: pooled from
+        ``returns`` and ``surface`` themselves.
 
     Returns
     -------
@@ -202,7 +207,7 @@ def point_tpu(
     """
     st = settings or TpuSettings()
     rst = refraction_settings or RefractionSettings()
-    inp = _inputs(returns, surface, rst, st, seabed_gradient, surface_tilt_sigma_rad)
+    inp = _inputs(returns, surface, rst, st, seabed_gradient, surface_tilt_sigma_rad, wave_sigma_m)
     code = timing_unresolved(inp.ret, inp.sig_ts, inp.sig_tb)
     out = code >= 0
     left = LeftOut(inp.ret.pulse_id[out], code[out])

@@ -26,6 +26,7 @@ from pipeline.uncertainty.tpu_settings import (
     Z,
 )
 from pipeline.uncertainty.tpu_terms import _inputs, _terms
+from pipeline.uncertainty.wave_pool import surface_wave_sigma_m
 
 __all__ = [
     "pair_scatter",
@@ -244,7 +245,10 @@ def timing_from_scatter(
     unit = 1e-10
     st_unit = dataclasses.replace(st, timing_sigma_s=unit)
     bare = dataclasses.replace(returns, t_surface_sigma_s=None, t_bottom_sigma_s=None)
-    inp = _inputs(bare, surface, rst, st_unit, seabed_gradient)
+    # the other terms' wave height as it always was here: each pulse's whole plane residual
+    # (unit timing sigmas range ~nothing), pulse by pulse, not the TPU's pool (wave_pool)
+    own_wave = surface_wave_sigma_m(bare, surface, unit, 0.0)
+    inp = _inputs(bare, surface, rst, st_unit, seabed_gradient, wave_sigma_m=own_wave)
     n = len(inp.row)
     scatter = np.asarray(depth_scatter_m, dtype=np.float64).ravel()
     if scatter.shape != (n,):

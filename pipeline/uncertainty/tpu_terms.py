@@ -20,7 +20,6 @@ from pipeline.uncertainty.tpu_screen import (
     max_timing_step_s,
 )
 from pipeline.uncertainty.tpu_settings import (
-    _C,
     CORRELATED_TERMS,
     DEPTH,
     RANDOM_TERMS,
@@ -28,7 +27,7 @@ from pipeline.uncertainty.tpu_settings import (
     TpuSettings,
     index_derivatives,
 )
-from pipeline.uncertainty.wave_pool import pooled_wave_sigma_m
+from pipeline.uncertainty.wave_pool import surface_wave_sigma_m
 
 
 def _take_surface(surface: WaterSurface, index: np.ndarray) -> WaterSurface:
@@ -97,7 +96,9 @@ def _per_row(name, value, n, cols=None):
     return np.where(np.isfinite(a), a, 0.0)
 
 
-def _inputs(returns, surface, rst, st, seabed_gradient=None, surface_tilt_sigma_rad=None):
+def _inputs(
+    returns, surface, rst, st, seabed_gradient=None, surface_tilt_sigma_rad=None, wave_sigma_m=None
+):
     if len(surface) != len(returns):
         raise ValueError(f"`surface` has {len(surface)} pulses; `returns` has {len(returns)}")
     row = np.flatnonzero(returns.has_bottom)
@@ -114,17 +115,18 @@ def _inputs(returns, surface, rst, st, seabed_gradient=None, surface_tilt_sigma_
     )
     sig_ts = np.where(ret.has_surface, sig_ts, 0.0)
     sig_tb = np.full(n, st.timing_sigma_s) if ret.t_bottom_sigma_s is None else ret.t_bottom_sigma_s
-    # wave height: the fit residual in excess of the surface points' own ranging noise
-    cos_i = np.abs(np.sum(ret.direction_meas * surf.normal, axis=1))
-    ranging = _C * np.where(ret.has_surface, sig_ts, st.timing_sigma_s) / 2.0 * cos_i
-    wave_h = pooled_wave_sigma_m(
-        surf.entry_m[:, :2],
-        surf.fit_sigma_m,
-        ranging,
-        surf.is_water & ret.has_surface,
-        ret.pulse_id,
-        st.wave_pool_cell_m,
-    )
+    # wave height: the fit residual in excess of the surface points' ranging noise, pooled
+    # over every surface pulse of a cell (pipeline.uncertainty.wave_pool)
+    if wave_sigma_m is None:
+        wave_sigma_m = surface_wave_sigma_m(
+            returns, surface, st.timing_sigma_s, st.wave_pool_cell_m
+        )
+    wave_all = np.asarray(wave_sigma_m, dtype=np.float64)
+    if wave_all.shape != (len(returns),):
+        raise ValueError(
+            f"`wave_sigma_m` must be (n_pulses,) = ({len(returns)},); got {wave_all.shape}"
+        )
+    wave_h = np.nan_to_num(wave_all[row], nan=0.0, posinf=0.0)
     wave_h = np.where(surf.is_water, wave_h, 0.0)
     return _Inputs(ret, surf, rst, sig_ts, sig_tb, wave_h, row, grad)
 

@@ -16,9 +16,13 @@ tile or block that holds a cell's pulses gets the whole survey's figure, to the 
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
-__all__ = ["pooled_wave_sigma_m"]
+from pipeline.optics import SPEED_OF_LIGHT_M_S as _C_M_S
+
+__all__ = ["pooled_wave_sigma_m", "surface_wave_sigma_m", "pooled_wave"]
 
 
 def pooled_wave_sigma_m(
@@ -74,3 +78,60 @@ def pooled_wave_sigma_m(
     mean[c_sorted[starts]] = sums / counts
     pooled = mean[cell]
     return np.where(np.isfinite(pooled), np.sqrt(np.maximum(pooled, 0.0)), own)
+
+
+def surface_wave_sigma_m(returns, surface, timing_sigma_s: float, cell_m: float) -> np.ndarray:
+    """:func:`pooled_wave_sigma_m` of every pulse of a survey (or tile), ``(n_pulses,)``.
+
+    The water pulses with a surface return and a bottom enter their cell: the soundings' own
+    sea. Pulses without a bottom are left out: on suite tuning seed 0 (turbid, calm, 761 m)
+    those of the swath's centre, beyond the light's reach, fit planes scattering up to 0.48 m
+    and put a 0.037 m wave term on a flat sea whose soundings' planes showed none. The
+    ranging is each surface return's timing sigma (``returns.t_surface_sigma_s``, else
+    ``timing_sigma_s``) along the plane's normal.
+
+    Parameters
+    ----------
+    returns : DetectedReturns
+        ``(n_pulses,)`` per field.
+    surface : WaterSurface
+        Their fitted surface.
+    timing_sigma_s : float
+        The timing sigma of a return without its own.
+    cell_m : float
+        Side of the cells (0: pulse by pulse).
+    """
+    sig = returns.t_surface_sigma_s
+    sig = np.full(len(returns), timing_sigma_s) if sig is None else np.asarray(sig, np.float64)
+    sig = np.where(returns.has_surface, sig, timing_sigma_s)
+    cos_i = np.abs(np.sum(returns.direction_meas * surface.normal, axis=1))
+    ranging = _C_M_S * sig / 2.0 * cos_i
+    water = np.asarray(surface.is_water, dtype=bool)
+    return pooled_wave_sigma_m(
+        surface.entry_m[:, :2],
+        surface.fit_sigma_m,
+        ranging,
+        water & returns.has_surface & returns.has_bottom,
+        returns.pulse_id,
+        cell_m,
+    )
+
+
+def pooled_wave(detector, surface, variogram, st) -> np.ndarray:
+    """The TPU's wave sigma per pulse, ``(n_pulses,)``, from the detector's surface sigmas.
+
+    Each sigma raised to the surface variogram's nugget at its incidence (the ranging the
+    surface points show, :func:`~pipeline.uncertainty.tpu_measured.with_surface_ranging`), not
+    to the pair scatter's share, which is set per sounding: the figure is then the same
+    whichever soundings a tile or block propagates (:mod:`pipeline.uncertainty.tpu_subset`).
+    A detector without surface sigmas (photon counting) starts from ``st.timing_sigma_s``.
+    ``detector``: the survey's (or tile's) returns with every bottom, not only those a block
+    propagates.
+    """
+    from pipeline.uncertainty.tpu_measured import with_surface_ranging
+
+    if detector.t_surface_sigma_s is None:
+        own = np.where(detector.has_surface, st.timing_sigma_s, 0.0)
+        detector = dataclasses.replace(detector, t_surface_sigma_s=own)
+    raised = with_surface_ranging(detector, surface, variogram)
+    return surface_wave_sigma_m(raised, surface, st.timing_sigma_s, st.wave_pool_cell_m)
