@@ -68,11 +68,13 @@ def pooled_wave_sigma_m(
     _, cell = np.unique(ij, axis=0, return_inverse=True)
     cell = cell.ravel()
     use = np.flatnonzero(np.asarray(contributes, dtype=bool) & np.isfinite(excess))
+    if use.size == 0:  # no sounding's plane (no bottom anywhere): each keeps its own
+        return own
     # within a cell, in pulse-id order: the same sum whatever the pulses' order or company
     order = use[np.lexsort((np.asarray(pulse_id)[use], cell[use]))]
     c_sorted = cell[order]
     starts = np.flatnonzero(np.r_[True, c_sorted[1:] != c_sorted[:-1]])
-    sums = np.add.reduceat(excess[order], starts) if order.size else np.zeros(0)
+    sums = np.add.reduceat(excess[order], starts)
     counts = np.diff(np.r_[starts, order.size])
     mean = np.full(cell.max() + 1, np.nan)
     mean[c_sorted[starts]] = sums / counts

@@ -66,3 +66,14 @@ def test_a_cell_without_contributors_keeps_each_pulse_own():
     cell_mean = np.sqrt(np.mean(fit[:2] ** 2 - rg[:2] ** 2))
     assert np.allclose(got[:2], cell_mean)
     assert np.allclose(got[2:], [np.sqrt(0.08**2 - 0.05**2), 0.0])
+
+
+def test_no_contributor_anywhere_keeps_each_pulse_own():
+    # a survey without a sounding (opaque water, all land): nothing to pool, nothing raised
+    fit, rg = np.array([0.08, 0.02]), np.full(2, 0.05)
+    got = pooled_wave_sigma_m(np.zeros((2, 2)), fit, rg, np.zeros(2, bool), np.arange(2), 25.0)
+    assert np.allclose(got, [np.sqrt(0.08**2 - 0.05**2), 0.0])
+    empty = pooled_wave_sigma_m(
+        np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0, bool), np.zeros(0, int), 25.0
+    )
+    assert empty.shape == (0,)
