@@ -22,7 +22,14 @@ __all__ = ["objects_and_rejections"]
 
 
 def objects_and_rejections(
-    processed, unc, grid: Grid, make_grid: Callable, ps, water_level_m, surface_range_m=None
+    processed,
+    unc,
+    grid: Grid,
+    make_grid: Callable,
+    ps,
+    water_level_m,
+    surface_range_m=None,
+    tested=None,
 ):
     """Classify objects, reject gross errors, and bring the grid and the cells up to date.
 
@@ -43,6 +50,11 @@ def objects_and_rejections(
     surface_range_m : (float, float), optional
         The survey's class-41 height range, when ``processed`` is a block of it
         (:func:`~pipeline.process.seabed_outliers.water_surface_range_m`).
+    tested : (n_points,) bool, optional
+        The points the class-43 and far-below tests are made at (default: all); every
+        point is still a reference point of the tested ones' planes. A block of a survey
+        passes the points whose TPU it propagated (``process_survey``'s ``tpu_keep``): its
+        kept points and those whose class their rejection test reads (below).
 
     Returns
     -------
@@ -53,10 +65,15 @@ def objects_and_rejections(
     rejected : dict of str to int
         Rejected points per rule.
     """
-    # class 43: seabed points standing above the local seabed by k sigma of their TPU
-    pts, n_obj = classify_objects(processed.points, ps.objects)
+    # class 43: seabed points standing above the local seabed by k sigma of their TPU. Its
+    # test reads the point's own TPU and its neighbours' positions only; the rejection test
+    # of a kept point reads which neighbours within `tests_reach_m` are still class 40 (their
+    # class-43 test and TVU rule: their own TPU). That chain ends there, so the points whose
+    # TPU a block propagates (`tpu_points`: the kept ones and those within that reach of
+    # them) are the ones both tests need at (pipeline.survey_blocks)
+    pts, n_obj = classify_objects(processed.points, ps.objects, tested)
     # gross errors: class 7, withheld; the grid and the cells again without them
-    pts, rejected = reject_seabed_outliers(pts, ps.outliers, ps.objects, surface_range_m)
+    pts, rejected = reject_seabed_outliers(pts, ps.outliers, ps.objects, surface_range_m, tested)
     processed = dataclasses.replace(processed, points=pts)
     if sum(rejected.values()):
         grid = make_grid(processed.points)

@@ -105,7 +105,9 @@ def process_survey(
     tpu_keep : callable, optional
         ``tpu_keep(points) -> (n_points,) bool``: the points whose TPU the caller keeps (a
         block's, :func:`~pipeline.survey_blocks.tpu_points`; the others' is not propagated,
-        so their classes and cells are not the survey's); needs ``figures``. Default: all.
+        so their classes and cells are not the survey's); needs ``figures``. The class-43
+        and rejection tests are made at the same points (:mod:`pipeline.survey_cleanup`).
+        Default: all.
     """
     from pipeline.process.datum import survey_datum
     from pipeline.process.seabed_outliers import water_surface_range_m
@@ -156,7 +158,7 @@ def process_survey(
         surface_range = water_surface_range_m(processed.points)
     with clock.stage("process"):
         processed, unc, grid, n_obj, rejected = objects_and_rejections(
-            processed, unc, grid, make_grid, ps, datum.water_level_m, surface_range
+            processed, unc, grid, make_grid, ps, datum.water_level_m, surface_range, keep
         )
     used = SurveyFigures(processed.wide, unc.wide, datum, surface_range)
     return SurveyProducts(processed, unc, grid, datum, n_obj, rejected, used)

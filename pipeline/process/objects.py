@@ -119,7 +119,7 @@ def _reference(xy: np.ndarray, z: np.ndarray, cell_m: float) -> np.ndarray:
     return order[start + (counts - 1) // 2]
 
 
-def detect_objects(xy_m, z_m, sigma_z_m, settings: ObjectSettings = ObjectSettings()):
+def detect_objects(xy_m, z_m, sigma_z_m, settings: ObjectSettings = ObjectSettings(), tested=None):
     """Seabed points standing above a robust local seabed fit (see the module docstring).
 
     Parameters
@@ -131,6 +131,11 @@ def detect_objects(xy_m, z_m, sigma_z_m, settings: ObjectSettings = ObjectSettin
     sigma_z_m : (n,) array_like
         Their vertical 1-sigma uncertainty (TPU); non-finite counts as 0.
     settings : ObjectSettings
+    tested : (n,) bool, optional
+        The points tested (default: all). Every point is still a reference point: a tested
+        point's figures are those it gets when all are tested (a block of a survey tests only
+        the points whose result it keeps, :mod:`pipeline.survey_blocks`). The others are not
+        objects, their height and sigma NaN.
 
     Returns
     -------
@@ -143,20 +148,32 @@ def detect_objects(xy_m, z_m, sigma_z_m, settings: ObjectSettings = ObjectSettin
     nan = np.full(n, np.nan)
     if n == 0 or n < settings.min_neighbours:
         return ObjectDetections(np.zeros(n, bool), nan, nan.copy())
+    query = np.arange(n) if tested is None else np.flatnonzero(np.asarray(tested, dtype=bool))
+    if query.size == 0:
+        return ObjectDetections(np.zeros(n, bool), nan, nan.copy())
     ref = _reference(xy, z, settings.reference_cell_m)
     tree = cKDTree(xy[ref])
     # rows are independent: blocks keep the (rows, neighbours) temporaries bounded (a survey's
     # points at once took ~3 kB each), run side by side on the stage's threads and give the
     # same figures
     is_obj, height, sigma = thread_map_rows(
-        lambda rows: _test_rows(xy, z, sig[rows], ref, tree, rows, settings), n, _BLOCK_ROWS
+        lambda rows: _test_rows(xy, z, sig, ref, tree, query[rows], settings),
+        query.size,
+        _BLOCK_ROWS,
     )
-    return ObjectDetections(is_obj, height, sigma)
+    if tested is None:
+        return ObjectDetections(is_obj, height, sigma)
+    full = ObjectDetections(np.zeros(n, bool), nan, nan.copy())
+    full.is_object[query], full.height_m[query], full.sigma_m[query] = is_obj, height, sigma
+    return full
 
 
-def _test_rows(xy, z, sig, ref, tree, rows: slice, settings: ObjectSettings):
-    """:func:`detect_objects`' test of the points ``rows``: (is_object, height_m, sigma_m)."""
-    xy_r = xy[rows]
+def _test_rows(xy, z, sig, ref, tree, query: np.ndarray, settings: ObjectSettings):
+    """:func:`detect_objects`' test of the points ``query`` ``(m,)``.
+
+    Returns ``(is_object, height_m, sigma_m)``, ``(m,)`` each.
+    """
+    xy_r = xy[query]
     n = xy_r.shape[0]
     k = int(min(settings.neighbours, ref.size))
     _, idx = tree.query(xy_r, k=k, distance_upper_bound=settings.radius_m)
@@ -167,7 +184,7 @@ def _test_rows(xy, z, sig, ref, tree, rows: slice, settings: ObjectSettings):
         sig,
         ref,
         idx,
-        rows.start,
+        query,
         settings.min_neighbours,
         settings.iterations,
         settings.min_scale_m,
@@ -177,10 +194,11 @@ def _test_rows(xy, z, sig, ref, tree, rows: slice, settings: ObjectSettings):
 
 
 @numba.njit(cache=True, nogil=True)
-def _test_kernel(xy, z, sig, ref, idx, row0, min_nb, iterations, min_scale, k_sigma, min_h):
+def _test_kernel(xy, z, sig, ref, idx, query, min_nb, iterations, min_scale, k_sigma, min_h):
     """Per row: neighbours' robust plane (Tukey IRLS), height above it and the test's sigma.
 
-    ``idx`` ``(n, k)``: the rows' nearest reference points (``ref.size`` where none). The
+    Row ``i`` tests point ``query[i]`` (``sig``: every point's); ``idx`` ``(n, k)``: the
+    rows' nearest reference points (``ref.size`` where none). The
     figures of the vectorised test this replaced (medians of the same values; sums and the
     3 x 3 solve in another order: last-bit differences).
     """
@@ -194,7 +212,7 @@ def _test_kernel(xy, z, sig, ref, idx, row0, min_nb, iterations, min_scale, k_si
     dz = np.empty(k)
     buf = np.empty(k)
     for i in range(n):
-        p = row0 + i
+        p = query[i]
         m = 0
         for c in range(k):
             if idx[i, c] < n_ref:
@@ -239,7 +257,7 @@ def _test_kernel(xy, z, sig, ref, idx, row0, min_nb, iterations, min_scale, k_si
         mm = max(m, 4)
         scale = max(scale * math.sqrt(mm / (mm - 3.0)), min_scale)
         h = -a  # the plane passes a above the point
-        s = math.sqrt(sig[i] * sig[i] + scale * scale * (1.0 + 1.0 / mm))
+        s = math.sqrt(sig[p] * sig[p] + scale * scale * (1.0 + 1.0 / mm))
         height[i] = h
         sigma[i] = s
         is_obj[i] = h > k_sigma * s and h >= min_h
@@ -268,20 +286,23 @@ def _plane3(sw, sx, sy, sxx, syy, sxy, sz, sxz, syz):
     return a, b, c
 
 
-def classify_objects(points: Points, settings: ObjectSettings) -> tuple[Points, int]:
+def classify_objects(points: Points, settings: ObjectSettings, tested=None) -> tuple[Points, int]:
     """Seabed points that stand above the seabed set to class 43; and how many.
 
     The class-40 bottom returns that :func:`detect_objects` finds become class 43.
 
     The test's sigma is each point's ``uncertainty_v_m`` (its TPU once
-    :func:`pipeline.uncertainty.survey_uncertainty.with_tpu` has run).
+    :func:`pipeline.uncertainty.survey_uncertainty.with_tpu` has run). ``tested``
+    ``(n_points,)`` bool: the points tested (default: all); every class-40 bottom is still a
+    reference point (:func:`detect_objects`), the others keep their class.
     """
     sea = (points.classification == BATHYMETRIC_POINT) & (points.kind == ReturnKind.BOTTOM)
     if not settings.enabled or not sea.any():
         return points, 0
     idx = np.flatnonzero(sea)
     xyz = points.xyz_m[idx]
-    found = detect_objects(xyz[:, :2], xyz[:, 2], points.uncertainty_v_m[idx], settings)
+    test = None if tested is None else np.asarray(tested, dtype=bool)[idx]
+    found = detect_objects(xyz[:, :2], xyz[:, 2], points.uncertainty_v_m[idx], settings, test)
     cls = points.classification.copy()
     cls[idx[found.is_object]] = SUBMERGED_OBJECT
     return points.replace(classification=cls), int(found.is_object.sum())

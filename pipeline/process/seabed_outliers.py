@@ -141,7 +141,7 @@ def implausible_surface(
 
 
 def seabed_outliers(
-    xy_m, z_m, sigma_z_m, settings: OutlierSettings, fit: ObjectSettings
+    xy_m, z_m, sigma_z_m, settings: OutlierSettings, fit: ObjectSettings, tested=None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Which points lie far below the robust local seabed of the others.
 
@@ -156,6 +156,9 @@ def seabed_outliers(
     settings : OutlierSettings
     fit : ObjectSettings
         The neighbourhood and robust plane of the object detector (same fit, same sigma).
+    tested : (n,) bool, optional
+        The points tested (default: all); every point is still a reference point of the
+        others' planes. The others are not outliers (height and sigma NaN).
 
     Returns
     -------
@@ -164,7 +167,7 @@ def seabed_outliers(
         Height above the local seabed fit and the test's sigma (NaN: too few neighbours,
         not tested).
     """
-    found = detect_objects(xy_m, z_m, sigma_z_m, fit)
+    found = detect_objects(xy_m, z_m, sigma_z_m, fit, tested)
     h, s = found.height_m, found.sigma_m
     with np.errstate(invalid="ignore"):
         out = (h < -settings.k_sigma * s) & (-h >= settings.min_offset_m)
@@ -176,6 +179,7 @@ def reject_seabed_outliers(
     settings: OutlierSettings,
     fit: ObjectSettings,
     surface_range_m: tuple[float, float] | None = None,
+    tested=None,
 ) -> tuple[Points, dict[str, int]]:
     """Class-40 bottom points either rule rejects set to class 7 and flagged; counts.
 
@@ -189,6 +193,11 @@ def reject_seabed_outliers(
     surface_range_m : (float, float), optional
         The survey's class-41 height range (:func:`water_surface_range_m`), when ``points``
         are a block of it; default: measured from ``points``.
+    tested : (n_points,) bool, optional
+        The points the far-below test (rule 3) is made at (default: all): a block of a
+        survey tests the points whose class it keeps (:mod:`pipeline.survey_blocks`). Every
+        class-40 point the rules before keep is still a reference point of its plane; the
+        other rules are per point and test all.
 
     Returns
     -------
@@ -223,7 +232,8 @@ def reject_seabed_outliers(
     if idx.size:
         xyz = points.xyz_m[idx]
         sig = points.uncertainty_v_m[idx]
-        out, _, _ = seabed_outliers(xyz[:, :2], xyz[:, 2], sig, settings, fit)
+        test = None if tested is None else np.asarray(tested, dtype=bool)[idx]
+        out, _, _ = seabed_outliers(xyz[:, :2], xyz[:, 2], sig, settings, fit, test)
         flags[idx[out]] |= np.uint16(PointFlag.SEABED_OUTLIER)
         counts["seabed_outlier"] = int(out.sum())
     rejected = (flags & np.uint16(REJECTED)) != 0

@@ -180,3 +180,24 @@ def test_the_compiled_test_is_the_method_point_by_point():
         np.testing.assert_allclose(got.height_m[i], want_h, rtol=1e-9, atol=1e-12, err_msg=str(i))
         np.testing.assert_allclose(got.sigma_m[i], want_s, rtol=1e-9, atol=1e-12, err_msg=str(i))
     assert got.is_object[picks].sum() >= 10 and (~got.is_object[picks]).sum() >= 50
+
+
+def test_a_tested_subset_gets_the_figures_of_all_points_tested(monkeypatch):
+    # a block of a survey tests only the points it keeps; every point stays a reference, so
+    # a tested point's figures are those of the test of all (to the bit), in any block size
+    import pipeline.process.objects as objects
+
+    rng = np.random.default_rng(17)
+    x, y, z, sig, _, top = swath_cloud(rng)
+    xy = np.c_[x, y]
+    whole = detect_objects(xy, z, sig)
+    tested = (np.abs(x) < 6.0) | top  # a strip, and every cube's top (found when tested)
+    monkeypatch.setattr(objects, "_BLOCK_ROWS", 97)
+    got = detect_objects(xy, z, sig, tested=tested)
+    np.testing.assert_array_equal(got.is_object[tested], whole.is_object[tested])
+    np.testing.assert_array_equal(got.height_m[tested], whole.height_m[tested])
+    np.testing.assert_array_equal(got.sigma_m[tested], whole.sigma_m[tested])
+    assert got.is_object[top].any() and not got.is_object[~tested].any()
+    assert np.isnan(got.height_m[~tested]).all() and np.isnan(got.sigma_m[~tested]).all()
+    none = detect_objects(xy, z, sig, tested=np.zeros(x.size, bool))
+    assert not none.is_object.any() and np.isnan(none.height_m).all()

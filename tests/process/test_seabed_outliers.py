@@ -195,3 +195,23 @@ def test_extinction_depth_summary_is_the_class_45_depths():
         "extinction_depth_source": "not_reached",
     }
     assert extinction_depth_summary(p)["class45_depth_m_median"] is None
+
+
+def test_a_tested_subset_is_rejected_as_when_all_points_are_tested():
+    """A block of a survey tests only the points whose class it keeps: every class-40 point
+    is still a reference of their planes, so a tested point's flags are those of the test of
+    all; the others are not tested by rule 3 (rules 1 and 2 test every point)."""
+    rng = np.random.default_rng(23)
+    x, y, z, sig = cloud(rng)
+    blunders = rng.choice(x.size, 40, replace=False)
+    z[blunders] -= rng.uniform(1.5, 10.0, blunders.size)
+    sig[rng.choice(x.size, 20, replace=False)] = 5.0  # beyond order 2's TVU: rule 1
+    pts = points(x, y, z, sig)
+    whole, _ = reject_seabed_outliers(pts, OutlierSettings(), ObjectSettings())
+    tested = x < 3.0
+    got, counts = reject_seabed_outliers(pts, OutlierSettings(), ObjectSettings(), tested=tested)
+    np.testing.assert_array_equal(got.flags[tested], whole.flags[tested])
+    np.testing.assert_array_equal(got.classification[tested], whole.classification[tested])
+    assert has(got, PointFlag.SEABED_OUTLIER)[tested].any()
+    assert not has(got, PointFlag.SEABED_OUTLIER)[~tested].any()
+    assert counts["tvu_exceeded"] == int(np.count_nonzero(has(whole, PointFlag.TVU_EXCEEDED)))
