@@ -104,10 +104,13 @@ def tests_reach_m(ps) -> float:
 
 
 def tpu_points(points, own_pulse_id: np.ndarray, box_m, reach_m: float) -> np.ndarray:
-    """The points whose TPU a block keeps, ``(n_points,)`` bool.
+    """The points whose TPU a block keeps, ``(n_points,)`` bool; its tests are made there too.
 
     A block keeps the TPU of its own pulses' points and of the points in its own cells, and
     the tests of those read the TPU of the points within ``reach_m`` (:func:`tests_reach_m`).
+    The class-43 and rejection tests are made at the same points
+    (:func:`~pipeline.survey_cleanup.objects_and_rejections`): a kept point's rejection reads
+    the class-43 results within ``reach_m``, and those read nothing but their own TPU.
     So: every point within ``reach_m`` of the box holding the block (``box_m``, ``(w, e, s,
     n)``) and its own pulses' points (a beam reach beyond it, at most), a square margin (a
     superset of the round one).

@@ -192,7 +192,8 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
                     continue  # no pulse near enough for a point of its to fall in the block
                 sub, row0, col0 = _sub_layout(blocks, int(b), halo)
                 # the TPU of the points the block keeps, and of those its tests read (one
-                # grid cell more: a point on the block's edge may fall in either cell)
+                # grid cell more: a point on the block's edge may fall in either cell); the
+                # class-43 and rejection tests are made at the same points
                 keep = functools.partial(
                     tpu_points,
                     own_pulse_id=ret.pulse_id[own],
