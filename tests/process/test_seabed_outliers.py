@@ -1,6 +1,7 @@
 """Gross seabed errors on hand-built soundings with known blunders and analytic seabeds."""
 
 import math
+from types import SimpleNamespace
 
 import laspy
 import numpy as np
@@ -215,3 +216,48 @@ def test_a_tested_subset_is_rejected_as_when_all_points_are_tested():
     assert has(got, PointFlag.SEABED_OUTLIER)[tested].any()
     assert not has(got, PointFlag.SEABED_OUTLIER)[~tested].any()
     assert counts["tvu_exceeded"] == int(np.count_nonzero(has(whole, PointFlag.TVU_EXCEEDED)))
+
+
+def test_a_block_tests_its_points_and_those_their_rejection_reads():
+    """The chain a block of a survey cuts (``pipeline.survey_cleanup``): a kept point's
+    rejection plane reads which neighbours within ``tests_reach_m`` are still class 40 (their
+    class-43 test and TVU rule, their own TPU), and those read only positions. Tested at the
+    kept points and within that reach of them, the kept points' classes, flags and the
+    rejection's figures are those of every point tested (cubes and blunders across the
+    block's edge); tested at the kept points alone, the figures are not."""
+    from pipeline.process.seabed_outliers import seabed_outliers, tvu_exceeded
+    from pipeline.survey_blocks import tests_reach_m
+
+    rng = np.random.default_rng(29)
+    x, y, z, sig = cloud(rng, n=9000)
+    for cx, cy in ((5.0, 0.0), (-5.0, 8.0), (12.0, -6.0)):  # cubes of 1.5 m, on the edges
+        z[(np.abs(x - cx) <= 0.75) & (np.abs(y - cy) <= 0.75)] += 1.0
+    blunders = rng.choice(x.size, 60, replace=False)
+    z[blunders] -= rng.uniform(0.8, 6.0, blunders.size)
+    sig[rng.choice(x.size, 60, replace=False)] = 5.0
+    pts = points(x, y, z, sig)
+    obj, out = ObjectSettings(), OutlierSettings()
+
+    def cleaned(tested):
+        found, _ = classify_objects(pts, obj, tested)
+        # the rejection's plane figures, as rule 3 makes them (no class 41: rule 2 keeps all)
+        sea = (found.classification == BATHYMETRIC_POINT) & ~tvu_exceeded(
+            found.depth_m, sig, out.max_order
+        )
+        h = np.full(x.size, np.nan)
+        test = None if tested is None else tested[sea]
+        _, h[sea], _ = seabed_outliers(np.c_[x, y][sea], z[sea], sig[sea], out, obj, test)
+        return reject_seabed_outliers(found, out, obj, tested=tested)[0], h
+
+    whole, h_whole = cleaned(None)
+    kept = np.abs(x) <= 5.0  # the block: a strip
+    reach = tests_reach_m(SimpleNamespace(objects=obj))
+    block, h_block = cleaned(np.abs(x) <= 5.0 + reach)
+    np.testing.assert_array_equal(block.classification[kept], whole.classification[kept])
+    np.testing.assert_array_equal(block.flags[kept], whole.flags[kept])
+    np.testing.assert_array_equal(h_block[kept], h_whole[kept])
+    assert (whole.classification[kept] == SUBMERGED_OBJECT).any()
+    assert has(whole, PointFlag.SEABED_OUTLIER)[kept].any()
+    # the cube on the edge: untested, its points outside stay class 40 and enter the planes
+    _, h_alone = cleaned(kept)
+    assert not np.array_equal(h_alone[kept], h_whole[kept], equal_nan=True)
