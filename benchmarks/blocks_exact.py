@@ -1,6 +1,7 @@
 """A survey longer than its blocks' halo, processed whole and in blocks: the same outputs?
 
-Usage: ``PYTHONPATH=. python benchmarks/blocks_exact.py OUT [--block-m 100]`` (~4 min on 2 cores).
+Usage: ``PYTHONPATH=. python benchmarks/blocks_exact.py OUT [--block-m 100] [--fire]`` (~4 min
+on 2 cores).
 
 ``tests/test_survey_blocks.py`` makes the comparison on a survey small enough for CI, whose
 blocks' halo covers all of it. Here the survey of that test is flown 600 m long (one line, a
@@ -10,6 +11,14 @@ is whether every neighbour search stays inside the halo. Prints which outputs di
 LAS dimension (points sorted by pulse and return), every ``grid.tif`` band and every figure
 of ``evaluation.json`` (the clock's readings and the blocks' own summary left out), and each
 run's wall and CPU seconds with its stages' CPU. Results: ``RESULTS_e2e.md``.
+
+At the default settings this survey has no class-43 point and no rejection, so the blocks'
+class-43 and rejection tests (made only at the points a block keeps and their reach) are not
+compared. ``--fire`` lowers their thresholds (``tests/test_survey_blocks.py``'s ``FIRE``:
+objects ``k_sigma`` 1, ``min_height_m`` 0.05; outliers ``k_sigma`` 1, ``min_offset_m`` 0.05,
+``max_order`` "special") so that both fire, and prints how many class-43 points and rejections
+the whole run made (``evaluation.json``'s ``features.object_points`` and ``seabed_rejected``)
+before comparing.
 """
 
 from __future__ import annotations
@@ -27,16 +36,18 @@ sys.path.insert(0, str(ROOT))
 
 from pipeline.run import run_scene  # noqa: E402
 from tests.test_survey_blocks import (  # noqa: E402
+    FIRE,
     evaluation_figures,
     las_points_by_pulse,
     wave_survey_scene,
 )
 
 
-def scene(block_m: float | None):
-    """The 600 m survey; ``block_m`` set: processed in blocks, every block in the sample."""
+def scene(block_m: float | None, fire: bool = False):
+    """The 600 m survey; ``block_m`` set: processed in blocks, every block in the sample;
+    ``fire``: with the class-43 and rejection thresholds lowered (:data:`FIRE`)."""
     run = {} if block_m is None else {"block_m": block_m}
-    return wave_survey_scene((0.0, 60.0, 0.0, 600.0), 7500.0, **run)
+    return wave_survey_scene((0.0, 60.0, 0.0, 600.0), 7500.0, process=FIRE if fire else None, **run)
 
 
 def compare(whole: Path, blocks: Path) -> list[str]:
@@ -77,12 +88,22 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path)
     ap.add_argument("--block-m", type=float, default=100.0)
+    ap.add_argument(
+        "--fire", action="store_true", help="lower the class-43 and rejection thresholds (FIRE)"
+    )
     args = ap.parse_args()
     lines: list[str] = []
-    timed(scene(None), args.out / "whole", lambda s: None)
-    timed(scene(args.block_m), args.out / "blocks", lines.append)
+    timed(scene(None, args.fire), args.out / "whole", lambda s: None)
+    timed(scene(args.block_m, args.fire), args.out / "blocks", lines.append)
     print("\n".join(s for s in lines if "blocks of" in s or "halo" in s))
     print(f"points: {len(las_points_by_pulse(args.out / 'whole')['X'])}")
+    ev = json.loads((args.out / "whole" / "evaluation.json").read_text())
+    rej = ev["seabed_rejected"]
+    print(
+        f"whole run: class-43 points {ev['features']['object_points']}, rejected {rej['n']}"
+        f" (TVU {rej['tvu_exceeded']}, below the seabed {rej['seabed_outlier']},"
+        f" surface implausible {rej['surface_implausible']})"
+    )
     diff = compare(args.out / "whole", args.out / "blocks")
     print("\n".join(diff) if diff else "identical: every LAS dimension, grid band and figure")
 

@@ -172,9 +172,20 @@ def test_coverage_gathered_block_by_block_is_the_whole_coverage():
     assert 0.2 < acc.fraction() < 1.0
 
 
-def wave_survey_scene(area_m=(0.0, 60.0, 0.0, 60.0), prf_hz=15000.0, **run):
+#: ``[process.objects]`` and ``[process.outliers]`` thresholds lowered so that the class-43
+#: and rejection tests fire on :func:`wave_survey_scene`'s survey (at the defaults neither
+#: makes a point): of its 24 411 points 589 become class 43 and 681 are rejected (600 m long,
+#: ``benchmarks/blocks_exact.py --fire``: 3468 and 4192)
+FIRE = {
+    "objects": {"k_sigma": 1.0, "min_height_m": 0.05},
+    "outliers": {"k_sigma": 1.0, "min_offset_m": 0.05, "max_order": "special"},
+}
+
+
+def wave_survey_scene(area_m=(0.0, 60.0, 0.0, 60.0), prf_hz=15000.0, *, process=None, **run):
     """``tests/test_process_tiles.py``'s survey (one Palmer line over ``area_m``), ``run`` keys.
 
+    ``process``: ``[process]`` sections' keys set on top of the scene's (e.g. :data:`FIRE`).
     Also flown 600 m long by ``benchmarks/blocks_exact.py``.
     """
     data = tomllib.loads(
@@ -188,6 +199,8 @@ def wave_survey_scene(area_m=(0.0, 60.0, 0.0, 60.0), prf_hz=15000.0, **run):
     data["trace"] = {"subrays": 3}
     data["process"]["posterior_pulses_per_km2"] = 0.0
     data["process"]["posterior_min_pulses"] = 0
+    for section, keys in (process or {}).items():
+        data["process"].setdefault(section, {}).update(keys)
     data["run"] = {"views": False, **run}
     return parse_scene(data)
 
@@ -232,33 +245,82 @@ def runs(tmp_path_factory):
     return root, lines
 
 
-@pytest.mark.slow
-def test_a_blocked_survey_gives_the_whole_survey_points_grid_and_evaluation(runs):
+def assert_blocked_as_whole(root, lines, whole, blocks):
+    """``blocks`` (a blocked run, every block in the sample) made ``whole``'s outputs: every LAS
+    dimension, the grid's files, the evaluation's figures and the counts logged."""
     import rasterio
 
-    root, lines = runs
-    ev = json.loads((root / "blocks" / "evaluation.json").read_text())["blocked"]
+    ev = json.loads((root / blocks / "evaluation.json").read_text())["blocked"]
     # every block with pulses sampled (and processed, with the blocks next to them)
     assert ev["blocks_with_pulses"] >= 4 and ev["sample_blocks"] == ev["blocks_with_pulses"]
     assert ev["blocks"] >= ev["blocks_with_pulses"]
     assert ev["sample_pulses"] == ev["survey_pulses"] > 10_000
-    a, b = las_points_by_pulse(root / "whole"), las_points_by_pulse(root / "blocks")
+    a, b = las_points_by_pulse(root / whole), las_points_by_pulse(root / blocks)
     assert a.keys() == b.keys() and len(a["X"]) > 20_000
     for d in a:
         np.testing.assert_array_equal(a[d], b[d], err_msg=d)
     assert np.any(a["classification"] == 45)  # the claims are there to compare
     # the grid's files (the blocked run's written by tiles): values, overviews, metadata
-    assert_same_tif(root / "whole" / "grid.tif", root / "blocks" / "grid.tif")
-    assert_same_nc(root / "whole" / "grid.nc", root / "blocks" / "grid.nc")
-    with rasterio.open(root / "whole" / "grid.tif") as r:
+    assert_same_tif(root / whole / "grid.tif", root / blocks / "grid.tif")
+    assert_same_nc(root / whole / "grid.nc", root / blocks / "grid.nc")
+    with rasterio.open(root / whole / "grid.tif") as r:
         assert np.count_nonzero(r.read(5)) > 500  # cells with points to compare (674)
-    assert json.dumps(
-        evaluation_figures(root / "whole"), sort_keys=True, default=str
-    ) == json.dumps(evaluation_figures(root / "blocks"), sort_keys=True, default=str)
+    assert json.dumps(evaluation_figures(root / whole), sort_keys=True, default=str) == json.dumps(
+        evaluation_figures(root / blocks), sort_keys=True, default=str
+    )
     # the counts logged are the survey's, not the sum of the blocks' overlapping halos
     for key in ("submerged objects", "class-45 claims withheld", "rejected bathymetric"):
-        want = [s for s in lines["whole"] if key in s]
-        assert want and want == [s for s in lines["blocks"] if key in s], key
+        want = [s for s in lines[whole] if key in s]
+        assert want and want == [s for s in lines[blocks] if key in s], key
+
+
+@pytest.mark.slow
+def test_a_blocked_survey_gives_the_whole_survey_points_grid_and_evaluation(runs):
+    root, lines = runs
+    assert_blocked_as_whole(root, lines, "whole", "blocks")
+
+
+@pytest.fixture(scope="module")
+def fire_runs(tmp_path_factory):
+    """The survey with :data:`FIRE`'s thresholds, processed whole and by blocks of 50 m
+    (every block in the sample), and the share of its loaded points each block kept (its
+    TPU, its class-43 and rejection tests)."""
+    import pipeline.survey_blocks_run as sbr
+
+    root = tmp_path_factory.mktemp("blocks_fire")
+    lines, kept = {}, []
+
+    def tpu_points(points, *args, **kw):
+        keep = sbr_tpu_points(points, *args, **kw)
+        kept.append(np.count_nonzero(keep) / keep.size)
+        return keep
+
+    sbr_tpu_points = sbr.tpu_points
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(sbr, "tpu_points", tpu_points)
+        for name, run in (("whole", {}), ("blocks", {"block_m": 50.0})):
+            got = []
+            scene = wave_survey_scene(process=FIRE, **run)
+            run_scene(scene, root / name, log=got.append, workers=1)
+            lines[name] = got
+    return root, lines, np.array(kept)
+
+
+@pytest.mark.slow
+def test_blocks_whose_class43_and_rejection_tests_fire_give_the_whole_survey_outputs(fire_runs):
+    # the default thresholds make neither a class-43 point nor a rejection on this survey;
+    # FIRE's make both, and each block tests only the points it keeps and their reach
+    root, lines, kept = fire_runs
+    ev = json.loads((root / "whole" / "evaluation.json").read_text())
+    assert ev["features"]["object_points"] > 0  # 589
+    rej = ev["seabed_rejected"]
+    assert rej["n"] > 0 and rej["tvu_exceeded"] > 0 and rej["seabed_outlier"] > 0  # 58 + 623
+    las = las_points_by_pulse(root / "whole")
+    assert np.any(las["classification"] == 43) and np.any(las["classification"] == 7)
+    # the halo (139 m) covers this whole survey, but each of the 27 blocks keeps and tests
+    # only a part of it (1.5 to 24 %): what is compared is the tests made at a subset
+    assert kept.size > 20 and np.all(kept > 0.0) and np.max(kept) < 0.5
+    assert_blocked_as_whole(root, lines, "whole", "blocks")
 
 
 def test_lines_the_sample_missed_join_the_figures_and_its_own_keep_their_axes():
