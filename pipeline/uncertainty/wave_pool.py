@@ -45,7 +45,8 @@ def pooled_wave_sigma_m(
         Its surface point's ranging sigma along the plane's normal (m).
     contributes : (n,) bool ndarray
         Pulses whose ``fit² - ranging²`` enter their cell's mean (water, an own surface
-        return); the others take their cell's figure.
+        return and, from :func:`surface_wave_sigma_m`, a bottom); the others take their
+        cell's figure.
     pulse_id : (n,) int ndarray
         The sums' order within a cell.
     cell_m : float
