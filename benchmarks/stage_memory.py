@@ -1,10 +1,11 @@
-"""Peak resident memory after each stage of a Palmer survey of about N pulses (issue 15).
+"""Peak resident memory of each stage of a Palmer survey of about N pulses (issue 15).
 
 Usage: ``PYTHONPATH=. python benchmarks/stage_memory.py N [--set run.KEY=VALUE ...]`` (1 worker,
 posteriors off, chunks of 20 000 pulses; the scene is :func:`bench_e2e.palmer`). Prints each stage's
-``peak_rss_mb`` from the run's manifest (:class:`pipeline.stages.StageClock`): the first stage
-whose figure jumps is the one that raised the run's peak. One survey per invocation: the
-high-water mark never falls within a process. Results: ``RESULTS_e2e.md``.
+``peak_rss_mb`` from the run's manifest (:class:`pipeline.stages.StageClock`): "exact" where
+the stage raised the process's high-water mark (the stage setting the run's peak is one),
+"sampled" (every 10 ms, a lower bound) where it did not; then the run's peak. One survey per
+invocation: the high-water mark never falls within a process. Results: ``RESULTS_e2e.md``.
 """
 
 from __future__ import annotations
@@ -49,7 +50,9 @@ def main() -> None:
     stages += [{"stage": k, **v} for k, v in m.get("other_stages", {}).items()]
     for s in stages:
         if s.get("peak_rss_mb") is not None:
-            print(f"{s['stage']:20s} {s['peak_rss_mb']:8.0f} MB  cpu {s['cpu_s']:.1f} s")
+            how = "exact" if s.get("peak_exact") else "sampled"
+            print(f"{s['stage']:20s} {s['peak_rss_mb']:8.0f} MB {how:8s} cpu {s['cpu_s']:.1f} s")
+    print(f"{'run':20s} {m['memory']['peak_rss_mb']:8.0f} MB")
     if "blocked" in m["evaluation"]:
         print("blocked:", m["evaluation"]["blocked"])
 

@@ -4,9 +4,10 @@ Usage: ``PYTHONPATH=. python benchmarks/stage_peaks.py N [BLOCK_PULSES SAMPLE_PU
 (1 worker, posteriors off; the scene is :func:`bench_e2e.palmer`). A thread samples the RSS
 every 5 ms and keeps its largest value under the innermost :class:`pipeline.stages.StageClock`
 stage running (``(none)``: between stages). The manifest's ``peak_rss_mb`` (what
-``stage_memory.py`` prints) is the process's high-water mark when a stage last ended, so every
-stage that ends after the peak shows it; a stage run once per block ends last in the last
-block. Short spikes between two samples, or while a thread holds the GIL, can be missed.
+``stage_memory.py`` prints) is exact only for the stages that raised the process's high-water
+mark and otherwise is sampled every 10 ms itself (:mod:`pipeline.rss_watch`); this script's
+5 ms samples also label the time between stages. Short spikes between two samples, or while a
+thread holds the GIL, can be missed.
 Results: ``RESULTS_e2e.md``.
 """
 

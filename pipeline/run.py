@@ -9,7 +9,7 @@ from typing import Any
 from pipeline.outputs.atomic import write_json
 from pipeline.provenance import provenance
 from pipeline.scene import Scene
-from pipeline.stages import StageClock, plan
+from pipeline.stages import StageClock, peak_rss_mb, plan
 
 __all__ = ["run_scene", "existing_outputs", "clear_outputs"]
 
@@ -129,6 +129,8 @@ def run_scene(
         "other_stages": {k: v for k, v in stages.items() if k not in {s.name for s in the_plan}},
         "files": {k: Path(v).relative_to(out).as_posix() for k, v in files.items()},
         "timings_s": {"total_wall_s": time.perf_counter() - t0},
+        # this process's high-water mark (each stage's own peak is in its plan entry)
+        "memory": {"peak_rss_mb": peak_rss_mb()},
         # where the chunk loop ran (stage CPU seconds add up every worker's)
         "execution": execution,
         "evaluation": evaluation,

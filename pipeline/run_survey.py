@@ -217,12 +217,11 @@ def simulate_detections(
         file=sys.stderr,
     )
     # in chunk order, as they arrive; each chunk's stage seconds (in the process that ran it)
-    # add to the clock, so CPU seconds count every worker. Each chunk goes to disk at once
-    # (the store); only its summary and its share of the survey-wide aggregates stay
+    # add to the clock, so CPU seconds count every worker, and its peak is the workers' largest.
+    # Each chunk goes to disk at once (the store); only its summary and its share of the
+    # survey-wide aggregates stay
     for c, res in enumerate(executor.map(run_chunk, job, n_chunk)):
-        for name in res.wall_s:
-            clock.wall_s[name] = clock.wall_s.get(name, 0.0) + res.wall_s[name]
-            clock.cpu_s[name] = clock.cpu_s.get(name, 0.0) + res.cpu_s[name]
+        clock.add(res.stages)
         _count(sub_flags, res.subray_flags)
         _count(pulse_flags, res.pulse_flags)
         if res.kept is not None:

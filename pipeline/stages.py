@@ -196,44 +196,67 @@ def trim_heap() -> None:
 
 @dataclass
 class StageClock:
-    """Wall and CPU seconds per stage, and the order in which stages ran.
+    """Wall and CPU seconds per stage, its resident-memory peak, and the order stages ran in.
 
     A stage that runs per chunk is timed across all its chunks. ``cpu_s`` is the process's CPU
     time (all threads), so a stage using several cores can show more CPU than wall time.
-    ``peak_rss_mb`` is this process's resident-memory high-water mark when the stage last
-    ended (:func:`peak_rss_mb`, which never decreases): the first stage whose figure jumps is
-    the one that raised the run's peak (stages run in pool workers are not in it).
+    ``peak_rss_mb`` is the stage's own peak in the process that ran it, over all its runs
+    (:mod:`pipeline.rss_watch`): exact (``peak_exact``) where the stage raised the process's
+    high-water mark (:func:`peak_rss_mb`), which is how the stage that sets a run's peak
+    shows; else the largest RSS sampled every 10 ms while it ran, a lower bound.
     """
 
     wall_s: dict[str, float] = field(default_factory=dict)
     cpu_s: dict[str, float] = field(default_factory=dict)
     peak_rss_mb: dict[str, float] = field(default_factory=dict)
+    peak_exact: dict[str, bool] = field(default_factory=dict)
 
     @contextlib.contextmanager
     def stage(self, name: str) -> Iterator[None]:
         """Time the block as stage ``name`` (added to earlier blocks of the same stage)."""
+        from pipeline.rss_watch import WATCH
+
         w0, c0 = time.perf_counter(), time.process_time()
+        mark0, token = peak_rss_mb(), WATCH.enter()
         try:
             yield
         finally:
             self.wall_s[name] = self.wall_s.get(name, 0.0) + time.perf_counter() - w0
             self.cpu_s[name] = self.cpu_s.get(name, 0.0) + time.process_time() - c0
-            self.peak_rss_mb[name] = peak_rss_mb()
+            sampled, mark = WATCH.exit(token), peak_rss_mb()
+            # the mark only rises: if it rose, its new value was reached inside this stage
+            raised = mark > mark0
+            self._add_peak(name, mark if raised else sampled, raised)
+
+    def _add_peak(self, name: str, peak: float | None, exact: bool) -> None:
+        if peak is not None and peak > self.peak_rss_mb.get(name, -1.0):
+            self.peak_rss_mb[name], self.peak_exact[name] = peak, exact
+
+    def add(self, other: dict[str, dict[str, float]]) -> None:
+        """Add another process's :meth:`to_dict` (a pool worker's chunk).
+
+        Seconds add up; the peak is the larger of the two.
+        """
+        for k, v in other.items():
+            self.wall_s[k] = self.wall_s.get(k, 0.0) + v["wall_s"]
+            self.cpu_s[k] = self.cpu_s.get(k, 0.0) + v["cpu_s"]
+            self._add_peak(k, v.get("peak_rss_mb"), bool(v.get("peak_exact")))
 
     def ran(self) -> list[str]:
         """Names of the stages timed, in the order they first ran."""
         return list(self.wall_s)
 
     def to_dict(self) -> dict[str, dict[str, float]]:
-        """``{stage: {"wall_s": ..., "cpu_s": ..., "peak_rss_mb": ...}}``, JSON-ready.
+        """``{stage: {"wall_s", "cpu_s", "peak_rss_mb", "peak_exact"}}``, JSON-ready.
 
-        ``peak_rss_mb`` is None for a stage timed only in pool workers.
+        ``peak_rss_mb`` is None where no RSS could be read.
         """
         return {
             k: {
                 "wall_s": self.wall_s[k],
                 "cpu_s": self.cpu_s[k],
                 "peak_rss_mb": self.peak_rss_mb.get(k),
+                "peak_exact": self.peak_exact.get(k, False),
             }
             for k in self.wall_s
         }

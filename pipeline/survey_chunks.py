@@ -71,8 +71,9 @@ class ChunkResult:
     nb : dict or None
         No-bottom-limit inputs of the chunk.
     subray_flags, pulse_flags : dict of str to int
-    wall_s, cpu_s : dict of str to float
-        Seconds per stage spent on this chunk (in the process that ran it).
+    stages : dict of str to dict
+        Per stage, its seconds on this chunk and its memory peak in the process that ran it
+        (:meth:`pipeline.stages.StageClock.to_dict`).
     """
 
     part: dict[str, np.ndarray]
@@ -80,8 +81,7 @@ class ChunkResult:
     nb: dict[str, np.ndarray] | None
     subray_flags: dict[str, int]
     pulse_flags: dict[str, int]
-    wall_s: dict[str, float]
-    cpu_s: dict[str, float]
+    stages: dict[str, dict[str, float]]
 
     @property
     def n_pulses(self) -> int:
@@ -138,8 +138,7 @@ def run_chunk(job: ChunkJob, c: int) -> ChunkResult:
         nb=nb,
         subray_flags=P.describe_flags(paths.flags),
         pulse_flags=pulse_flags,
-        wall_s=dict(clock.wall_s),
-        cpu_s=dict(clock.cpu_s),
+        stages=clock.to_dict(),
     )
 
 

@@ -4,6 +4,7 @@ import ast
 import json
 import subprocess
 import sys
+import time
 import tomllib
 from pathlib import Path
 
@@ -12,7 +13,7 @@ import pytest
 from pipeline.cli import main
 from pipeline.run import run_scene
 from pipeline.scene import load_scene, parse_scene
-from pipeline.stages import STAGES, plan
+from pipeline.stages import STAGES, StageClock, plan
 
 from .conftest import ROOT
 
@@ -200,3 +201,66 @@ print(json.dumps(clock.to_dict()))
     # the high-water mark is the kernel's (ru_maxrss), not the clock's bookkeeping: the 200 MB
     # array raised it by most of its size, and it stays raised after the array is gone
     assert d["big"]["peak_rss_mb"] - d["small"]["peak_rss_mb"] > 150.0
+
+
+def test_a_stage_that_does_not_raise_the_mark_gets_its_own_peak():
+    # the process's high-water mark cannot give a later, lower stage's peak: the sampler does.
+    # Known allocations are the reference: every page of np.ones is written
+    code = """
+import json, time
+import numpy as np
+from pipeline.stages import StageClock
+from pipeline.rss_watch import current_rss_mb
+
+clock = StageClock()
+base = current_rss_mb()
+with clock.stage("first"):
+    a = np.ones(40_000_000)  # 305 MiB
+    del a
+with clock.stage("outer"):
+    with clock.stage("second"):
+        b = np.ones(13_000_000)  # 99 MiB, held long enough for 10 ms samples
+        time.sleep(0.2)
+        del b
+    with clock.stage("third"):
+        c = np.ones(52_000_000)  # 397 MiB: raises the mark
+        del c
+print(json.dumps({"base": base, "clock": clock.to_dict()}))
+"""
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT
+    )
+    res = json.loads(out.stdout.strip().splitlines()[-1])
+    d, base = res["clock"], res["base"]
+    assert d["first"]["peak_exact"] and d["first"]["peak_rss_mb"] - base > 290.0
+    # sampled, not the mark: within a few MiB of its 99 MiB above the start
+    assert not d["second"]["peak_exact"]
+    assert 90.0 < d["second"]["peak_rss_mb"] - base < 140.0
+    # the nested stage raised the mark: it and the stage around it get it exactly
+    assert d["third"]["peak_exact"] and d["third"]["peak_rss_mb"] - base > 380.0
+    assert d["outer"]["peak_exact"]
+    assert d["outer"]["peak_rss_mb"] == d["third"]["peak_rss_mb"]
+
+
+def test_worker_figures_add_seconds_and_keep_the_larger_peak():
+    clock = StageClock()
+    clock.add({"trace": {"wall_s": 1.0, "cpu_s": 2.0, "peak_rss_mb": 500.0, "peak_exact": True}})
+    clock.add({"trace": {"wall_s": 0.5, "cpu_s": 1.0, "peak_rss_mb": 300.0, "peak_exact": False}})
+    d = clock.to_dict()["trace"]
+    assert d == {"wall_s": 1.5, "cpu_s": 3.0, "peak_rss_mb": 500.0, "peak_exact": True}
+
+
+def test_the_sampler_works_in_a_forked_worker():
+    # a forked child inherits no sampling thread (and maybe a held lock): it starts its own
+    import multiprocessing
+
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        d = pool.apply(_stage_in_worker)
+    assert d["w"]["peak_rss_mb"] > 0.0
+
+
+def _stage_in_worker():
+    clock = StageClock()
+    with clock.stage("w"):
+        time.sleep(0.05)
+    return clock.to_dict()
