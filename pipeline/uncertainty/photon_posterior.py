@@ -45,8 +45,14 @@ import numpy as np
 
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.photon_carry import detrended_heights
-from pipeline.process.photon_livetime import bin_live_fraction, dead_height_m, event_heights_m
+from pipeline.process.photon_livetime import (
+    MIN_LIVE_FRACTION,
+    bin_live_fraction,
+    dead_height_m,
+    event_heights_m,
+)
 from pipeline.process.photon_windows import PhotonWindows
+from pipeline.uncertainty.photon_exposure import reference_rate, weighted_live_fraction
 from pipeline.uncertainty.posterior_selection import kept_for_posterior
 from pipeline.uncertainty.waveform_model import WaveformSystem, in_water_delay_s
 
@@ -277,8 +283,8 @@ def window_histograms(
         beam, ``2 n_air (z_origin - z) / (c |u_z|)``, lies within half a sample of
         ``t0 + j dt``.
     exposure : list of (m_i,) ndarray
-        Live share of each sample (:func:`~pipeline.process.photon_livetime.bin_live_fraction`
-        over the window's events), in (0, 1].
+        Live share of each sample over the window's events, weighted by the window's echoes
+        within the sample (:mod:`pipeline.uncertainty.photon_exposure`), in (0, 1].
     t0_s : (p,) ndarray
         Round-trip time of sample 0's centre.
     """
@@ -311,7 +317,15 @@ def window_histograms(
             np.array([kept.n_shots[k]]),
             n_channels,
         )[0, ::-1]
-        exposure.append(live)
+        # weighted by where the window's echoes put the light within each sample
+        # (pipeline.uncertainty.photon_exposure): the plain mean credits a piled-up echo's
+        # sample with the exposure after its events
+        ref = reference_rate(
+            samples[-1], live, t0[i], t_surface_s[i], t_bottom_s[i], dt, system.pulse_sigma_s
+        )
+        t_ev = (origin_z_m[i] - z) * scale
+        n_live = int(kept.n_shots[k]) * max(int(n_channels), 1)
+        exposure.append(weighted_live_fraction(t_ev, tau_h * scale, t0[i], dt, m, n_live, ref))
     return samples, exposure, t0
 
 
@@ -336,7 +350,8 @@ def photon_starts(
     dt = system.sample_interval_s
     out = np.zeros((len(samples), 9))
     for i, (y, e) in enumerate(zip(samples, exposure, strict=True)):
-        rate = y / e
+        # the rates as processing caps them (a weighted share can be ~0 just after an echo)
+        rate = y / np.maximum(e, MIN_LIVE_FRACTION)
         i_s = int(round((t_surface_s[i] - t0_s[i]) / dt))
         i_b = int(round((t_bottom_s[i] - t0_s[i]) / dt))
         lead = rate[: max(int(LEAD_S / dt), 4)]

@@ -18,6 +18,7 @@ from pipeline.optics import SPEED_OF_LIGHT_M_S as C
 from pipeline.process.photon_livetime import dead_height_m
 from pipeline.process.photon_windows import PhotonWindows
 from pipeline.scene import parse_scene
+from pipeline.uncertainty.photon_exposure import MIN_WEIGHTED_LIVE
 from pipeline.uncertainty.photon_posterior import (
     KeptPhotons,
     photon_starts,
@@ -97,12 +98,12 @@ def test_histogram_keeps_every_event_of_the_crop_and_the_dead_share():
     assert y[0].sum() == 2 * n
     dt = system.sample_interval_s
     j_s = int(np.floor((t_s - t0[0]) / dt + 0.5))
-    # samples wholly within (t_s, t_s + dead time) are blind in every shot: the floor (0.02)
+    # samples wholly within (t_s, t_s + dead time) are blind in every shot: the floor
     blind = np.arange(m := y[0].size)
     centre = t0[0] + blind * dt
     inside = (centre - dt / 2 > t_s) & (centre + dt / 2 < t_s + DEAD_S)
     assert inside.sum() >= 2
-    np.testing.assert_allclose(ex[0][inside], 0.02)
+    np.testing.assert_allclose(ex[0][inside], MIN_WEIGHTED_LIVE)
     # before the surface every channel is live
     np.testing.assert_allclose(ex[0][: j_s - 1], 1.0)
     assert m > j_s
