@@ -387,8 +387,10 @@ def at_detected_surface(surface, returns):
     surface time then moves the sounding only through the in-water path, as when the planes
     were fitted shot by shot (each through its window's one height). Read below the sampled
     surface instead, the depths of suite tuning 13 and 14 and held-out 9 posteriors moved 2-3
-    cm deep (their 68 % coverage 67, 100, 100 % -> 38, 82, 17 %) while the soundings' did not
-    (why the posterior's sample of the surface and the detection differ was not traced).
+    cm deep (their 68 % coverage 67, 100, 100 % -> 38, 82, 17 %) while the soundings' did not.
+    That was measured with each sample's plain mean live share, which put a piled-up surface
+    ~0.16 ns early (:mod:`pipeline.uncertainty.photon_exposure`); the weighted
+    share removes that difference, and this reading was kept as it is.
 
     Parameters
     ----------
