@@ -30,6 +30,7 @@ from pipeline.process.classify import (
 from pipeline.process.coverage import area_cells
 from pipeline.process.returns import PointFlag
 from pipeline.stages import trim_heap
+from pipeline.survey_block_reach import processing_reach_m, processing_rows
 from pipeline.survey_blocks import (
     LineSums,
     _sub_layout,
@@ -44,7 +45,7 @@ from pipeline.survey_blocks import (
     tpu_points,
     with_survey_lines,
 )
-from pipeline.survey_tiles import points_tile_order
+from pipeline.survey_tiles import points_tile_order, returns_position_m
 
 __all__ = ["run_blocked", "CoverageAccumulator"]
 
@@ -155,6 +156,8 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
         blocks = block_layout(scene, layout.bounds_m, n_pulses, halo)
         counts = pulse_counts(store, blocks)
         todo = blocks_to_process(blocks, counts, reach)
+        # how far past a block its pulses' planes and kriged sea are read (survey_block_reach)
+        krige_m, planes_m = processing_reach_m(ctx, ps, reach)
     used = np.flatnonzero(counts > 0)
     load = ((blocks.tile_m + 2.0 * halo) / blocks.tile_m) ** 2
     log(
@@ -200,7 +203,11 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
                     box_m=blocks.box_m(int(b)),
                     reach_m=tests_reach_m(ps) + ps.grid_resolution_m,
                 )
-                blk = process_survey(ret, scene, plan, ctx, sub, clock, _quiet, figures, keep)
+                pos, box = returns_position_m(ret, air), blocks.box_m(int(b))
+                at = tuple(processing_rows(pos, own, box, r) for r in (planes_m, krige_m))
+                blk = process_survey(
+                    ret, scene, plan, ctx, sub, clock, _quiet, figures, keep, process_at=at
+                )
                 done += 1
                 with clock.stage("outputs"):
                     pts = blk.processed.points

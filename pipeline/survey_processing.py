@@ -85,6 +85,7 @@ def process_survey(
     log=print,
     figures: SurveyFigures | None = None,
     tpu_keep=None,
+    process_at: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> SurveyProducts:
     """Process, grid and propagate the TPU of ``returns`` (``bathy run``'s stages, in order).
 
@@ -108,6 +109,10 @@ def process_survey(
         so their classes and cells are not the survey's); needs ``figures``. The class-43
         and rejection tests are made at the same points (:mod:`pipeline.survey_cleanup`).
         Default: all.
+    process_at : ((n_pulses,) bool, (n_pulses,) bool), optional
+        The pulses whose local planes and whose kriged sea are made (a block's,
+        :func:`~pipeline.survey_block_reach.processing_rows`: every pulse whose points or
+        surface what the block keeps reads); needs ``figures``. Default: all.
     """
     from pipeline.process.datum import survey_datum
     from pipeline.process.seabed_outliers import water_surface_range_m
@@ -120,7 +125,16 @@ def process_survey(
     ps, fr = scene.process, scene.frame
     origin = (fr.origin_easting_m, fr.origin_northing_m, 0.0)
     with clock.stage("process"):
-        processed = process_detections(returns, ctx, ps.classify, water_column=False, wide=fig.wide)
+        planes_at, krige_at = (None, None) if process_at is None else process_at
+        processed = process_detections(
+            returns,
+            ctx,
+            ps.classify,
+            water_column=False,
+            wide=fig.wide,
+            planes_at=planes_at,
+            krige_at=krige_at,
+        )
     if processed.surface.facet_slope_var is not None:
         log(
             f"  wave facets: mean-square slope {ctx.refraction.facet_mss:.4f} (Cox-Munk at the "

@@ -224,3 +224,37 @@ def test_blocks_of_planes_and_kriging_on_threads_change_nothing(survey, monkeypa
     with stage_threads(3):
         again = process_detections(returns, ctx, scene.process.classify, water_column=False)
     _assert_same_points(again.points, whole.points)
+
+
+@pytest.mark.slow
+def test_a_strip_asked_with_its_reach_around_it_gets_the_whole_survey_points(survey):
+    # a block's processing asked at some pulses only (pipeline.survey_block_reach): a strip of
+    # 20 m across the shore, the sea and the class-45 side. The sea kriged within a beam reach
+    # and the class-45 test's radius of it (the soundings its claims are tested against), the
+    # local planes a beam reach and the kriging's allowance further (the echoes it reads,
+    # water and not outliers of their own planes): the strip's points are the whole survey's,
+    # to the bit (that the reach is needed: tests/process/test_process_at.py, whose echoes
+    # hold many blunders)
+    from pipeline.survey_block_reach import processing_rows
+
+    scene, ctx, returns, whole = survey
+    cl = scene.process.classify
+    wide = survey_wide(
+        returns, surface_settings=ctx.surface_fit, refraction_settings=ctx.refraction
+    )
+    beam = beam_reach_m(returns, ctx, wide)
+    pos = returns_position_m(returns, ctx.instrument.air_index)
+    box = (-1e9, 1e9, 10.0, 30.0)
+    strip = processing_rows(pos, np.zeros(len(returns), bool), box, 0.0)
+    krige_m = beam + max(cl.no_bottom_radius_m, cl.no_bottom_land_radius_m)
+    krige = processing_rows(pos, strip, box, krige_m)
+    planes = processing_rows(pos, strip, box, krige_m + beam + ctx.surface_fit.radius_m)
+    assert 0.05 < strip.mean() and planes.mean() < 0.8
+    got = process_detections(
+        returns, ctx, cl, water_column=False, wide=wide, planes_at=planes, krige_at=krige
+    ).points
+    mine = returns.pulse_id[strip]
+    want = _by_pulse(whole.points.select(np.isin(whole.points.pulse_id, mine)))
+    assert np.any(want.classification == NO_BOTTOM_FOUND_AT)
+    assert np.any(whole.surface.is_land[strip])
+    _assert_same_points(_by_pulse(got.select(np.isin(got.pulse_id, mine))), want)

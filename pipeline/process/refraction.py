@@ -134,6 +134,7 @@ def seabed_points(
     settings: RefractionSettings | None = None,
     *,
     correct_refraction: bool = True,
+    krige_at: np.ndarray | None = None,
 ) -> Points:
     """Georeference the bottom returns of every pulse that has one.
 
@@ -147,6 +148,10 @@ def seabed_points(
         Defaults if omitted.
     correct_refraction : bool
         False gives the uncorrected points (straight beam, speed of light in air).
+    krige_at : (n_pulses,) bool ndarray, optional
+        Krige the sea only above these pulses' soundings (a block's, whose points are read:
+        :mod:`pipeline.survey_block_reach`); the others read the plane. Each sounding is
+        kriged on its own, so those asked get the figures of a run asking all. Default: all.
 
     Returns
     -------
@@ -161,7 +166,7 @@ def seabed_points(
     own sea term; kriged again at points moved by millimetres, it would jump wherever an echo
     enters or leaves the nearest ones).
     """
-    return _seabed_points(returns, surface, settings, correct_refraction)[0]
+    return _seabed_points(returns, surface, settings, correct_refraction, krige_at=krige_at)[0]
 
 
 def seabed_xyz_depth(
@@ -190,7 +195,9 @@ def kriged_sea_change(
     return _seabed_points(returns, unfrozen, settings, True)[1]
 
 
-def _seabed_points(returns, surface, settings, correct_refraction, *, xyz_depth_only=False):
+def _seabed_points(
+    returns, surface, settings, correct_refraction, *, xyz_depth_only=False, krige_at=None
+):
     """:func:`seabed_points` (or :func:`seabed_xyz_depth`'s array) and its sea change."""
     st = settings or RefractionSettings()
     if len(surface) != len(returns):
@@ -279,7 +286,7 @@ def _seabed_points(returns, surface, settings, correct_refraction, *, xyz_depth_
         # 0.013 m): their difference errs by 0.038 m. The plane's reading stays where no echo
         # is near.
         change = np.full(len(returns), np.nan)
-        r = np.flatnonzero(refr)
+        r = np.flatnonzero(refr if krige_at is None else refr & np.asarray(krige_at)[idx])
         t_r = np.asarray(returns.t_emit_s)[idx[r]]
         at_b, _, used = field.predict(xyz[r, :2], t_r)
         at_e, _, _ = field.predict(met[r, :2], t_r)
@@ -355,6 +362,8 @@ def georeference(
     include_derived_surface: bool = False,
     windows: PhotonWindows | None = None,
     wide: SurveyWide | None = None,
+    planes_at: np.ndarray | None = None,
+    krige_at: np.ndarray | None = None,
 ) -> ProcessedPoints:
     """Detected returns to classified points: surface fit, refraction, classification.
 
@@ -368,11 +377,17 @@ def georeference(
     ``windows``: photon counting, how the shots were accumulated (a window's shots share one
     detection: the sea correlation does not pair them). ``wide``: the survey-wide figures
     (:func:`~pipeline.process.survey_wide.survey_wide` of the whole survey) to use instead of
-    measuring them from ``returns`` (a tile of the survey and its halo).
+    measuring them from ``returns`` (a tile of the survey and its halo). ``planes_at``,
+    ``krige_at`` (``(n_pulses,)`` bool, need ``wide``): the local planes and the kriged sea
+    only at those pulses (:func:`fit_water_surface`, :func:`seabed_points`; a block's,
+    :mod:`pipeline.survey_block_reach`): the other pulses' points are not the survey's.
     """
+    if (planes_at is not None or krige_at is not None) and wide is None:
+        raise ValueError("`planes_at` and `krige_at` need the survey-wide figures (`wide`)")
     st = surface_settings or SurfaceFitSettings()
     group = None if windows is None else windows.of_returns(returns)
-    surface = fit_water_surface(returns, st, None if wide is None else wide.surface, group)
+    wide_s = None if wide is None else wide.surface
+    surface = fit_water_surface(returns, st, wide_s, group, planes_at=planes_at)
     sea = sea_wide(returns, surface, st, refraction_settings, group) if wide is None else wide.sea
     field = None
     if sea.covariance is not None:  # photon windows: one detection each, never kriged
@@ -387,7 +402,9 @@ def georeference(
     surface = dataclasses.replace(surface, sea_correlation=sea.correlation, sea_field=field)
     mss = (refraction_settings or RefractionSettings()).facet_mss
     surface = apply_facets(returns, surface, mss, sea.facets)
-    bottom, sea_change = _seabed_points(returns, surface, refraction_settings, True)
+    bottom, sea_change = _seabed_points(
+        returns, surface, refraction_settings, True, krige_at=krige_at
+    )
     parts = [water_surface_points(returns, surface, refraction_settings), bottom]
     if include_derived_surface:
         parts.append(water_surface_points(returns, surface, refraction_settings, derived=True))

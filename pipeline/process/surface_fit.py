@@ -188,6 +188,7 @@ def fit_water_surface(
     settings: SurfaceFitSettings | None = None,
     wide: SurfaceWide | None = None,
     group=None,
+    planes_at: np.ndarray | None = None,
 ) -> WaterSurface:
     """Fit the water surface under every pulse from the surface returns.
 
@@ -204,6 +205,12 @@ def fit_water_surface(
     group : (n,) array_like, optional
         Pulses sharing one detection (photon-counting windows, ``pulse_id //
         shots_per_window``): one surface sample per window (module notes, step 3).
+    planes_at : (n,) bool ndarray, optional
+        Fit the local planes only under these pulses (a block's, whose results are read:
+        :mod:`pipeline.survey_block_reach`); the other water pulses keep the global plane,
+        unflagged. The planes' neighbours are still every water-surface point, and the land
+        decision is still made for every pulse, so a pulse's plane is the one fitted with
+        every pulse asked. Default: every water pulse.
 
     Returns
     -------
@@ -273,7 +280,8 @@ def fit_water_surface(
     resid = np.zeros(n)
 
     water = ~is_land & ~grazing
-    q = np.flatnonzero(water)
+    # each plane is its own query (row by row): asking fewer changes none of the others
+    q = np.flatnonzero(water if planes_at is None else water & np.asarray(planes_at, bool))
     qxy = np.where(water_s[q, None], ps[q, :2], entry[q, :2])
     spts = np.column_stack([ps[water_s, :2], res_s[water_s]])
     t_emit = returns.t_emit_s

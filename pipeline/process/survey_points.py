@@ -36,6 +36,8 @@ def process_detections(
     *,
     water_column: bool = True,
     wide: SurveyWide | None = None,
+    planes_at: np.ndarray | None = None,
+    krige_at: np.ndarray | None = None,
 ) -> ProcessedPoints:
     """Points from the detections, as ``bathy run`` makes them.
 
@@ -52,6 +54,12 @@ def process_detections(
     wide : SurveyWide, optional
         The whole survey's survey-wide figures, when ``returns`` are a tile of it
         (:func:`~pipeline.process.survey_wide.survey_wide`); None: measured from ``returns``.
+    planes_at, krige_at : (n_pulses,) bool ndarray, optional
+        Need ``wide``. The local planes and the kriged sea (of the soundings and of the
+        class-45 points) only at those pulses (:func:`~pipeline.process.refraction.
+        georeference`; a block's, :mod:`pipeline.survey_block_reach`): a pulse in
+        ``krige_at`` whose kriging reads only echoes in ``planes_at`` gets the points of a
+        run asking all, the others' are not the survey's. Default: all.
 
     Returns
     -------
@@ -69,10 +77,12 @@ def process_detections(
         classify_settings=classify,
         windows=ins.windows,
         wide=wide,
+        planes_at=planes_at,
+        krige_at=krige_at,
     )
     # the class-45 points join their pulses' echo sequence: number every pulse again (LAS
     # return numbers 1..n in time order, the class-45 point after its surface)
-    claims = no_bottom_points(returns, processed, ctx)
+    claims = no_bottom_points(returns, processed, ctx, krige_at=krige_at)
     withheld = contradicted_claims(claims, processed.points, classify)
     points = Points.concatenate([processed.points, claims.select(~withheld)])
     processed = dataclasses.replace(
@@ -87,7 +97,10 @@ def process_detections(
 
 
 def no_bottom_points(
-    returns: DetectedReturns, processed: ProcessedPoints, ctx: ProcessingContext
+    returns: DetectedReturns,
+    processed: ProcessedPoints,
+    ctx: ProcessingContext,
+    krige_at: np.ndarray | None = None,
 ) -> Points:
     """ASPRS class 45 "no-bottom-found-at" points of the water pulses that have no bottom.
 
@@ -101,7 +114,8 @@ def no_bottom_points(
     (:func:`~pipeline.process.detect_photons.detect_photon_events`), not the end of the range
     gate: opaque water establishes nothing below its surface. Detections without limits
     (``t_no_bottom_s`` None) keep the end of the recorded window, ``window_s − pre_trigger_s``
-    after the surface echo.
+    after the surface echo. ``krige_at`` (``(n_pulses,)`` bool): the sea is kriged above
+    those pulses' points only (:func:`~pipeline.process.refraction.seabed_points`).
     """
     ins = ctx.instrument
     none = returns.has_surface & ~returns.has_bottom
@@ -118,7 +132,7 @@ def no_bottom_points(
         t_bottom_sigma_s=None,
         t_no_bottom_s=None,
     )
-    pts = seabed_points(probe, processed.surface, ctx.refraction)
+    pts = seabed_points(probe, processed.surface, ctx.refraction, krige_at=krige_at)
     bad = PointFlag.LAND | PointFlag.GRAZING | PointFlag.ABOVE_SURFACE
     pts = pts.select((pts.flags & np.uint16(bad)) == 0)
     # made by processing, not measured: LAS's synthetic flag; no echo of its own, so amplitude
