@@ -283,34 +283,41 @@ def test_a_blocked_survey_gives_the_whole_survey_points_grid_and_evaluation(runs
 @pytest.fixture(scope="module")
 def fire_runs(tmp_path_factory):
     """The survey with :data:`FIRE`'s thresholds, processed whole and by blocks of 50 m
-    (every block in the sample), and the share of its loaded points each block kept (its
-    TPU, its class-43 and rejection tests)."""
+    (every block in the sample), the share of its loaded points each block kept (its TPU, its
+    class-43 and rejection tests) and the shares of its loaded pulses whose local planes and
+    kriged sea it made (``pipeline.survey_block_reach``)."""
     import pipeline.survey_blocks_run as sbr
 
     root = tmp_path_factory.mktemp("blocks_fire")
-    lines, kept = {}, []
+    lines, kept, made = {}, [], []
 
     def tpu_points(points, *args, **kw):
         keep = sbr_tpu_points(points, *args, **kw)
         kept.append(np.count_nonzero(keep) / keep.size)
         return keep
 
-    sbr_tpu_points = sbr.tpu_points
+    def processing_rows(*args, **kw):
+        rows = sbr_processing_rows(*args, **kw)
+        made.append(np.count_nonzero(rows) / rows.size)
+        return rows
+
+    sbr_tpu_points, sbr_processing_rows = sbr.tpu_points, sbr.processing_rows
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(sbr, "tpu_points", tpu_points)
+        mp.setattr(sbr, "processing_rows", processing_rows)
         for name, run in (("whole", {}), ("blocks", {"block_m": 50.0})):
             got = []
             scene = wave_survey_scene(process=FIRE, **run)
             run_scene(scene, root / name, log=got.append, workers=1)
             lines[name] = got
-    return root, lines, np.array(kept)
+    return root, lines, np.array(kept), np.array(made).reshape(-1, 2)
 
 
 @pytest.mark.slow
 def test_blocks_whose_class43_and_rejection_tests_fire_give_the_whole_survey_outputs(fire_runs):
     # the default thresholds make neither a class-43 point nor a rejection on this survey;
     # FIRE's make both, and each block tests only the points it keeps and their reach
-    root, lines, kept = fire_runs
+    root, lines, kept, made = fire_runs
     ev = json.loads((root / "whole" / "evaluation.json").read_text())
     assert ev["features"]["object_points"] > 0  # 589
     rej = ev["seabed_rejected"]
@@ -320,6 +327,10 @@ def test_blocks_whose_class43_and_rejection_tests_fire_give_the_whole_survey_out
     # the halo (139 m) covers this whole survey, but each of the 27 blocks keeps and tests
     # only a part of it (1.5 to 24 %): what is compared is the tests made at a subset
     assert kept.size > 20 and np.all(kept > 0.0) and np.max(kept) < 0.5
+    # and the blocks' local planes and kriged sea are made at a part of their pulses (planes
+    # 74 to 100 %, the sea 63 to 94 %): what is compared is processing asked at a subset too
+    assert len(made) == kept.size and np.all(made[:, 1] <= made[:, 0])
+    assert made[:, 0].min() < 0.8 and made[:, 1].min() < 0.7
     assert_blocked_as_whole(root, lines, "whole", "blocks")
 
 
