@@ -15,18 +15,20 @@ block's cells and its own pulses' positions (``b`` the survey's beam reach,
   margin);
 * **their readers** reach, from a kept point, the soundings within the TPU's reach
   (:func:`~pipeline.uncertainty.tpu_survey_wide.tpu_halo_m`: the gradient's and the pair
-  scatter's searches) and another beam to their pulses; the wave pool's cell of the kept
-  point's entry (:mod:`pipeline.uncertainty.wave_pool`: a beam to its pulse, one to its
-  entry, the cell's diagonal, a beam from each contributor's entry to its pulse); the
-  rejection planes' references within ``tests_reach_m`` and a beam; the class-45
-  contradiction's soundings and ground within ``no_bottom_radius_m`` /
-  ``no_bottom_land_radius_m`` and a beam. Within the largest of these the sea is kriged
-  (``krige``): every point read there is the survey's.
+  scatter's searches) and another beam to their pulses; the rejection planes' references
+  within ``tests_reach_m`` and a beam; the class-45 contradiction's soundings and ground
+  within ``no_bottom_radius_m`` / ``no_bottom_land_radius_m`` and a beam. These read the
+  soundings' depths or their classes, which read the depths (a sounding above the sea or
+  shallower than ``min_depth_m`` is not class 40): within the largest of them the sea is
+  kriged (``krige``).
 * **the kriging** of those reads the nearest surface echoes that are water and not outliers
   of their own planes, on the pulse's beam (another beam) and within the kriging's allowance
   (the surface fit's ``radius_m``, as :func:`~pipeline.process_tiles.processing_halo_m`
-  allows it): there the local planes are fitted (``planes``). The planes themselves read
-  every loaded water-surface point (the land decision is still made for every pulse).
+  allows it); and the wave pool's cell of a kept point's entry
+  (:mod:`pipeline.uncertainty.wave_pool`: a beam to its pulse, one to its entry, the cell's
+  diagonal, a beam from each contributor's entry to its pulse) reads their planes' scatter
+  alone. There the local planes are fitted (``planes``); they read every loaded
+  water-surface point (the land decision is still made for every pulse).
 
 Outside ``planes`` a pulse keeps the global plane, outside ``krige`` its depth reads the
 plane: their points are not the survey's and nothing the block keeps reads them. The margins
@@ -67,14 +69,10 @@ def processing_reach_m(ctx, ps, beam_reach_m: float) -> tuple[float, float]:
     tests = tests_reach_m(ps)
     kept = b + tests + ps.grid_resolution_m
     cl = ps.classify
-    reads = max(
-        tpu_halo_m(ctx.tpu) + b,
-        3.0 * b + math.sqrt(2.0) * ctx.tpu.wave_pool_cell_m,
-        tests + b,
-        max(cl.no_bottom_radius_m, cl.no_bottom_land_radius_m) + b,
-    )
-    krige = kept + reads
-    return float(krige), float(krige + b + ctx.surface_fit.radius_m)
+    radius = max(cl.no_bottom_radius_m, cl.no_bottom_land_radius_m)
+    krige = kept + b + max(tpu_halo_m(ctx.tpu), tests, radius)
+    pool = kept + 3.0 * b + math.sqrt(2.0) * ctx.tpu.wave_pool_cell_m
+    return float(krige), float(max(krige + b + ctx.surface_fit.radius_m, pool))
 
 
 def processing_rows(pos_m: np.ndarray, own: np.ndarray, box_m, reach_m: float) -> np.ndarray:

@@ -19,11 +19,11 @@ After the chunk loop it runs in four passes, each holding a bounded part of the 
 3. **Beam reach.** One pass over the chunks measures the farthest reach of a beam from its
    pulse's position (:func:`~pipeline.process_tiles.beam_reach_m`, a maximum: the same
    streamed) at the sample's water level; it sets the halo (:func:`block_halo_m`).
-4. **Every block** with its halo: processed with the sample's figures handed in, its local
-   planes and kriged sea made only where what it keeps reads them
-   (:mod:`pipeline.survey_block_reach`), its TPU and tests only at the points it keeps
-   (:func:`tpu_points`); its own
-   pulses' points are appended to ``points.laz`` (:class:`~pipeline.outputs.las.LazTileWriter`)
+4. **Every block** with its halo: processed with the sample's figures handed in (its local
+   planes and kriged sea made only where what it keeps reads them,
+   :mod:`pipeline.survey_block_reach`; its TPU and tests only at the points it keeps,
+   :func:`tpu_points`); its own pulses' points are appended to ``points.laz``
+   (:class:`~pipeline.outputs.las.LazTileWriter`)
    and its own cells (:func:`own_cells`) go to disk at once, into the survey's grid
    (:class:`~pipeline.outputs.grid_tiles.GridTiles`, which writes ``grid.tif`` and
    ``grid.nc`` from there window by window). Nothing of a block stays.
