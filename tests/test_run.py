@@ -42,11 +42,11 @@ def test_default_scene_runs(tmp_path, monkeypatch):
     manifest = json.loads((tmp_path / "out" / "default" / "manifest.json").read_text())
     assert manifest["scene"]["scene"]["name"] == "default"
     # the stages after the chunk loop run in this process: the run's high-water mark bounds
-    # their peaks, and the first stage in the run to use memory raised it (an exact figure)
+    # their peaks (whether one of them raised it depends on what the test process ran before;
+    # tests/test_stages.py checks that in fresh interpreters)
     mine = [s for s in manifest["plan"] if s["runs"] and s["stage"] in ("process", "grid", "tpu")]
     assert len(mine) == 3
     assert all(0 < s["peak_rss_mb"] <= manifest["memory"]["peak_rss_mb"] for s in mine)
-    assert any(s.get("peak_exact") for s in manifest["plan"] if s["runs"])
     # the emcee depth posteriors of a bounded sample of points hold the truth as often as
     # their intervals say (48 pulses: 99.9 % binomial bands around 68 % and 95 %)
     ev = json.loads((tmp_path / "out" / "default" / "evaluation.json").read_text())
