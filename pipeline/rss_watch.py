@@ -7,7 +7,8 @@ a value the mark cannot give without being reset (``/proc/self/clear_refs``). A 
 also lower what ``wait4`` and ``/usr/bin/time`` report for the whole process after it exits,
 so it is not done: such a span's peak is the largest of the RSS samples a thread takes every
 ``interval_s`` while the span is open (a lower bound, which can miss spikes shorter than the
-interval). :func:`span_peak` says which of the two a figure is.
+interval). :class:`~pipeline.stages.StageClock` records which of the two each stage's figure
+is (``peak_exact``).
 
 The sampler reads ``/proc/self/statm`` (Linux); elsewhere spans get only the exact kind, when
 the process's ``ru_maxrss`` rose.
