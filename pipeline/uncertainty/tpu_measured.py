@@ -84,6 +84,9 @@ _CH_A, _CH_B = 0.457, 0.494
 _LIKE_INCIDENCE_DEG = 2.5
 #: Lag bins of each incidence band the nugget is extrapolated from.
 _NUGGET_BINS = 3
+#: A lag bin with fewer pairs than this share of each neighbour's is not read by the wave term
+#: (:meth:`SurfaceVariogram.wave_lags`; set on the suite's tuning half).
+_SPARSE_SHARE = 0.1
 
 
 @dataclass(frozen=True)
@@ -108,6 +111,8 @@ class SurfaceVariogram:
     raw_rise_per_m2 : float
         The same of the heights above the survey's global plane instead: half the mean-square
         slope of the whole sea along the pairs (what a plane that follows nothing misses).
+    lag_pairs : (k,) int64 or None
+        Pairs in each lag bin (None: not known, e.g. a variogram built by hand).
     """
 
     lag_m: np.ndarray
@@ -116,6 +121,7 @@ class SurfaceVariogram:
     pairs: int
     rise_per_m2: float = 0.0
     raw_rise_per_m2: float = 0.0
+    lag_pairs: np.ndarray | None = None
 
     @classmethod
     def empty(cls) -> SurfaceVariogram:
@@ -131,9 +137,33 @@ class SurfaceVariogram:
         lag bins. A function of ``lag_m`` and ``gamma_m2`` alone, so a variogram handed to a
         tile (:mod:`pipeline.uncertainty.tpu_survey_wide`) or built by hand has it too.
         """
-        if self.lag_m.size == 0:
+        lag, gamma = self.wave_lags()
+        if lag.size == 0:
             return float("nan")
-        return _sea_nugget(self.lag_m[:_NUGGET_BINS], self.gamma_m2[:_NUGGET_BINS])
+        return _sea_nugget(lag[:_NUGGET_BINS], gamma[:_NUGGET_BINS])
+
+    def wave_lags(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(lag_m, gamma_m2)`` the wave term reads: without isolated sparse bins.
+
+        A scan's pair separations come in classes (the n-th neighbour along a sweep, the next
+        sweep), so a lag bin between two classes can hold a few pairs of another kind only.
+        On suite shoal tuning seed 7004 (Palmer, 210 m, waves) the 1.0-1.5 m bin held 218
+        pairs, all from successive sweeps at the circle's sides, against 28 000 and 27 000 in
+        its neighbours. Their surface errors are alike, so its ``gamma`` (0.010² m²) lay below
+        the ranging noise of the pairs around it (0.027² m²). The fit through the three
+        shortest bins (:func:`_sea_nugget`) then fell (``a < 0``), and the wave term was 0
+        where the sea read over the soundings erred by 0.05 m. A bin holding fewer than
+        :data:`_SPARSE_SHARE` of the pairs of each of its neighbours is left out here (an end
+        bin is compared with its one neighbour). Sparse bins that rise in a run of their own
+        stay (an oscillating scanner's shortest lags: 220, 409 and 966 pairs). Without
+        ``lag_pairs`` every bin is read.
+        """
+        if self.lag_pairs is None or self.lag_m.size < 3:
+            return self.lag_m, self.gamma_m2
+        n = np.asarray(self.lag_pairs, dtype=np.float64)
+        left, right = np.r_[np.inf, n[:-1]], np.r_[n[1:], np.inf]
+        keep = ~((n < _SPARSE_SHARE * left) & (n < _SPARSE_SHARE * right))
+        return self.lag_m[keep], self.gamma_m2[keep]
 
     def gamma_at(self, lag_m) -> np.ndarray:
         """``gamma`` interpolated at ``lag_m`` (clamped at the ends; 0 without bins)."""
@@ -261,10 +291,11 @@ def surface_variogram(
     # the pairs of each lag bin, in their own order (a stable sort: each bin's mean sums the
     # same values in the same order as a mask would select them)
     by_lag = _Bins(lag_bin, n_lag)
-    lags, gammas, gammas_raw = [], [], []
+    lags, gammas, gammas_raw, counts = [], [], [], []
     for b in range(n_lag):
         m = by_lag.rows(b)
         if m.size >= min_pairs:
+            counts.append(m.size)
             lags.append(float(np.mean(lag[m])))
             gammas.append(_robust_semivariance(d[m]))
             gammas_raw.append(_robust_semivariance(d_raw[m]))
@@ -291,7 +322,10 @@ def surface_variogram(
                 break
         if hs:
             nugget[b] = _nugget(np.array(hs), np.array(gs))
-    return SurfaceVariogram(np.array(lags), np.array(gammas), nugget, int(n_pairs), rise, raw_rise)
+    return SurfaceVariogram(
+        np.array(lags), np.array(gammas), nugget, int(n_pairs), rise, raw_rise,
+        np.array(counts, dtype=np.int64),
+    )  # fmt: skip
 
 
 def _incidence_deg(returns, surface, rows):
@@ -352,10 +386,13 @@ def wave_entry_sigma_m(vg: SurfaceVariogram, delta_m, rho=None) -> np.ndarray:
         The correlation the depth used at each ``Delta``.
     """
     delta = np.asarray(delta_m, dtype=np.float64)
-    if vg.lag_m.size == 0:
+    lag, gamma = vg.wave_lags()
+    if lag.size == 0:
         return np.zeros(delta.shape)
-    h0, g0, n = vg.lag_m[0], vg.gamma_m2[0], vg.pooled_nugget_m2
-    wave = np.where(delta >= h0, vg.gamma_at(delta) - n, max(g0 - n, 0.0) * (delta / h0) ** 2)
+    h0, g0, n = lag[0], gamma[0], vg.pooled_nugget_m2
+    wave = np.where(
+        delta >= h0, np.interp(delta, lag, gamma) - n, max(g0 - n, 0.0) * (delta / h0) ** 2
+    )
     factor = 2.0 if rho is None else 1.0 + np.clip(np.asarray(rho, dtype=np.float64), 0.0, 1.0)
     return np.sqrt(factor * np.maximum(np.nan_to_num(wave), 0.0))
 

@@ -20,6 +20,7 @@ from pipeline.process.sea_correlation import SeaCorrelation
 from pipeline.process.surface_fit import SurfaceFitSettings, fit_water_surface
 from pipeline.uncertainty.tpu import point_tpu
 from pipeline.uncertainty.tpu_measured import (
+    INCIDENCE_BANDS_DEG,
     WAVE_TERM,
     SurfaceVariogram,
     surface_variogram,
@@ -386,3 +387,41 @@ def test_facet_excess_term_is_the_wind_sigma_share_of_the_correction():
         out.sigma_depth_correlated_m, np.hypot(tpu.sigma_depth_correlated_m, want), rtol=3e-3
     )
     np.testing.assert_array_equal(out.sigma_depth_random_m, tpu.sigma_depth_random_m)
+
+
+def test_an_isolated_sparse_lag_bin_is_not_read_by_the_wave_term():
+    # suite shoal tuning 7004's shortest bins: pairs of a smooth sea over ranging noise
+    # (gamma = s_r² + a h², written here) with, between two sweeps' classes, a bin of 218
+    # pairs of another kind whose gamma lies below the ranging noise
+    s_r, a = 0.023, 3.5e-4
+    lags = np.array([0.77, 1.27, 1.53, 2.31, 3.44])
+    gamma = s_r**2 + a * lags**2
+    gamma[1] = 0.0104**2
+    counts = np.array([28483, 218, 27562, 26660, 50708])
+    nb = len(INCIDENCE_BANDS_DEG) - 1
+    vg = SurfaceVariogram(lags, gamma, np.full(nb, s_r**2), int(counts.sum()), lag_pairs=counts)
+    assert vg.pooled_nugget_m2 == pytest.approx(s_r**2, rel=1e-9)
+    delta = np.array([0.3, 0.6, 1.0, 2.0])
+    # the sea's part at each offset, rho = 1 read as the entry's (2 gamma_w): analytic below
+    # the shortest lag (the h² rise from the origin), within the lag bins' linear
+    # interpolation of the h² curve (< 10 % here) above it
+    got = wave_entry_sigma_m(vg, delta)
+    np.testing.assert_allclose(got[:2], np.sqrt(2 * a * delta[:2] ** 2), rtol=1e-9)
+    np.testing.assert_allclose(got[2:], np.sqrt(2 * a * delta[2:] ** 2), rtol=0.1)
+    # read with the sparse bin, the fit through the three shortest falls and the term vanishes
+    blind = SurfaceVariogram(lags, gamma, np.full(nb, s_r**2), int(counts.sum()))
+    assert blind.pooled_nugget_m2 == pytest.approx(gamma[0])
+    assert np.all(wave_entry_sigma_m(blind, delta[:2]) == 0.0)
+
+
+def test_sparse_bins_rising_in_a_run_of_their_own_are_read():
+    # an oscillating scanner's shortest lags (suite tuning 33): few pairs, but no dip between
+    # two dense neighbours
+    lags = np.array([0.38, 0.76, 1.3, 1.78, 2.46])
+    gamma = 1e-4 + 2e-4 * lags**2
+    counts = np.array([220, 409, 966, 11528, 2082])
+    nb = len(INCIDENCE_BANDS_DEG) - 1
+    vg = SurfaceVariogram(lags, gamma, np.full(nb, 1e-4), int(counts.sum()), lag_pairs=counts)
+    got_lag, got_gamma = vg.wave_lags()
+    np.testing.assert_array_equal(got_lag, lags)
+    np.testing.assert_array_equal(got_gamma, gamma)
