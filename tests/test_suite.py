@@ -397,7 +397,7 @@ def _halves(heldout_xfail_reason: str) -> list:
 @pytest.mark.parametrize(
     "half_name",
     _halves(
-        "measured: held-out TPU 95 % coverage 98.0 % (2026-11-30; 97.9 % on 2026-11-25: too "
+        "measured: held-out TPU 95 % coverage 97.9 % (2026-11-30, as on 2026-11-25: too "
         "wide, its points gained, RMSE 0.057 -> 0.049 m, from the surface echo's population "
         "weighting and the kriged sea change, the TPU's sea and surface timing terms did not "
         "shrink with them); 93.9 % before the kriged sea, 97.7 % before the seabed gradient's "
