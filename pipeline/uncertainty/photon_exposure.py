@@ -65,6 +65,11 @@ class ReferenceRate:
         self.a_s, self.a_b = float(area_surface), float(area_bottom)
         self.bg, self.col, self.sigma = float(background_per_s), float(column_per_s), sigma_s
 
+    @classmethod
+    def uniform(cls) -> ReferenceRate:
+        """A flat rate: the weighted live share is then the plain mean over each sample."""
+        return cls(0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0)
+
     def cumulative(self, t_s: np.ndarray) -> np.ndarray:
         """Expected count from the reference's origin to each time (increasing in ``t``)."""
         t = np.asarray(t_s, dtype=np.float64)

@@ -47,12 +47,15 @@ from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.photon_carry import detrended_heights
 from pipeline.process.photon_livetime import (
     MIN_LIVE_FRACTION,
-    bin_live_fraction,
     dead_height_m,
     event_heights_m,
 )
 from pipeline.process.photon_windows import PhotonWindows
-from pipeline.uncertainty.photon_exposure import reference_rate, weighted_live_fraction
+from pipeline.uncertainty.photon_exposure import (
+    ReferenceRate,
+    reference_rate,
+    weighted_live_fraction,
+)
 from pipeline.uncertainty.posterior_selection import kept_for_posterior
 from pipeline.uncertainty.waveform_model import WaveformSystem, in_water_delay_s
 
@@ -300,32 +303,21 @@ def window_histograms(
         z, tau_h = kept.z_m[ev], kept.tau_h_m[ev]
         scale = 2.0 * n_air / (c * abs(float(direction_z[i])))  # s of round trip per m
         m = int(np.ceil((t_end[i] - t0[i]) / dt)) + 1
-        j = np.floor(((origin_z_m[i] - z) * scale - t0[i]) / dt + 0.5).astype(np.int64)
+        t_ev = (origin_z_m[i] - z) * scale  # along this shot's beam
+        j = np.floor((t_ev - t0[i]) / dt + 0.5).astype(np.int64)
         inside = (j >= 0) & (j < m)
         samples.append(np.bincount(j[inside], minlength=m).astype(np.float64))
-        # the same samples as height bins, lowest first: sample j spans heights
-        # z_origin - (t0 + (j +- 1/2) dt) / scale
-        h = dt / scale
-        z_low = origin_z_m[i] - (t0[i] + (m - 0.5) * dt) / scale
-        live = bin_live_fraction(
-            np.zeros(z.size, dtype=np.int64),
-            z,
-            tau_h,
-            z_low,
-            h,
-            m,
-            np.array([kept.n_shots[k]]),
-            n_channels,
-        )[0, ::-1]
-        # weighted by where the window's echoes put the light within each sample
-        # (pipeline.uncertainty.photon_exposure): the plain mean credits a piled-up echo's
-        # sample with the exposure after its events
+        dead, n_live = tau_h * scale, int(kept.n_shots[k]) * max(int(n_channels), 1)
+        # the plain mean share over each sample gives the rates the reference is read from;
+        # the exposure is weighted by where the window's echoes put the light within each
+        # sample (pipeline.uncertainty.photon_exposure): the plain mean credits a piled-up
+        # echo's sample with the exposure after its events
+        plain = weighted_live_fraction(t_ev, dead, t0[i], dt, m, n_live, ReferenceRate.uniform())
         ref = reference_rate(
-            samples[-1], live, t0[i], t_surface_s[i], t_bottom_s[i], dt, system.pulse_sigma_s
-        )
-        t_ev = (origin_z_m[i] - z) * scale
-        n_live = int(kept.n_shots[k]) * max(int(n_channels), 1)
-        exposure.append(weighted_live_fraction(t_ev, tau_h * scale, t0[i], dt, m, n_live, ref))
+            samples[-1], np.maximum(plain, MIN_LIVE_FRACTION), t0[i], t_surface_s[i],
+            t_bottom_s[i], dt, system.pulse_sigma_s,
+        )  # fmt: skip
+        exposure.append(weighted_live_fraction(t_ev, dead, t0[i], dt, m, n_live, ref))
     return samples, exposure, t0
 
 

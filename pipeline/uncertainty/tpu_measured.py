@@ -165,13 +165,6 @@ class SurfaceVariogram:
         keep = ~((n < _SPARSE_SHARE * left) & (n < _SPARSE_SHARE * right))
         return self.lag_m[keep], self.gamma_m2[keep]
 
-    def gamma_at(self, lag_m) -> np.ndarray:
-        """``gamma`` interpolated at ``lag_m`` (clamped at the ends; 0 without bins)."""
-        lag = np.asarray(lag_m, dtype=np.float64)
-        if self.lag_m.size == 0:
-            return np.zeros(lag.shape)
-        return np.interp(lag, self.lag_m, self.gamma_m2)
-
 
 def _robust_semivariance(d: np.ndarray) -> float:
     """Cressie-Hawkins semivariance of differences ``d``: ``(mean |d|^½)⁴ / (2 (a + b / N))``."""

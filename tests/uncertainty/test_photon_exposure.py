@@ -56,7 +56,7 @@ def test_a_uniform_reference_gives_the_plain_live_share():
     t_ev = np.sort(rng.uniform(0.0, 30e-9, 400))
     dead = np.full(t_ev.size, DEAD_S)
     m, t0, n_live = 50, 0.0, 120
-    ref = ReferenceRate(0.0, 0.0, 0.0, 0.0, 1.0, 0.0, SIGMA_S)
+    ref = ReferenceRate.uniform()
     got = weighted_live_fraction(t_ev, dead, t0, DT, m, n_live, ref)
     # the same events as heights on a nadir beam (1 m of height per 2/c of time, any scale):
     # time sample j is height bin m - 1 - j, both centred on t0 + j dt
@@ -85,7 +85,7 @@ def test_a_piled_up_echo_is_timed_right_with_the_weighted_share_not_the_plain_on
         y = np.histogram(t_ev, edges)[0].astype(np.float64)
         dead = np.full(t_ev.size, DEAD_S)
         t0 = edges[0] + DT / 2
-        uniform = ReferenceRate(0.0, 0.0, 0.0, 0.0, 1.0, 0.0, SIGMA_S)
+        uniform = ReferenceRate.uniform()
         plain = np.maximum(weighted_live_fraction(t_ev, dead, t0, DT, m, n_shots, uniform), 0.02)
         ref = reference_rate(y, plain, t0, t_true + 0.1e-9, t_true + 0.1e-9, DT, SIGMA_S)
         weighted = weighted_live_fraction(t_ev, dead, t0, DT, m, n_shots, ref)
