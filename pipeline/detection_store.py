@@ -34,7 +34,7 @@ from pipeline.process.column_stack import ColumnStack
 from pipeline.process.returns import DetectedReturns
 from pipeline.uncertainty.posterior_selection import kept_for_posterior
 
-__all__ = ["SAMPLE_PULSES", "ChunkSummary", "DetectionStore", "SurveyAggregates"]
+__all__ = ["SAMPLE_PULSES", "ChunkSummary", "DetectionStore", "StoreReader", "SurveyAggregates"]
 
 #: Pulses whose values the survey-wide statistics keep, at most (about 8 bytes each per
 #: statistic): a survey this size or smaller uses every pulse.
@@ -118,7 +118,48 @@ class SetAside:
             return pickle.load(f)
 
 
-class DetectionStore:
+class _ChunkReads:
+    """Reading a store's chunks back: needs ``chunks``, ``_index`` and ``_fileno()``."""
+
+    chunks: list[ChunkSummary]
+    _index: list[dict[str, tuple[int, str, tuple[int, ...]]]]
+
+    def _fileno(self) -> int:
+        raise NotImplementedError
+
+    def load_chunk(self, c: int, fields: list[str] | None = None) -> dict[str, np.ndarray]:
+        """Fields of chunk ``c`` (all by default)."""
+        out = {}
+        for k in fields or list(self._index[c]):
+            off, dtype, shape = self._index[c][k]
+            n = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
+            buf = os.pread(self._fileno(), n, off) if n else b""
+            out[k] = np.frombuffer(buf, dtype=dtype).reshape(shape).copy()
+        return out
+
+    def load(self, chunks: list[int] | None = None) -> dict[str, np.ndarray]:
+        """The fields of ``chunks`` (default: all) concatenated in pulse order."""
+        idx = list(range(len(self.chunks)) if chunks is None else chunks)
+        # filled chunk by chunk: the survey's arrays once, not beside a list of their parts
+        n = sum(self._index[c]["pulse_id"][2][0] for c in idx)
+        out = {}
+        for k, (_, dtype, shape) in self._index[idx[0]].items():
+            out[k] = np.empty((n, *shape[1:]), dtype=dtype)
+        lo = 0
+        for c in idx:
+            part = self.load_chunk(c, list(out))
+            m = len(part["pulse_id"])
+            for k, v in part.items():
+                out[k][lo : lo + m] = v
+            lo += m
+        return out
+
+    def returns(self, chunks: list[int] | None = None) -> DetectedReturns:
+        """The detections of ``chunks`` (default: all) as one DetectedReturns."""
+        return detected_returns(self.load(chunks))
+
+
+class DetectionStore(_ChunkReads):
     """Per-chunk detections in one unnamed temporary file; a context manager.
 
     The file is made by :func:`tempfile.TemporaryFile` in the run's output folder (or, before
@@ -153,6 +194,27 @@ class DetectionStore:
         """Close (and so free) the file."""
         self._file.close()
 
+    def _fileno(self) -> int:
+        return self._file.fileno()
+
+    def reader(self) -> StoreReader | None:
+        """A read-only view for another process of this machine (None: no ``/proc`` here).
+
+        The chunks stored so far; the view reads the same unnamed file through this
+        process's ``/proc/<pid>/fd/<n>``, so it is valid while the store is open.
+        """
+        path = f"/proc/{os.getpid()}/fd/{self._file.fileno()}"
+        if not os.path.exists(path):
+            return None
+        st = os.fstat(self._file.fileno())
+        return StoreReader(
+            path,
+            (st.st_dev, st.st_ino),
+            self.air_index,
+            list(self.chunks),
+            [dict(i) for i in self._index],
+        )
+
     @property
     def n_pulses(self) -> int:
         """Pulses stored."""
@@ -184,16 +246,6 @@ class DetectionStore:
         """The fields stored for chunk ``c``."""
         return list(self._index[c])
 
-    def load_chunk(self, c: int, fields: list[str] | None = None) -> dict[str, np.ndarray]:
-        """Fields of chunk ``c`` (all by default)."""
-        out = {}
-        for k in fields or list(self._index[c]):
-            off, dtype, shape = self._index[c][k]
-            n = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
-            buf = os.pread(self._file.fileno(), n, off) if n else b""
-            out[k] = np.frombuffer(buf, dtype=dtype).reshape(shape).copy()
-        return out
-
     def replace_field(self, c: int, name: str, values: np.ndarray) -> None:
         """Overwrite (or add) one field of chunk ``c`` (appended; the old bytes are left).
 
@@ -212,26 +264,44 @@ class DetectionStore:
         for idx in self._index:
             idx.pop(name, None)
 
-    def load(self, chunks: list[int] | None = None) -> dict[str, np.ndarray]:
-        """The fields of ``chunks`` (default: all) concatenated in pulse order."""
-        idx = list(range(len(self.chunks)) if chunks is None else chunks)
-        # filled chunk by chunk: the survey's arrays once, not beside a list of their parts
-        n = sum(self._index[c]["pulse_id"][2][0] for c in idx)
-        out = {}
-        for k, (_, dtype, shape) in self._index[idx[0]].items():
-            out[k] = np.empty((n, *shape[1:]), dtype=dtype)
-        lo = 0
-        for c in idx:
-            part = self.load_chunk(c, list(out))
-            m = len(part["pulse_id"])
-            for k, v in part.items():
-                out[k][lo : lo + m] = v
-            lo += m
-        return out
 
-    def returns(self, chunks: list[int] | None = None) -> DetectedReturns:
-        """The detections of ``chunks`` (default: all) as one DetectedReturns."""
-        return detected_returns(self.load(chunks))
+class StoreReader(_ChunkReads):
+    """A :class:`DetectionStore`'s chunks, read by another process (:meth:`~DetectionStore.reader`).
+
+    Pickled, it carries the file's path and the chunks' index, not an open file: the file is
+    opened on first read, and must be the store's own (the same device and inode), so a
+    process on another machine fails on its first read instead of reading another file.
+    """
+
+    def __init__(self, path: str, identity: tuple[int, int], air_index: float, chunks, index):
+        self.path, self.identity, self.air_index = path, tuple(identity), float(air_index)
+        self.chunks, self._index = chunks, index
+        self._fd: int | None = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {**self.__dict__, "_fd": None}
+
+    def __del__(self) -> None:
+        if getattr(self, "_fd", None) is not None:
+            os.close(self._fd)
+
+    def _fileno(self) -> int:
+        if self._fd is None:
+            fd = os.open(self.path, os.O_RDONLY)
+            st = os.fstat(fd)
+            if (st.st_dev, st.st_ino) != self.identity:
+                os.close(fd)
+                raise OSError(
+                    f"{self.path} is not the detection store this reader was made for "
+                    "(a process on another machine?)"
+                )
+            self._fd = fd
+        return self._fd
+
+    @property
+    def n_pulses(self) -> int:
+        """Pulses stored."""
+        return sum(c.n_pulses for c in self.chunks)
 
 
 def detected_returns(cat: dict[str, np.ndarray]) -> DetectedReturns:

@@ -17,15 +17,15 @@ import tempfile
 from pathlib import Path
 
 from pipeline.errors import SceneError
+from pipeline.memory_budget import (
+    BASE_BYTES,
+    BYTES_PER_PULSE,
+    MEMORY_SHARE,
+    machine_memory_bytes,
+)
 
 __all__ = ["blocked_grid_cells", "check_disk", "check_feasible", "machine_memory_bytes"]
 
-#: Peak memory of a survey run held whole: 434 MB + 1.44 kB per pulse (measured with
-#: ``/usr/bin/time -v`` on the Palmer scene). A survey of more than ``run.block_pulses`` is
-#: processed block by block (:mod:`pipeline.survey_blocks`): it holds about
-#: ``max(run.block_pulses, run.sample_pulses)`` pulses at a time.
-BASE_BYTES = 434e6
-BYTES_PER_PULSE = 1.44e3
 #: Per node of a meshed seabed tile (:mod:`pipeline.simulate.tiled_seabed`): float64 vertices
 #: (24 B), two triangles' indices, normals and points (144 B), open3d's float32 copy and BVH.
 BYTES_PER_MESH_NODE = 256.0
@@ -34,8 +34,6 @@ BYTES_PER_MESH_NODE = 256.0
 BYTES_PER_ROUGHNESS_NODE = 48.0
 #: Per node of the seabed grid's two axes (float64, kept whole for the tiles' exact nodes).
 BYTES_PER_AXIS_NODE = 8.0
-#: Share of the machine's memory a run may plan to use.
-MEMORY_SHARE = 0.8
 #: Disk a survey run writes per pulse: its detection store (337 B measured on the Palmer scene,
 #: plus the fields processing rewrites) and its points (41 B in LAZ).
 DISK_BYTES_PER_PULSE = 450.0
@@ -48,11 +46,6 @@ DISK_SHARE = 0.9
 #: (at most those bands and their overviews, 32 B: DEFLATE only shrinks them). ``grid.nc`` is
 #: staged there after the GeoTIFFs are gone (compressed, less than them).
 TEMP_BYTES_PER_CELL = 29.0 + 24.0 + 32.0
-
-
-def machine_memory_bytes() -> float:
-    """Physical memory of this machine in bytes."""
-    return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
 
 
 def check_feasible(scene) -> None:

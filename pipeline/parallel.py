@@ -250,6 +250,18 @@ class Executor:
             "local_threads": self.local_threads,
         }
 
+    def shares_file(self, path: str) -> bool:
+        """Whether every worker opens the same file at ``path`` as this process.
+
+        A pool's workers run on this machine and always do; a Dask cluster's do only on this
+        machine (compared by device and inode, which ``/proc/<pid>/fd`` paths keep).
+        """
+        if self._client is None:
+            return True
+        st = os.stat(path)
+        seen = self._client.run(_file_identity, path)
+        return bool(seen) and all(v == (st.st_dev, st.st_ino) for v in seen.values())
+
     def __enter__(self) -> Executor:
         return self
 
@@ -306,6 +318,15 @@ class Executor:
             )
         finally:
             client.cancel([shared_f])
+
+
+def _file_identity(path: str) -> tuple[int, int] | None:
+    """``(st_dev, st_ino)`` of ``path`` here, None where it does not open."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino
 
 
 def _ordered(submit: Callable[[int], Any], n_tasks: int, ahead: int) -> Iterator[Any]:

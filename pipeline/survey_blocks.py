@@ -26,7 +26,10 @@ After the chunk loop it runs in four passes, each holding a bounded part of the 
    (:class:`~pipeline.outputs.las.LazTileWriter`)
    and its own cells (:func:`own_cells`) go to disk at once, into the survey's grid
    (:class:`~pipeline.outputs.grid_tiles.GridTiles`, which writes ``grid.tif`` and
-   ``grid.nc`` from there window by window). Nothing of a block stays.
+   ``grid.nc`` from there window by window). Nothing of a block stays. The blocks run side
+   by side on the run's executor (:mod:`pipeline.survey_block_task`: a pure function of the
+   block, written in block order), its workers reading the store through
+   :meth:`~pipeline.detection_store.DetectionStore.reader`.
 
 What stays in memory across blocks: the coverage's cells (one byte per grid cell, sized by
 the area), the sample's products (set aside on disk while the blocks run; its own grid and

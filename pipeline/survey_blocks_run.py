@@ -6,15 +6,16 @@ The passes of :mod:`pipeline.survey_blocks`, wired and timed.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import gc
 import time
 
 import numpy as np
 
 from pipeline.detection_store import SetAside
+from pipeline.memory_budget import MEMORY_SHARE, machine_memory_bytes
 from pipeline.outputs.grid_tiles import GridFrame, GridTiles
 from pipeline.outputs.las_fields import LineEnds
+from pipeline.parallel import Executor
 from pipeline.process.classify import (
     BATHYMETRIC_POINT,
     DERIVED_WATER_SURFACE,
@@ -28,24 +29,21 @@ from pipeline.process.classify import (
     WATER_SURFACE,
 )
 from pipeline.process.coverage import area_cells
-from pipeline.process.returns import PointFlag
+from pipeline.rss_watch import current_rss_mb
 from pipeline.stages import trim_heap
-from pipeline.survey_block_reach import processing_reach_m, processing_rows
+from pipeline.survey_block_reach import processing_reach_m
+from pipeline.survey_block_task import BlockJob, blocks_side_by_side, run_block
 from pipeline.survey_blocks import (
     LineSums,
-    _sub_layout,
     block_halo_m,
     block_layout,
     blocks_to_process,
     load_blocks,
-    own_cells,
     pulse_counts,
     sample_blocks,
-    tests_reach_m,
-    tpu_points,
     with_survey_lines,
 )
-from pipeline.survey_tiles import points_tile_order, returns_position_m
+from pipeline.survey_tiles import points_tile_order
 
 __all__ = ["run_blocked", "CoverageAccumulator"]
 
@@ -81,33 +79,6 @@ class CoverageAccumulator:
     def fraction(self) -> float:
         """Fraction of the area's cells holding a point."""
         return float(self.seen.mean())
-
-
-#: The rejection rules' counts (:func:`~pipeline.process.seabed_outliers.reject_seabed_outliers`)
-#: by the flag each sets.
-_RULES = {
-    "tvu_exceeded": PointFlag.TVU_EXCEEDED,
-    "surface_implausible": PointFlag.SURFACE_IMPLAUSIBLE,
-    "seabed_outlier": PointFlag.SEABED_OUTLIER,
-}
-
-
-def _reached(returns, blocks, b: int, reach_m: float, air_index: float) -> bool:
-    """Whether a pulse of ``returns`` lies within a beam reach of block ``b``."""
-    from pipeline.survey_tiles import returns_position_m
-
-    xy = returns_position_m(returns, air_index)
-    x0, x1, y0, y1 = blocks.box_m(b)
-    x, y = xy[:, 0], xy[:, 1]
-    return bool(
-        np.any(
-            (x >= x0 - reach_m) & (x <= x1 + reach_m) & (y >= y0 - reach_m) & (y <= y1 + reach_m)
-        )
-    )
-
-
-def _quiet(*_args, **_kw) -> None:
-    return None
 
 
 def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ctx, layout):
@@ -182,52 +153,50 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
         del made, sample_returns
         gc.collect()
         trim_heap()
+    # the blocks side by side where the executor's workers can read the store (a process pool,
+    # or a Dask cluster on this machine), else one after another here; written in block order
+    reader = store.reader() if executor is not None and executor.workers > 1 else None
+    if reader is not None and executor.shares_file(reader.path):
+        runner, source = executor, reader
+        if executor.scheduler is None:
+            # a pool on this machine: as many blocks at once as its memory holds
+            loaded = min(n_pulses, float(counts.max()) * load)
+            free = MEMORY_SHARE * machine_memory_bytes() - (current_rss_mb() or 0.0) * 2.0**20
+            side = blocks_side_by_side(executor.workers, loaded, free)
+            if side < executor.workers:
+                log(
+                    f"  {side} block(s) at a time, not {executor.workers}: each holds about"
+                    f" {loaded:.3g} pulses (run.block_pulses), more than this machine's memory"
+                    " holds side by side"
+                )
+                runner = Executor(workers=side)
+    else:
+        runner, source = Executor(workers=1), store
+    job = BlockJob(
+        source, blocks, todo, counts, halo, reach, planes_m, krige_m, scene, plan, ctx,
+        figures, layout,
+    )  # fmt: skip
+    log(f"  blocks on {runner.workers} worker(s)")
     # the survey's grid on disk, removed when the survey is finished
     with GridTiles(frame) as tiles:
         t0, done = time.perf_counter(), 0
         with LazTileWriter(out / "points.laz", header, ctx.instrument.amplitude_full_scale) as w:
-            for k, b in enumerate(todo):
-                with clock.stage("blocks"):
-                    ret, own = load_blocks(store, blocks, [b], halo)
-                if ret is None or (
-                    counts[b] == 0 and not _reached(ret, blocks, int(b), reach, air)
-                ):
-                    continue  # no pulse near enough for a point of its to fall in the block
-                sub, row0, col0 = _sub_layout(blocks, int(b), halo)
-                # the TPU of the points the block keeps, and of those its tests read (one
-                # grid cell more: a point on the block's edge may fall in either cell); the
-                # class-43 and rejection tests are made at the same points
-                keep = functools.partial(
-                    tpu_points,
-                    own_pulse_id=ret.pulse_id[own],
-                    box_m=blocks.box_m(int(b)),
-                    reach_m=tests_reach_m(ps) + ps.grid_resolution_m,
-                )
-                pos, box = returns_position_m(ret, air), blocks.box_m(int(b))
-                at = tuple(processing_rows(pos, own, box, r) for r in (planes_m, krige_m))
-                blk = process_survey(
-                    ret, scene, plan, ctx, sub, clock, _quiet, figures, keep, process_at=at
-                )
-                done += 1
-                with clock.stage("outputs"):
-                    pts = blk.processed.points
-                    mine = np.isin(pts.pulse_id, ret.pulse_id[own])
-                    pts = pts.select(mine)
-                    order, starts = points_tile_order(pts, ret, layout, air)
-                    for i in range(starts.size - 1):
-                        w.write(pts.select(order[starts[i] : starts[i + 1]]), ret, lines)
-                    dst, src = own_cells(blocks, int(b), row0, col0)
-                    tiles.put(dst, blk.grid, blk.unc.cells, src)
-                    cover.add(pts.xyz_m[:, :2])
-                # the block's own pulses' counts (its halo's are another block's)
-                n_obj += int(np.count_nonzero(pts.classification == SUBMERGED_OBJECT))
-                for name, flag in _RULES.items():
-                    hit = (pts.flags & np.uint16(flag)) != 0
-                    rejected[name] = rejected.get(name, 0) + int(np.count_nonzero(hit))
-                held = blk.processed.withheld_pulse_id
-                withheld += int(np.count_nonzero(np.isin(held, ret.pulse_id[own])))
-                del ret, own, blk, pts
-                trim_heap()
+            for k, res in enumerate(runner.map(run_block, job, todo.size)):
+                clock.add(res.stages)
+                if res.points is not None:
+                    done += 1
+                    with clock.stage("outputs"):
+                        pts = res.points
+                        for i in range(res.starts.size - 1):
+                            w.write(pts.select(slice(res.starts[i], res.starts[i + 1])),
+                                    res.returns, lines)  # fmt: skip
+                        tiles.put_records(res.dst, res.records)
+                        cover.add(pts.xyz_m[:, :2])
+                    n_obj += res.class43
+                    withheld += res.withheld
+                    for name, hits in res.rejected.items():
+                        rejected[name] = rejected.get(name, 0) + hits
+                del res
                 if (k + 1) % 10 == 0 or k + 1 == todo.size:
                     log(
                         f"  {k + 1}/{todo.size} blocks looked at, {done} processed "

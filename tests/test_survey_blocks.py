@@ -230,18 +230,40 @@ def evaluation_figures(out):
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     """The survey processed whole; by blocks of 100 m, every block in the sample; and by
-    blocks of 60 m, a few of them in the sample."""
+    blocks of 60 m, a few of them in the sample: on 1 worker, and the blocked runs again on 2
+    (a process pool) and on a Dask cluster of 2 threads."""
+    from distributed import LocalCluster
+
     root = tmp_path_factory.mktemp("blocks")
     lines = {}
+    blocks, sampled = {"block_m": 100.0}, {"block_m": 60.0, "sample_pulses": 3000}
     cases = (
-        ("whole", {}),
-        ("blocks", {"block_m": 100.0}),
-        ("sampled", {"block_m": 60.0, "sample_pulses": 3000}),
+        ("whole", {}, 1),
+        ("blocks", blocks, 1),
+        ("sampled", sampled, 1),
+        ("blocks_w2", blocks, 2),
+        ("sampled_w2", sampled, 2),
     )
-    for name, run in cases:
+    for name, run, workers in cases:
         got = []
-        run_scene(wave_survey_scene(**run), root / name, log=got.append, workers=1)
+        run_scene(wave_survey_scene(**run), root / name, log=got.append, workers=workers)
         lines[name] = got
+    # 2 workers on a machine whose memory holds one block at a time (~0.46 GB each here)
+    import pipeline.survey_blocks_run as sbr
+    from pipeline.rss_watch import current_rss_mb
+
+    with pytest.MonkeyPatch.context() as mp:
+        rss = current_rss_mb() * 2.0**20
+        mp.setattr(sbr, "machine_memory_bytes", lambda: (rss + 0.7e9) / sbr.MEMORY_SHARE)
+        got = []
+        run_scene(wave_survey_scene(**sampled), root / "sampled_tight", log=got.append, workers=2)
+        lines["sampled_tight"] = got
+    # threads, not processes: a process cluster would start 2 more interpreters on 2 cores
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False) as cluster:
+        got = []
+        scene, address = wave_survey_scene(**sampled), cluster.scheduler_address
+        run_scene(scene, root / "sampled_dask", log=got.append, workers=None, scheduler=address)
+        lines["sampled_dask"] = got
     return root, lines
 
 
@@ -286,7 +308,8 @@ def fire_runs(tmp_path_factory):
     (every block in the sample), the share of its loaded points each block kept (its TPU, its
     class-43 and rejection tests) and the shares of its loaded pulses whose local planes and
     kriged sea it made (``pipeline.survey_block_reach``)."""
-    import pipeline.survey_blocks_run as sbr
+    import pipeline.survey_block_reach as reach
+    import pipeline.survey_blocks as sb
 
     root = tmp_path_factory.mktemp("blocks_fire")
     lines, kept, made = {}, [], []
@@ -301,10 +324,11 @@ def fire_runs(tmp_path_factory):
         made.append(np.count_nonzero(rows) / rows.size)
         return rows
 
-    sbr_tpu_points, sbr_processing_rows = sbr.tpu_points, sbr.processing_rows
+    # (pipeline.survey_block_task imports both when a block runs)
+    sbr_tpu_points, sbr_processing_rows = sb.tpu_points, reach.processing_rows
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(sbr, "tpu_points", tpu_points)
-        mp.setattr(sbr, "processing_rows", processing_rows)
+        mp.setattr(sb, "tpu_points", tpu_points)
+        mp.setattr(reach, "processing_rows", processing_rows)
         for name, run in (("whole", {}), ("blocks", {"block_m": 50.0})):
             got = []
             scene = wave_survey_scene(process=FIRE, **run)
@@ -369,6 +393,66 @@ def test_a_rewritten_position_field_moves_the_chunks_box(tmp_path):
         want = [xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()]
         np.testing.assert_array_equal(store.chunks[0].bbox_m, want)
         assert not np.array_equal(before, want)
+
+
+@pytest.mark.slow
+def test_blocks_side_by_side_give_the_outputs_of_blocks_one_after_another(runs):
+    # every block in the sample: 2 workers give the whole survey's outputs, as 1 does
+    root, lines = runs
+    assert any("blocks on 2 worker(s)" in s for s in lines["sampled_w2"])
+    assert any("blocks on 2 worker(s)" in s for s in lines["sampled_dask"])
+    assert any("blocks on 2 worker(s)" in s for s in lines["blocks_w2"])
+    assert_blocked_as_whole(root, lines, "whole", "blocks_w2")
+    # a sample of a few blocks (the others made with its figures): the same outputs on
+    # 1 worker, 2 workers and a Dask cluster
+    ref = las_points_by_pulse(root / "sampled")
+    # (and on 2 workers whose machine holds one block at a time: one after another)
+    assert any("1 block(s) at a time, not 2" in s for s in lines["sampled_tight"])
+    assert any("blocks on 1 worker(s)" in s for s in lines["sampled_tight"])
+    for name in ("sampled_w2", "sampled_dask", "sampled_tight"):
+        assert any(s.startswith("  blocks on ") for s in lines[name]), name
+        got = las_points_by_pulse(root / name)
+        assert got.keys() == ref.keys()
+        for d in ref:
+            np.testing.assert_array_equal(ref[d], got[d], err_msg=f"{name}: {d}")
+        assert_same_tif(root / "sampled" / "grid.tif", root / name / "grid.tif")
+        assert_same_nc(root / "sampled" / "grid.nc", root / name / "grid.nc")
+        want = json.dumps(evaluation_figures(root / "sampled"), sort_keys=True, default=str)
+        assert json.dumps(evaluation_figures(root / name), sort_keys=True, default=str) == want
+        for key in ("submerged objects", "class-45 claims withheld", "rejected bathymetric"):
+            want_line = [s for s in lines["sampled"] if key in s]
+            assert want_line and want_line == [s for s in lines[name] if key in s], key
+
+
+def test_a_store_read_from_another_process_gives_its_chunks(tmp_path):
+    import multiprocessing
+    import pickle
+
+    rng = np.random.default_rng(3)
+    with DetectionStore(tmp_path, 1.0) as store:
+        for c in range(3):
+            store.append(_part(rng, 50 + 10 * c, 1000 * c, c))
+        reader = store.reader()
+        assert reader.path.startswith("/proc/")
+        want = store.load()
+        with multiprocessing.get_context("spawn").Pool(1) as pool:
+            got = pool.apply(_load_all, (pickle.dumps(reader),))
+        assert got.keys() == want.keys()
+        for k in want:
+            np.testing.assert_array_equal(got[k], want[k], err_msg=k)
+        # another file at the same path is refused, not read
+        with DetectionStore(tmp_path, 1.0) as other:
+            other.append(_part(rng, 5, 0, 0))
+            wrong = other.reader()
+            wrong.identity = reader.identity
+            with pytest.raises(OSError, match="not the detection store"):
+                wrong.load_chunk(0)
+
+
+def _load_all(blob):
+    import pickle
+
+    return pickle.loads(blob).load()
 
 
 @pytest.mark.slow

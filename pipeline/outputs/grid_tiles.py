@@ -43,7 +43,7 @@ from pipeline.outputs.atomic import _anonymous_file as anonymous_file
 from pipeline.outputs.atomic import atomic_path
 from pipeline.process.grid import Grid, cell_centres_m
 
-__all__ = ["TILE", "GridFrame", "GridTiles"]
+__all__ = ["TILE", "GridFrame", "GridTiles", "cell_records"]
 
 #: Side of the windows written (cells): the COG's tiles and ``grid.nc``'s chunks.
 TILE = 256
@@ -125,6 +125,18 @@ class GridFrame:
 
     #: world transform of the cell corners, :attr:`Grid.transform`'s (the same attributes)
     transform = Grid.transform
+
+
+def cell_records(grid, cells, src: tuple[slice, slice]) -> np.ndarray:
+    """Cells ``src`` of a block's ``grid`` and ``cells``, as the records :class:`GridTiles` stores.
+
+    A worker that processed the block sends these (29 bytes a cell), not its grid.
+    """
+    first = getattr(grid, next(iter(_SOURCES.values()))[1])[src]
+    out = np.empty(first.shape, dtype=_CELL)
+    for name, (where, field) in _SOURCES.items():
+        out[name] = getattr(grid if where == "grid" else cells, field)[src]
+    return out
 
 
 class GridTiles:
@@ -215,13 +227,16 @@ class GridTiles:
             The block's cell uncertainty, shaped like ``grid``.
         src : (slice, slice)
         """
+        self.put_records(dst, cell_records(grid, cells, src))
+
+    def put_records(self, dst: tuple[slice, slice], records: np.ndarray) -> None:
+        """Write :func:`cell_records` ``(rows, cols)`` to the grid's cells ``dst``."""
         rows, cols = dst
         r0, r1, _ = rows.indices(self.frame.shape[0])
         c0, c1, _ = cols.indices(self.frame.shape[1])
-        block = np.empty((r1 - r0, c1 - c0), dtype=_CELL)
-        for name, (where, field) in _SOURCES.items():
-            block[name] = getattr(grid if where == "grid" else cells, field)[src]
-        self._pwrite(block, r0, c0)
+        if records.shape != (r1 - r0, c1 - c0):
+            raise ValueError(f"records of shape {records.shape} for cells {dst}")
+        self._pwrite(records, r0, c0)
 
     def layer(self, name: str, rows: slice, cols: slice, overlay=None) -> np.ndarray:
         """A window of layer ``name`` as :func:`~pipeline.outputs.raster.grid_layers` gives it.
