@@ -29,12 +29,25 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.detection_reader import (
+    ChunkSummary,
+    StoreReader,
+    _ChunkReads,
+    detected_returns,
+    file_identity,
+)
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.column_stack import ColumnStack
-from pipeline.process.returns import DetectedReturns
 from pipeline.uncertainty.posterior_selection import kept_for_posterior
 
-__all__ = ["SAMPLE_PULSES", "ChunkSummary", "DetectionStore", "StoreReader", "SurveyAggregates"]
+__all__ = [
+    "SAMPLE_PULSES",
+    "ChunkSummary",
+    "DetectionStore",
+    "StoreReader",
+    "SurveyAggregates",
+    "detected_returns",
+]
 
 #: Pulses whose values the survey-wide statistics keep, at most (about 8 bytes each per
 #: statistic): a survey this size or smaller uses every pulse.
@@ -42,28 +55,6 @@ SAMPLE_PULSES = 1_000_000
 
 #: Hash offset of the aggregates' sample (not the posterior's waveforms).
 _SAMPLE_SALT = 0x5EED
-
-
-@dataclass(frozen=True)
-class ChunkSummary:
-    """What stays in memory of a spilled chunk.
-
-    Attributes
-    ----------
-    index : int
-        Chunk number (pulse order).
-    n_pulses : int
-    pulse_id_range : (int, int)
-        First and last pulse id.
-    bbox_m : (4,) float or None
-        Local ``(xmin, xmax, ymin, ymax)`` of the chunk's pulse positions
-        (:func:`pulse_position_m`); None when the chunk has no pulse.
-    """
-
-    index: int
-    n_pulses: int
-    pulse_id_range: tuple[int, int]
-    bbox_m: np.ndarray | None
 
 
 #: The fields a pulse's position is made of (:func:`pulse_position_m`).
@@ -118,47 +109,6 @@ class SetAside:
             return pickle.load(f)
 
 
-class _ChunkReads:
-    """Reading a store's chunks back: needs ``chunks``, ``_index`` and ``_fileno()``."""
-
-    chunks: list[ChunkSummary]
-    _index: list[dict[str, tuple[int, str, tuple[int, ...]]]]
-
-    def _fileno(self) -> int:
-        raise NotImplementedError
-
-    def load_chunk(self, c: int, fields: list[str] | None = None) -> dict[str, np.ndarray]:
-        """Fields of chunk ``c`` (all by default)."""
-        out = {}
-        for k in fields or list(self._index[c]):
-            off, dtype, shape = self._index[c][k]
-            n = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
-            buf = os.pread(self._fileno(), n, off) if n else b""
-            out[k] = np.frombuffer(buf, dtype=dtype).reshape(shape).copy()
-        return out
-
-    def load(self, chunks: list[int] | None = None) -> dict[str, np.ndarray]:
-        """The fields of ``chunks`` (default: all) concatenated in pulse order."""
-        idx = list(range(len(self.chunks)) if chunks is None else chunks)
-        # filled chunk by chunk: the survey's arrays once, not beside a list of their parts
-        n = sum(self._index[c]["pulse_id"][2][0] for c in idx)
-        out = {}
-        for k, (_, dtype, shape) in self._index[idx[0]].items():
-            out[k] = np.empty((n, *shape[1:]), dtype=dtype)
-        lo = 0
-        for c in idx:
-            part = self.load_chunk(c, list(out))
-            m = len(part["pulse_id"])
-            for k, v in part.items():
-                out[k][lo : lo + m] = v
-            lo += m
-        return out
-
-    def returns(self, chunks: list[int] | None = None) -> DetectedReturns:
-        """The detections of ``chunks`` (default: all) as one DetectedReturns."""
-        return detected_returns(self.load(chunks))
-
-
 class DetectionStore(_ChunkReads):
     """Per-chunk detections in one unnamed temporary file; a context manager.
 
@@ -206,10 +156,9 @@ class DetectionStore(_ChunkReads):
         path = f"/proc/{os.getpid()}/fd/{self._file.fileno()}"
         if not os.path.exists(path):
             return None
-        st = os.fstat(self._file.fileno())
         return StoreReader(
             path,
-            (st.st_dev, st.st_ino),
+            file_identity(self._file.fileno()),
             self.air_index,
             list(self.chunks),
             [dict(i) for i in self._index],
@@ -263,62 +212,6 @@ class DetectionStore(_ChunkReads):
         """Forget a field of every chunk."""
         for idx in self._index:
             idx.pop(name, None)
-
-
-class StoreReader(_ChunkReads):
-    """A :class:`DetectionStore`'s chunks, read by another process (:meth:`~DetectionStore.reader`).
-
-    Pickled, it carries the file's path and the chunks' index, not an open file: the file is
-    opened on first read, and must be the store's own (the same device and inode), so a
-    process on another machine fails on its first read instead of reading another file.
-    """
-
-    def __init__(self, path: str, identity: tuple[int, int], air_index: float, chunks, index):
-        self.path, self.identity, self.air_index = path, tuple(identity), float(air_index)
-        self.chunks, self._index = chunks, index
-        self._fd: int | None = None
-
-    def __getstate__(self) -> dict[str, Any]:
-        return {**self.__dict__, "_fd": None}
-
-    def __del__(self) -> None:
-        if getattr(self, "_fd", None) is not None:
-            os.close(self._fd)
-
-    def _fileno(self) -> int:
-        if self._fd is None:
-            fd = os.open(self.path, os.O_RDONLY)
-            st = os.fstat(fd)
-            if (st.st_dev, st.st_ino) != self.identity:
-                os.close(fd)
-                raise OSError(
-                    f"{self.path} is not the detection store this reader was made for "
-                    "(a process on another machine?)"
-                )
-            self._fd = fd
-        return self._fd
-
-    @property
-    def n_pulses(self) -> int:
-        """Pulses stored."""
-        return sum(c.n_pulses for c in self.chunks)
-
-
-def detected_returns(cat: dict[str, np.ndarray]) -> DetectedReturns:
-    """The chunks' navigation and detections, concatenated, as one DetectedReturns."""
-    required = (
-        "pulse_id origin_meas_m direction_meas has_surface t_surface_s has_bottom t_bottom_s "
-        "surface_confidence bottom_confidence flags surface_amplitude bottom_amplitude "
-        # the photon detector's no-bottom limits (full waveform: set by the no-bottom stage
-        # once the survey's bottoms are in); the shot's timestamp and flight line
-        "t_no_bottom_s t_emit_s line_id"
-    ).split()
-    # optional: the full-waveform detector's timing sigma of each return (photon counting:
-    # none, the TPU sets it from the scatter of the soundings) and the in-column returns
-    optional = ("t_surface_sigma_s", "t_bottom_sigma_s", *DetectedReturns.COLUMN_FIELDS)
-    return DetectedReturns(
-        **{k: cat[k] for k in required}, **{k: cat[k] for k in optional if k in cat}
-    )
 
 
 @dataclass

@@ -228,7 +228,7 @@ class Executor:
                 workers = max(1, sum(self._client.nthreads().values()))
         self.workers = default_workers() if workers is None else int(workers)
         self.ahead = ahead if ahead is not None else 2 * self.workers
-        self.map_wall_s = 0.0  # wall seconds inside map(), the consumer's work included
+        self.map_wall_s = 0.0  # wall seconds inside timed map() calls, the consumer's work included
         # threads of this process's parallel kernels: the workers asked for, or with a
         # cluster (whose threads are elsewhere) this machine's cores
         self.local_threads = default_workers() if self._client else self.workers
@@ -254,13 +254,24 @@ class Executor:
         """Whether every worker opens the same file at ``path`` as this process.
 
         A pool's workers run on this machine and always do; a Dask cluster's do only on this
-        machine (compared by device and inode, which ``/proc/<pid>/fd`` paths keep).
+        machine (compared by device, inode and boot id, which ``/proc/<pid>/fd`` paths keep).
+        Workers that join a cluster later are not asked.
+
+        Parameters
+        ----------
+        path : str
+            A path of this machine, e.g. ``/proc/<pid>/fd/<n>``.
+
+        Returns
+        -------
+        bool
         """
+        from pipeline.detection_reader import file_identity
+
         if self._client is None:
             return True
-        st = os.stat(path)
         seen = self._client.run(_file_identity, path)
-        return bool(seen) and all(v == (st.st_dev, st.st_ino) for v in seen.values())
+        return bool(seen) and all(v == file_identity(path) for v in seen.values())
 
     def __enter__(self) -> Executor:
         return self
@@ -274,25 +285,36 @@ class Executor:
             self._client.close()
             self._client = None
 
-    def map(self, fn: Callable[[Any, int], Any], shared: Any, n_tasks: int) -> Iterator[Any]:
+    def map(
+        self,
+        fn: Callable[[Any, int], Any],
+        shared: Any,
+        n_tasks: int,
+        ahead: int | None = None,
+        timed: bool = True,
+    ) -> Iterator[Any]:
         """Yield ``fn(shared, i)`` for ``i = 0 .. n_tasks - 1``, in order, as they arrive.
 
         ``fn`` must be a module-level function (it is pickled by reference). Leaving the loop
-        early (or an exception in a task) cancels the tasks not yet started.
+        early (or an exception in a task) cancels the tasks not yet started. ``ahead``: tasks
+        submitted and not yet consumed, at most (default the executor's); ``timed``: whether
+        the wall seconds count in :attr:`map_wall_s` (the chunk loop's, in the manifest).
         """
         t0 = time.perf_counter()
+        ahead = self.ahead if ahead is None else max(1, int(ahead))
         try:
             if self._client is not None:
-                yield from self._map_dask(fn, shared, n_tasks)
+                yield from self._map_dask(fn, shared, n_tasks, ahead)
             elif self.workers == 1 or n_tasks <= 1:
                 for i in range(n_tasks):
                     yield fn(shared, i)
             else:
-                yield from self._map_pool(fn, shared, n_tasks)
+                yield from self._map_pool(fn, shared, n_tasks, ahead)
         finally:
-            self.map_wall_s += time.perf_counter() - t0
+            if timed:
+                self.map_wall_s += time.perf_counter() - t0
 
-    def _map_pool(self, fn, shared, n_tasks: int) -> Iterator[Any]:
+    def _map_pool(self, fn, shared, n_tasks: int, ahead: int) -> Iterator[Any]:
         ctx = multiprocessing.get_context("spawn")
         # the file lives until the pool has shut down: every worker has read it by then
         with _shared_handoff(shared) as (initializer, initargs):
@@ -303,30 +325,31 @@ class Executor:
                 initargs=initargs,
             )
             try:
-                yield from _ordered(lambda i: pool.submit(_pool_call, fn, i), n_tasks, self.ahead)
+                yield from _ordered(lambda i: pool.submit(_pool_call, fn, i), n_tasks, ahead)
             finally:
                 pool.shutdown(wait=True, cancel_futures=True)
 
-    def _map_dask(self, fn, shared, n_tasks: int) -> Iterator[Any]:
+    def _map_dask(self, fn, shared, n_tasks: int, ahead: int) -> Iterator[Any]:
         client = self._client
         shared_f = client.scatter(shared, broadcast=True, hash=False)
         try:
             yield from _ordered(
                 lambda i: client.submit(_dask_call, fn, shared_f, i, pure=False),
                 n_tasks,
-                self.ahead,
+                ahead,
             )
         finally:
             client.cancel([shared_f])
 
 
-def _file_identity(path: str) -> tuple[int, int] | None:
-    """``(st_dev, st_ino)`` of ``path`` here, None where it does not open."""
+def _file_identity(path: str) -> tuple | None:
+    """:func:`~pipeline.detection_reader.file_identity` of ``path`` here (None: no such file)."""
+    from pipeline.detection_reader import file_identity
+
     try:
-        st = os.stat(path)
+        return file_identity(path)
     except OSError:
         return None
-    return st.st_dev, st.st_ino
 
 
 def _ordered(submit: Callable[[int], Any], n_tasks: int, ahead: int) -> Iterator[Any]:

@@ -131,7 +131,7 @@ def run_scene(
         "timings_s": {"total_wall_s": time.perf_counter() - t0},
         # this process's high-water mark (each stage's own peak is in its plan entry)
         "memory": {"peak_rss_mb": peak_rss_mb()},
-        # where the chunk loop ran (stage CPU seconds add up every worker's)
+        # where the chunk loop ran (the chunk and block stages' seconds add up every worker's)
         "execution": execution,
         "evaluation": evaluation,
         "provenance": provenance(scene),

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.memory_budget import BASE_BYTES, BYTES_PER_PULSE
 from pipeline.process.classify import SUBMERGED_OBJECT
 from pipeline.process.returns import PointFlag
 from pipeline.stages import StageClock, trim_heap
@@ -78,6 +79,7 @@ class BlockResult:
     Attributes
     ----------
     block : int
+        The block's number in the blocks' layout.
     points : Points or None
         The block's own pulses' points, in the points file's tile order, ``(n_points,)``.
     starts : (n_tiles + 1,) int
@@ -113,11 +115,23 @@ def blocks_side_by_side(workers: int, loaded_pulses: float, free_bytes: float) -
 
     Each running block is a process holding its loaded pulses
     (:data:`~pipeline.memory_budget.BASE_BYTES` + :data:`~pipeline.memory_budget.BYTES_PER_PULSE`
-    each, the measured cost of a survey held whole); ``free_bytes`` is what the run may still
-    use (its share of the machine's memory less this process's resident memory). At least 1.
-    """
-    from pipeline.memory_budget import BASE_BYTES, BYTES_PER_PULSE
+    each, the measured cost of a survey held whole).
 
+    Parameters
+    ----------
+    workers : int
+        The executor's workers.
+    loaded_pulses : float
+        Pulses a block loads with its halo, at most.
+    free_bytes : float
+        What the run may still use: its share of the machine's memory less this process's
+        resident memory.
+
+    Returns
+    -------
+    int
+        At least 1.
+    """
     per_block = BASE_BYTES + BYTES_PER_PULSE * max(float(loaded_pulses), 0.0)
     return int(max(1, min(int(workers), free_bytes // per_block)))
 
@@ -141,7 +155,28 @@ def _quiet(*_args, **_kw) -> None:
 
 
 def run_block(job: BlockJob, k: int) -> BlockResult:
-    """Process block ``job.todo[k]`` with its halo and keep what is its own."""
+    """Process block ``job.todo[k]`` with its halo and keep what is its own.
+
+    Parameters
+    ----------
+    job : BlockJob
+    k : int
+        The task: block ``job.todo[k]``.
+
+    Returns
+    -------
+    BlockResult
+        ``points`` None where no pulse lies near enough for a point to fall in the block.
+    """
+    try:
+        return _run_block(job, k)
+    except Exception as exc:
+        b = int(job.todo[k])
+        box = ", ".join(f"{v:.1f}" for v in job.blocks.box_m(b))
+        raise RuntimeError(f"block {b} (local box w, e, s, n = {box} m) failed: {exc}") from exc
+
+
+def _run_block(job: BlockJob, k: int) -> BlockResult:
     from pipeline.outputs.grid_tiles import cell_records
     from pipeline.survey_block_reach import processing_rows
     from pipeline.survey_blocks import (

@@ -81,6 +81,40 @@ class CoverageAccumulator:
         return float(self.seen.mean())
 
 
+def _block_runner(executor, store, counts, load: float, log):
+    """Where the blocks run: ``(runner, source, side)``.
+
+    ``runner``: an executor; ``source``: the store as it reads it; ``side``: blocks at once.
+    Side by side where the executor's workers can read the store (a process pool, or a Dask
+    cluster on this machine), as many as the memory holds (:func:`blocks_side_by_side`: each
+    block holds about its loaded pulses); else one after another in this process.
+    """
+    n = store.n_pulses
+    if executor is None or executor.workers <= 1:
+        return Executor(workers=1), store, 1
+    reader = store.reader()
+    if reader is None or not executor.shares_file(reader.path):
+        log(
+            "  blocks one after another here: the workers cannot read this process's"
+            " detection store (no /proc, or a Dask cluster on another machine)"
+        )
+        return Executor(workers=1), store, 1
+    loaded = min(n, float(counts.max()) * load)
+    free = MEMORY_SHARE * machine_memory_bytes() - (current_rss_mb() or 0.0) * 2.0**20
+    side = blocks_side_by_side(executor.workers, loaded, free)
+    if side < executor.workers:
+        log(
+            f"  {side} block(s) at a time, not {executor.workers}: each holds about"
+            f" {loaded:.3g} pulses (run.block_pulses), more than this machine's memory"
+            " holds side by side"
+        )
+    if side == 1:
+        return Executor(workers=1), store, 1
+    if executor.scheduler is None and side < executor.workers:
+        return Executor(workers=side), reader, side
+    return executor, reader, side
+
+
 def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ctx, layout):
     """The passes of :mod:`pipeline.survey_blocks`; returns ``(files, evaluation)``.
 
@@ -153,35 +187,19 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
         del made, sample_returns
         gc.collect()
         trim_heap()
-    # the blocks side by side where the executor's workers can read the store (a process pool,
-    # or a Dask cluster on this machine), else one after another here; written in block order
-    reader = store.reader() if executor is not None and executor.workers > 1 else None
-    if reader is not None and executor.shares_file(reader.path):
-        runner, source = executor, reader
-        if executor.scheduler is None:
-            # a pool on this machine: as many blocks at once as its memory holds
-            loaded = min(n_pulses, float(counts.max()) * load)
-            free = MEMORY_SHARE * machine_memory_bytes() - (current_rss_mb() or 0.0) * 2.0**20
-            side = blocks_side_by_side(executor.workers, loaded, free)
-            if side < executor.workers:
-                log(
-                    f"  {side} block(s) at a time, not {executor.workers}: each holds about"
-                    f" {loaded:.3g} pulses (run.block_pulses), more than this machine's memory"
-                    " holds side by side"
-                )
-                runner = Executor(workers=side)
-    else:
-        runner, source = Executor(workers=1), store
+    runner, source, side = _block_runner(executor, store, counts, load, log)
     job = BlockJob(
         source, blocks, todo, counts, halo, reach, planes_m, krige_m, scene, plan, ctx,
         figures, layout,
     )  # fmt: skip
-    log(f"  blocks on {runner.workers} worker(s)")
+    log(f"  blocks on {side} worker(s)")
     # the survey's grid on disk, removed when the survey is finished
     with GridTiles(frame) as tiles:
         t0, done = time.perf_counter(), 0
         with LazTileWriter(out / "points.laz", header, ctx.instrument.amplitude_full_scale) as w:
-            for k, res in enumerate(runner.map(run_block, job, todo.size)):
+            # at most `side` blocks in flight; the manifest's map_wall_s stays the chunk loop's
+            tasks = runner.map(run_block, job, todo.size, ahead=side, timed=False)
+            for k, res in enumerate(tasks):
                 clock.add(res.stages)
                 if res.points is not None:
                     done += 1
@@ -192,6 +210,7 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
                                     res.returns, lines)  # fmt: skip
                         tiles.put_records(res.dst, res.records)
                         cover.add(pts.xyz_m[:, :2])
+                        del pts
                     n_obj += res.class43
                     withheld += res.withheld
                     for name, hits in res.rejected.items():
@@ -202,6 +221,7 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
                         f"  {k + 1}/{todo.size} blocks looked at, {done} processed "
                         f"({time.perf_counter() - t0:.0f} s)"
                     )
+        blocks_wall_s = time.perf_counter() - t0
         covered = cover.fraction()
         with clock.stage("blocks"):
             made, sample_returns = aside.take()
@@ -230,6 +250,8 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
         blocked = {
             "block_m": blocks.tile_m,
             "blocks": done,
+            "blocks_wall_s": blocks_wall_s,
+            "block_workers": side,
             "blocks_with_pulses": int(used.size),
             "halo_m": halo,
             "sample_blocks": int(sample.size),

@@ -399,8 +399,10 @@ def test_a_rewritten_position_field_moves_the_chunks_box(tmp_path):
 def test_blocks_side_by_side_give_the_outputs_of_blocks_one_after_another(runs):
     # every block in the sample: 2 workers give the whole survey's outputs, as 1 does
     root, lines = runs
-    assert any("blocks on 2 worker(s)" in s for s in lines["sampled_w2"])
-    assert any("blocks on 2 worker(s)" in s for s in lines["sampled_dask"])
+    for name in ("blocks_w2", "sampled_w2", "sampled_dask"):
+        assert any("blocks on 2 worker(s)" in s for s in lines[name]), name
+        blocked = json.loads((root / name / "evaluation.json").read_text())["blocked"]
+        assert blocked["block_workers"] == 2 and blocked["blocks_wall_s"] > 0.0
     assert any("blocks on 2 worker(s)" in s for s in lines["blocks_w2"])
     assert_blocked_as_whole(root, lines, "whole", "blocks_w2")
     # a sample of a few blocks (the others made with its figures): the same outputs on
@@ -447,6 +449,56 @@ def test_a_store_read_from_another_process_gives_its_chunks(tmp_path):
             wrong.identity = reader.identity
             with pytest.raises(OSError, match="not the detection store"):
                 wrong.load_chunk(0)
+
+
+def test_blocks_run_side_by_side_only_where_the_workers_read_the_store_and_memory_holds(
+    tmp_path, monkeypatch
+):
+    import pipeline.survey_blocks_run as sbr
+    from pipeline.detection_reader import StoreReader
+    from pipeline.memory_budget import BASE_BYTES, BYTES_PER_PULSE
+    from pipeline.parallel import Executor
+
+    class Cluster(Executor):  # a Dask cluster's answer, without a cluster
+        def __init__(self, workers, reads):
+            super().__init__(workers)
+            self.scheduler, self.reads = "tcp://elsewhere:8786", reads
+
+        def shares_file(self, path):
+            return self.reads
+
+    rng = np.random.default_rng(4)
+    counts = np.array([0, 40_000, 25_000])  # loads 4 times its own: 160 000 pulses a block
+    per_block = BASE_BYTES + BYTES_PER_PULSE * 160_000  # (0.66 GB)
+    rss = sbr.current_rss_mb() * 2.0**20
+    with DetectionStore(tmp_path, 1.0) as store:
+        for c in range(4):
+            store.append(_part(rng, 100_000, 100_000 * c, 0))
+
+        def runner(executor, memory_blocks):
+            mem = (rss + memory_blocks * per_block) / sbr.MEMORY_SHARE
+            monkeypatch.setattr(sbr, "machine_memory_bytes", lambda: mem)
+            said = []
+            got = sbr._block_runner(executor, store, counts, 4.0, said.append)
+            return got, said
+
+        # a pool of 3, memory for 3.5 blocks: 3 at once, reading the store through /proc
+        (ex, src, side), said = runner(Executor(3), 3.5)
+        assert side == 3 and ex.workers == 3 and isinstance(src, StoreReader) and not said
+        # memory for 2.5: a pool of 2
+        (ex, src, side), said = runner(Executor(3), 2.5)
+        assert side == 2 and ex.workers == 2 and isinstance(src, StoreReader)
+        assert "2 block(s) at a time, not 3" in said[0]
+        # memory for 1.5: here, one after another, from the store itself
+        (ex, src, side), said = runner(Executor(3), 1.5)
+        assert side == 1 and ex.workers == 1 and src is store
+        # a cluster on this machine keeps its workers, at most `side` blocks in flight
+        cluster = Cluster(4, reads=True)
+        (ex, src, side), said = runner(cluster, 2.5)
+        assert ex is cluster and side == 2 and isinstance(src, StoreReader)
+        # a cluster whose workers cannot read the store: here, with a line saying why
+        (ex, src, side), said = runner(Cluster(4, reads=False), 9.0)
+        assert side == 1 and src is store and "cannot read" in said[0]
 
 
 def _load_all(blob):

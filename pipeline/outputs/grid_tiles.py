@@ -131,6 +131,19 @@ def cell_records(grid, cells, src: tuple[slice, slice]) -> np.ndarray:
     """Cells ``src`` of a block's ``grid`` and ``cells``, as the records :class:`GridTiles` stores.
 
     A worker that processed the block sends these (29 bytes a cell), not its grid.
+
+    Parameters
+    ----------
+    grid : Grid
+        A block's grid.
+    cells : CellUncertainty
+        Its cell uncertainty, shaped like ``grid``.
+    src : (slice, slice)
+        Rows and columns of the block's grid.
+
+    Returns
+    -------
+    (rows, cols) structured ndarray
     """
     first = getattr(grid, next(iter(_SOURCES.values()))[1])[src]
     out = np.empty(first.shape, dtype=_CELL)
@@ -234,8 +247,8 @@ class GridTiles:
         rows, cols = dst
         r0, r1, _ = rows.indices(self.frame.shape[0])
         c0, c1, _ = cols.indices(self.frame.shape[1])
-        if records.shape != (r1 - r0, c1 - c0):
-            raise ValueError(f"records of shape {records.shape} for cells {dst}")
+        if records.dtype != _CELL or records.shape != (r1 - r0, c1 - c0):
+            raise ValueError(f"records {records.dtype} {records.shape} for cells {dst}")
         self._pwrite(records, r0, c0)
 
     def layer(self, name: str, rows: slice, cols: slice, overlay=None) -> np.ndarray:
