@@ -103,6 +103,7 @@ def run_one(scene: dict, workers: int, tmp: Path, name: str) -> dict:
     man = json.loads((out / "manifest.json").read_text())
     ev = json.loads((out / "evaluation.json").read_text())
     stages = {s["stage"]: s for s in man["plan"] if s["runs"] and "wall_s" in s}
+    stages.update(man.get("other_stages", {}))  # a blocked survey's block passes
     return {
         "name": name,
         # a blocked survey evaluates its sample: the survey's pulses are in its summary
@@ -271,6 +272,13 @@ def main() -> None:
                 scene.setdefault(section, {})[name] = float(value) if "." in value else int(value)
             mem_runs.append(run_one(scene, args.memory_workers, Path(tmp), f"m{n}"))
             print(json.dumps({k: v for k, v in mem_runs[-1].items() if k != "stages"}), flush=True)
+            for st, v in mem_runs[-1]["stages"].items():  # wall, CPU (all workers), own peak
+                peak = v.get("peak_rss_mb")
+                print(
+                    f"  {st:20s} wall {v['wall_s']:8.1f} s  cpu {v['cpu_s']:8.1f} s  "
+                    f"peak {'-' if peak is None else f'{peak:.0f} MiB'}",
+                    flush=True,
+                )
     text = report(runs, mem_runs, command)
     if args.out is not None:
         Path(args.out).write_text(text)

@@ -249,6 +249,8 @@ def simulate_detections(
             null_z=dt.surface_echo_null_z,
             null_excess=dt.surface_echo_null_excess,
             null_max_clear=dt.surface_echo_null_max_clear,
+            band_deg=dt.surface_echo_angle_bin_deg,
+            prior_pulses=dt.surface_echo_angle_prior_pulses,
         )
     no_bottom = None
     if not job.waveform:

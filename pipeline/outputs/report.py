@@ -114,11 +114,15 @@ def write_survey_report(
             if weak.get("echoes")
             else ""
         )
+        ws = [b["weight"] for b in echoes.get("bands") or []]
+        weighs = f"{echoes['weight']:.3f}"
+        if len(ws) > 1:  # one weight per band of the beams' off-nadir angle
+            weighs = f"{min(ws):.3f}-{max(ws):.3f} by off-nadir angle"
         info.append(
             [
                 "surface echoes: clear, ambiguous",
                 f"{echoes['clear']}, {echoes['ambiguous']}: an ambiguous one weighs the "
-                f"echo-kept fit {echoes['weight']:.3f}{found}",
+                f"echo-kept fit {weighs}{found}",
             ]
         )
     s.append("<h2 id='scene'>1. Scene and stage plan</h2>" + table(["", ""], info))

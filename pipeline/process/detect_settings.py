@@ -57,6 +57,26 @@ class DetectSettings:
         "of benchmarks/wave_refraction (seeds 7, 8: 5 m/s waves, flat 5 and 1.5 m/s) as the "
         "smallest sum of squared surface-time biases among 0.005, 0.01, 0.02, 0.05",
     )
+    surface_echo_angle_bin_deg: float = setting(
+        2.0,
+        gt=0.0,
+        le=90.0,
+        doc="the survey's share of clear surface echoes is counted per band of this many "
+        "degrees of the beam's off-nadir angle: a glint needs a facet tilted by the angle, so "
+        "a scanner sweeping 0-20 degrees over a light sea sees clear echoes near nadir and "
+        "none at its swath's edges, where the survey-wide share timed the onset's noise as "
+        "echoes (late: the surface 3-6 cm low at 15-18 degrees, an oscillating scan's edges); "
+        "a band's share leans on the survey's by surface_echo_angle_prior_pulses; 90: one "
+        "share for the survey",
+    )
+    surface_echo_angle_prior_pulses: float = setting(
+        1.0,
+        ge=0.0,
+        doc="pulses' worth of the survey's share of clear echoes added to each angle band's "
+        "counts: a band of a few judged pulses leans on the survey's share, one of thousands "
+        "reads its own (the weight p / (p + surface_echo_prevalence_half) is steep: 200 gave "
+        "a band of 2600 ambiguous echoes and none clear the weight 0.55 on a survey 34 % clear)",
+    )
     surface_echo_null_every: int = setting(
         16,
         ge=0,

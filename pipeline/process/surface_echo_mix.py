@@ -17,7 +17,9 @@ import numpy as np
 
 __all__ = [
     "StepParts",
+    "angle_band",
     "echo_weight",
+    "band_weights",
     "mixed_time",
     "mix_stored_echoes",
     "weak_echo_test",
@@ -87,6 +89,49 @@ def echo_weight(n_clear: int, n_mixable: int, half: float) -> float:
     return p / (p + half)
 
 
+def angle_band(direction: np.ndarray, band_deg: float) -> np.ndarray:
+    """Band of each beam's off-nadir angle, ``floor(angle / band_deg)``, ``(n,)`` int.
+
+    Parameters
+    ----------
+    direction : (n, 3) ndarray
+        Measured unit beam directions.
+    band_deg : float
+        Width of a band (degrees).
+    """
+    cos = np.clip(np.abs(np.asarray(direction, dtype=np.float64)[:, 2]), 0.0, 1.0)
+    return np.floor(np.degrees(np.arccos(cos)) / band_deg).astype(np.int64)
+
+
+def band_weights(
+    n_clear: np.ndarray, n_mixable: np.ndarray, half: float, prior_pulses: float
+) -> np.ndarray:
+    """:func:`echo_weight` of each off-nadir band's share of clear echoes, ``(n_bands,)``.
+
+    A band's share is its own counts with ``prior_pulses`` pulses' worth of the survey's
+    share added (``p_b = (c_b + m p) / (n_b + m)``): the survey's share is the prior of the
+    bands' (empirical Bayes again), which a band of many judged pulses outweighs.
+
+    Parameters
+    ----------
+    n_clear, n_mixable : (n_bands,) int
+        Clear echoes on a column onset and ambiguous echoes in each band.
+    half : float
+        ``half`` of :func:`echo_weight`.
+    prior_pulses : float
+        ``m``.
+    """
+    c = np.asarray(n_clear, dtype=np.float64)
+    n = c + np.asarray(n_mixable, dtype=np.float64)
+    total = float(n.sum())
+    if total <= 0.0:
+        return np.zeros(n.shape)
+    share = float(c.sum()) / total
+    m = float(prior_pulses)
+    p = np.where(n + m > 0.0, (c + m * share) / np.maximum(n + m, 1e-300), share)
+    return p / (p + half)
+
+
 def mixed_time(parts: StepParts, weight: float) -> np.ndarray:
     """Each pulse's surface time (fractional sample), an ambiguous echo's weighted by ``weight``."""
     mix = parts.t_onset + weight * (parts.t_mix_echo - parts.t_onset)
@@ -100,17 +145,21 @@ def mix_stored_echoes(
     null_z: float = 3.0,
     null_excess: float = 0.20,
     null_max_clear: float = 0.01,
+    band_deg: float = 90.0,
+    prior_pulses: float = 0.0,
 ) -> float:
     """Set each stored ambiguous surface echo's time from the survey's share of clear echoes.
 
     Each chunk's detection weighed its ambiguous echoes by its own blocks' share; the survey's
-    share, from integer counts, makes every pulse's time independent of the chunking. Where
-    the detector resampled some of them on noise alone (:data:`NULL_FIELD`), the survey's
-    shifts against those may show its ambiguous echoes to be echoes (:func:`weak_echo_test`):
-    where its clear echoes are also rarer than ``null_max_clear`` (a sea whose glints are
-    weak in every footprint, not one whose facets glint in some), they take the echo-kept
-    fit (weight 1). The parts (:data:`ECHO_FIELDS`, :data:`NULL_FIELD`) are dropped from the
-    store.
+    share, from integer counts, makes every pulse's time independent of the chunking. The
+    share is counted per band of the beams' off-nadir angle (:func:`angle_band`,
+    :func:`band_weights`): glints need facets tilted by the angle, so a scan over a light sea
+    has clear echoes near nadir and none off it. Where the detector resampled some of them on
+    noise alone (:data:`NULL_FIELD`), the survey's shifts against those may show its ambiguous
+    echoes to be echoes (:func:`weak_echo_test`): where its clear echoes are also rarer than
+    ``null_max_clear`` (a sea whose glints are weak in every footprint, not one whose facets
+    glint in some), they take the echo-kept fit (weight 1). The parts (:data:`ECHO_FIELDS`,
+    :data:`NULL_FIELD`) are dropped from the store.
 
     Parameters
     ----------
@@ -123,29 +172,47 @@ def mix_stored_echoes(
         ``z_min`` and ``excess_min`` of the weak-echo test.
     null_max_clear : float
         Largest share of clear echoes among the judged at which the test's verdict counts.
+    band_deg : float
+        Width of the off-nadir bands (degrees; 90: one share for the survey).
+    prior_pulses : float
+        ``prior_pulses`` of :func:`band_weights`.
 
     Returns
     -------
     (float, dict)
-        The weight of the echo-kept time, and the figures behind it (JSON-ready: the
-        evaluation records them): ``clear``, ``ambiguous``, ``weight``, ``weak_echoes`` (the
-        test's figures and ``taken``; None without resampled pulses).
+        The survey-wide weight of the echo-kept time (one band), and the figures behind the
+        times (JSON-ready: the evaluation records them): ``clear``, ``ambiguous``,
+        ``weight``, ``bands`` (per off-nadir band with judged pulses: its lower angle, counts
+        and weight), ``weak_echoes`` (the test's figures and ``taken``; None without
+        resampled pulses).
     """
     n_clear = n_mix = 0
+    band_clear: dict[int, int] = {}
+    band_mix: dict[int, int] = {}
     shifts, nulls = [], []
     weak_figures = None
     for c in range(len(store.chunks)):
         has_null = NULL_FIELD in store.fields(c)
-        names = ["surface_echo_state", *(("surface_echo_shift_s", NULL_FIELD) if has_null else ())]
+        names = ["surface_echo_state", "direction_meas"]
+        names += [*(("surface_echo_shift_s", NULL_FIELD) if has_null else ())]
         d = store.load_chunk(c, names)
         state = d["surface_echo_state"]
-        n_clear += int(np.count_nonzero(state == 1))  # a clear echo on a column onset
+        band = angle_band(d["direction_meas"], band_deg)
+        for counts, judged in ((band_clear, state == 1), (band_mix, state < 0)):
+            # a clear echo on a column onset; an ambiguous one
+            for b, k in zip(*np.unique(band[judged], return_counts=True), strict=True):
+                counts[int(b)] = counts.get(int(b), 0) + int(k)
+        n_clear += int(np.count_nonzero(state == 1))
         n_mix += int(np.count_nonzero(state < 0))
         if has_null:
             pair = (state < 0) & np.isfinite(d[NULL_FIELD])
             shifts.append(d["surface_echo_shift_s"][pair])
             nulls.append(d[NULL_FIELD][pair])
     w = echo_weight(n_clear, n_mix, half)
+    bands = np.array(sorted(set(band_clear) | set(band_mix)), dtype=np.int64)
+    bc = np.array([band_clear.get(int(b), 0) for b in bands], dtype=np.int64)
+    bm = np.array([band_mix.get(int(b), 0) for b in bands], dtype=np.int64)
+    wb = band_weights(bc, bm, half, prior_pulses)
     if shifts:
         shift, null = np.concatenate(shifts), np.concatenate(nulls)
         weak, fig = weak_echo_test(shift, null, null_z, null_excess)
@@ -165,6 +232,7 @@ def mix_stored_echoes(
             )
         if taken:
             w = 1.0
+            wb = np.ones_like(wb)
         weak_figures = {
             "pairs": fig["pairs"],
             "z": fig["z"],
@@ -176,17 +244,35 @@ def mix_stored_echoes(
             "taken": taken,
         }
     for c in range(len(store.chunks)):
-        d = store.load_chunk(c, ["t_surface_s", *ECHO_FIELDS])
+        d = store.load_chunk(c, ["t_surface_s", "direction_meas", *ECHO_FIELDS])
         mix = d["surface_echo_state"] < 0
-        t = np.where(mix, d["t_surface_onset_s"] + w * d["surface_echo_shift_s"], d["t_surface_s"])
+        # every judged pulse's band is one of `bands`; the others are not mixed
+        at = np.clip(np.searchsorted(bands, angle_band(d["direction_meas"], band_deg)), 0, None)
+        wp = wb[np.minimum(at, max(bands.size - 1, 0))] if bands.size else np.zeros(mix.size)
+        t = np.where(mix, d["t_surface_onset_s"] + wp * d["surface_echo_shift_s"], d["t_surface_s"])
         store.replace_field(c, "t_surface_s", t)
     for k in (*ECHO_FIELDS, NULL_FIELD):
         store.drop_field(k)
+    spread = f"{wb.min():.3f}-{wb.max():.3f} by off-nadir angle" if bands.size > 1 else f"{w:.3f}"
     log(
         f"  surface echoes: {n_clear} clear of {n_clear + n_mix} judged; an ambiguous one's "
-        f"time weighs the echo-kept fit {w:.3f}"
+        f"time weighs the echo-kept fit {spread}"
     )
-    summary = {"clear": n_clear, "ambiguous": n_mix, "weight": w, "weak_echoes": weak_figures}
+    summary = {
+        "clear": n_clear,
+        "ambiguous": n_mix,
+        "weight": w,
+        "bands": [
+            {
+                "from_deg": float(b * band_deg),
+                "clear": int(k),
+                "ambiguous": int(m),
+                "weight": float(x),
+            }
+            for b, k, m, x in zip(bands, bc, bm, wb, strict=True)
+        ],
+        "weak_echoes": weak_figures,
+    }
     return w, summary
 
 

@@ -12,10 +12,10 @@ Method
    surface point higher than the band is a land candidate unless its high neighbours mostly
    have a return below the water level (water under them), and land if it is linked to
    candidates whose neighbourhood is mostly candidates and stands ``land_sea_sigmas`` sea
-   sigmas (measured from the surface heights) above the level, or to a region of candidates
-   far wider than a crest region: a wave crest is water, and so is a trough down to
-   ``max(below_margin_m, below_sea_sigmas * sigma_sea)`` below the level, or deeper with
-   a bottom return ``level_min_depth_m`` under it. A
+   sigmas (measured from the surface heights with a bottom ``level_min_depth_m`` under them,
+   when ``sea_min_wet_pulses`` have one: water for certain) above the level, or to a region of
+   candidates far wider than a crest region: a wave crest is water, and so is a trough down to
+   ``max(below_margin_m, below_sea_sigmas * sigma_sea)`` below the level. A
    pulse without a surface return whose straight (air) bottom point is higher than the band
    is land. Points below the band are not water surface (flagged outliers). With no water
    level given, a survey whose detector measured the water column (no-bottom limits given)
@@ -222,14 +222,7 @@ def fit_water_surface(
     o, d = returns.origin_meas_m, returns.direction_meas
     c = SPEED_OF_LIGHT_M_S
     inputs = surface_inputs(returns, st)
-    ps, pb, pc, bound, has_s, wet = (
-        inputs.ps,
-        inputs.pb,
-        inputs.pc,
-        inputs.bound,
-        inputs.has_s,
-        inputs.wet,
-    )
+    ps, pb, pc, bound, has_s = inputs.ps, inputs.pb, inputs.pc, inputs.bound, inputs.has_s
     wide = wide or surface_wide(returns, st, inputs)
     lvl = has_s | bound if wide.bounds_set_level else has_s
     flags = np.zeros(n, dtype=np.uint16)
@@ -254,9 +247,12 @@ def fit_water_surface(
             ps[lvl, :2], res_s[lvl], water_below[lvl], st, sigma_m=wide.land_sigma_m
         )[0]
     land_s &= has_s
-    # a trough is water, down to the band below the level the measured sea sets (SurfaceWide);
-    # and a surface point with a bottom well under it saw water below: it is the surface
-    low_s = has_s & (res_s <= -wide.below_m) & ~wet
+    # a trough is water, down to the band below the level the measured sea sets (SurfaceWide,
+    # on the surface returns with water under them). Deeper is not the sea, even with a later
+    # return under it: that is a lone seabed echo of a calm sea and a noise hit after it (suite
+    # tuning seed 7201: 93 soundings 1-1.6 m short read from such "surfaces"); a rough sea's
+    # troughs are inside the band its own measured sigma sets
+    low_s = has_s & (res_s <= -wide.below_m)
     water_s = has_s & ~land_s & ~low_s
     land_b = ~has_s & returns.has_bottom & (res_b >= st.land_margin_m)
     if wide.no_water:

@@ -96,7 +96,8 @@ def global_plane(ps: np.ndarray, st, wet: np.ndarray | None = None) -> tuple[np.
     st : SurfaceFitSettings
     wet : (m,) bool, optional
         The point's pulse has a bottom return well below it (water under the surface); when
-        at least 3 are wet, the histogram mode is theirs.
+        at least 3 are wet, the histogram mode is theirs, and when at least
+        ``sea_min_wet_pulses`` are, the plane is fitted to them alone.
 
     Returns
     -------
@@ -105,6 +106,10 @@ def global_plane(ps: np.ndarray, st, wet: np.ndarray | None = None) -> tuple[np.
     sigma_m : float
         Residual standard deviation of the band fit.
     """
+    if wet is not None and np.count_nonzero(wet) >= st.sea_min_wet_pulses:
+        # the plane of the water for certain (SurfaceFitSettings.sea_min_wet_pulses): lone
+        # seabed echoes of a calm sea within the band pulled its fit down
+        ps, wet = ps[wet], None
     z = ps[:, 2]
     if st.water_level_hint_m is not None:
         level = float(st.water_level_hint_m)

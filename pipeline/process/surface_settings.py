@@ -82,6 +82,14 @@ class SurfaceFitSettings:
         "is this far above fallback_water_level_m (lower: a calm sea's seabed echoes, the "
         "surface unseen); the expected level's own uncertainty (tide, geoid)",
     )
+    sea_min_wet_pulses: int = setting(
+        30,
+        ge=0,
+        doc="the sea's height sigma (the troughs' reach, the land test) is measured on the "
+        "surface returns with a bottom level_min_depth_m under them when at least this many "
+        "(water for certain: a calm sea's pulses that return only the seabed read as troughs "
+        "otherwise); fewer: on every surface return",
+    )
     level_min_depth_m: float = setting(
         1.0,
         ge=0.0,

@@ -126,13 +126,25 @@ def surface_wide(returns: DetectedReturns, st, inputs: SurfaceInputs | None = No
         gsigma = 0.0
     z0, gx, gy = gplane
     res_s = np.where(lvl, ps[:, 2] - (z0 + gx * ps[:, 0] + gy * ps[:, 1]), 0.0)
-    land_sigma = sea_sigma_m(res_s[lvl], st) if lvl.any() else 0.0
+    # the sea is measured where water is certain: on the surface returns with a bottom well
+    # under them, when there are enough. A calm sea seen off nadir from high up returns no
+    # surface echo on many pulses, only the seabed through it; within the band those echoes
+    # read as a rough sea (0.38 m on suite tuning seed 7201, flat water, 694 m, a 0-5 m shoal),
+    # whose troughs then took them in as surface points (the planes sank to the seabed: 300
+    # soundings 1-1.8 m short)
+    sea_pts = lvl & lvl_wet
+    if np.count_nonzero(sea_pts) < st.sea_min_wet_pulses:
+        sea_pts = lvl
+    land_sigma = sea_sigma_m(res_s[sea_pts], st) if sea_pts.any() else 0.0
     # a trough is water: the band below the level widens with the measured sea, as the land
     # margin above it does (a 2.5 m Hs sea has troughs 1.5 m down; a fixed 1 m band dropped
     # them, the pulses fell back to the mean plane and went 1-2 m deep)
     below = st.below_margin_m
-    if has_s.any():
-        below = max(below, st.below_sea_sigmas * sea_sigma_m(res_s[has_s], st))
+    sea_s = has_s & lvl_wet
+    if np.count_nonzero(sea_s) < st.sea_min_wet_pulses:
+        sea_s = has_s
+    if sea_s.any():
+        below = max(below, st.below_sea_sigmas * sea_sigma_m(res_s[sea_s], st))
     return SurfaceWide(
         global_plane=gplane,
         global_sigma_m=float(gsigma),

@@ -155,3 +155,19 @@ def test_a_survey_whose_water_surfaces_are_all_clipped_takes_their_bound_and_say
     datum = survey_datum(sat)
     assert datum.source == "clipped_bound"
     assert datum.water_level_m == pytest.approx(LEVEL_M + 0.15, abs=1e-9)
+
+
+def test_the_datum_is_set_by_the_surface_returns_with_water_under_them():
+    # a calm sea off nadir from high up: half the pulses return only the seabed, 2-5 m down,
+    # as their "surface" return (nothing under it); the other half return the sea and a
+    # bottom. The datum is the sea's level, not the mean of both
+    pts = _points(60)
+    n = int(np.count_nonzero(pts.kind == 1))
+    lone = np.flatnonzero(pts.kind == 2)[: n // 2]  # these pulses keep no bottom ...
+    keep = np.setdiff1d(np.arange(len(pts.kind)), lone)
+    pts = pts.select(keep)
+    z = pts.xyz_m.copy()
+    alone = (pts.kind == 1) & ~np.isin(pts.pulse_id, pts.pulse_id[pts.kind == 2])
+    z[alone, 2] = np.linspace(-5.0, -2.0, int(alone.sum()))  # ... and a seabed echo for surface
+    datum = survey_datum(pts.replace(xyz_m=z))
+    assert datum.water_level_m == pytest.approx(LEVEL_M, abs=0.02)

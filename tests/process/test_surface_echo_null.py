@@ -224,3 +224,55 @@ def test_the_survey_mix_takes_the_echoes_in_any_chunking_and_drops_the_null(ligh
     clear, ambiguous = int(np.sum(state == 1.0)), int(np.sum(state < 0))
     assert clear > ds.surface_echo_null_max_clear * (clear + ambiguous)
     assert w == pytest.approx(echo_weight(clear, ambiguous, ds.surface_echo_prevalence_half))
+
+
+def test_the_share_of_clear_echoes_is_counted_per_off_nadir_band(tmp_path):
+    """A scan over a light sea: at nadir 40 % of the judged echoes are clear (glints), at
+    18 degrees none are. An ambiguous echo at 18 degrees is the onset's noise (its time the
+    onset's), one at nadir is most likely a weak glint (the echo-kept time): one share for the
+    survey (band 90 degrees) gave both the echo-kept weight, 18 degrees' too. The same times
+    for any chunking."""
+    from pipeline.detection_store import DetectionStore
+    from pipeline.process.surface_echo_mix import mix_stored_echoes
+
+    n = 4000
+    rng = np.random.default_rng(5)
+    off = np.radians(np.where(np.arange(n) % 2 == 0, 0.5, 18.0))  # nadir, 18 degrees
+    az = rng.uniform(0.0, 2.0 * np.pi, n)
+    d = np.column_stack([np.sin(off) * np.cos(az), np.sin(off) * np.sin(az), -np.cos(off)])
+    nadir = off < np.radians(1.0)
+    state = np.where(nadir & (rng.random(n) < 0.4), 1, -1).astype(np.int8)
+    onset, shift = np.full(n, 1.0e-6), np.full(n, 1.0e-9)
+    part = {
+        "pulse_id": np.arange(n),
+        "origin_meas_m": np.zeros((n, 3)),
+        "direction_meas": d,
+        "t_surface_s": onset + shift,
+        "has_surface": np.ones(n, bool),
+        "has_bottom": np.zeros(n, bool),
+        "t_bottom_s": np.zeros(n),
+        "surface_echo_state": state,
+        "t_surface_onset_s": onset,
+        "surface_echo_shift_s": shift,
+    }
+
+    def times(chunks, band_deg):
+        with DetectionStore(tmp_path, N_AIR) as st:
+            for rows in np.array_split(np.arange(n), chunks):
+                st.append({k: v[rows] for k, v in part.items()})
+            _, summary = mix_stored_echoes(
+                st, 0.02, log=lambda *a: None, band_deg=band_deg, prior_pulses=1.0
+            )
+            t = np.concatenate(
+                [st.load_chunk(c, ["t_surface_s"])["t_surface_s"] for c in range(len(st.chunks))]
+            )
+        return (t - onset) / shift, summary  # the echo-kept weight each pulse took
+
+    w, summary = times(1, 2.0)
+    amb = state < 0
+    assert np.all(w[amb & ~nadir] < 0.05) and np.all(w[amb & nadir] > 0.9)
+    assert np.all(w[~amb] == pytest.approx(1.0))  # a clear echo keeps its time
+    assert [b["from_deg"] for b in summary["bands"]] == [0.0, 18.0]
+    np.testing.assert_array_equal(times(7, 2.0)[0], w)
+    one, _ = times(3, 90.0)
+    assert np.all(one[amb] > 0.9)  # one share: 18 degrees' noise read as echoes

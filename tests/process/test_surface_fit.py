@@ -3,6 +3,7 @@
 import dataclasses
 
 import numpy as np
+import pytest
 from scipy import constants
 
 from pipeline.process.returns import DetectedReturns, DetectorFlag, PointFlag
@@ -339,3 +340,28 @@ def test_neighbours_are_taken_from_the_pulses_own_look():
     # the window is a setting: without it the looks mix
     mixed = fit_water_surface(ret, SurfaceFitSettings(air_index=N_AIR, time_window_s=None))
     assert np.abs(mixed.entry_m[inner, 2] - z[inner]).mean() > 0.1
+
+
+def test_the_sea_is_measured_on_the_surface_returns_with_water_under_them():
+    """A calm sea (2 cm of ranging noise about z = 0) seen off nadir from high up: 40 % of the
+    pulses return the surface and a bottom 3 m under it; the others return only a shallow
+    seabed 0.3-0.9 m down (air range), inside the band around the level. The sea's sigma is
+    the wet surfaces' 2 cm (the band's truncation at 1 m is negligible at that size), so the
+    not-surface band keeps its 1 m floor; measured on every surface return, the seabed echoes
+    made a sea of ~0.3 m and a band reaching 1.2 m down, which took them in as troughs."""
+    from pipeline.process.surface_wide import surface_wide
+
+    rng = np.random.default_rng(11)
+    x, y, d = beams(n_side=40)
+    n = x.size
+    wet = rng.random(n) < 0.4
+    z = np.where(wet, rng.normal(0.0, 0.02, n), -rng.uniform(0.3, 0.9, n))
+    o, r = from_hits(np.column_stack([x, y, z]), d)
+    tb = np.where(wet, 2 * (r + 3.0) * N_AIR / C, 0.0)
+    ret = make_returns(o, d, r, t_bottom_s=tb)
+    wide = surface_wide(ret, FIT)
+    assert wide.land_sigma_m == pytest.approx(0.02, rel=0.15)
+    assert wide.below_m == FIT.below_margin_m
+    # with too few wet pulses the sea is measured on every surface return, as before
+    few = make_returns(o, d, r, t_bottom_s=np.where(np.arange(n) < 10, tb, 0.0))
+    assert surface_wide(few, FIT).land_sigma_m > 0.2
