@@ -85,10 +85,11 @@ class SurfaceFitSettings:
     sea_min_wet_pulses: int = setting(
         30,
         ge=0,
-        doc="the sea's height sigma (the troughs' reach, the land test) is measured on the "
-        "surface returns with a bottom level_min_depth_m under them when at least this many "
-        "(water for certain: a calm sea's pulses that return only the seabed read as troughs "
-        "otherwise); fewer: on every surface return",
+        doc="the global water plane and the sea's height sigma (the troughs' reach, the land "
+        "test) are measured on the surface returns with a bottom level_min_depth_m under them "
+        "when at least this many (water for certain: a calm sea seen off nadir from high up "
+        "returns only the seabed on many pulses, whose lone echoes otherwise pulled the plane "
+        "down and read as troughs; suite tuning seed 7201); fewer: on every surface return",
     )
     level_min_depth_m: float = setting(
         1.0,
