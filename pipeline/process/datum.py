@@ -67,6 +67,15 @@ class DatumSettings:
         doc="datum (local z, m) of a survey with no surface return to estimate one from; "
         "keep it equal to process.surface_fit.fallback_water_level_m",
     )
+    min_wet_points: int = setting(
+        30,
+        ge=0,
+        doc="the datum is the mean of the surface returns with water under them (a later "
+        "return of their pulse) when at least this many (a calm sea seen off nadir from high "
+        "up returns only the seabed on many pulses: suite tuning seed 7201's lone seabed "
+        "echoes set the level 2.2 m down); fewer: of every surface return off land; keep it "
+        "equal to process.surface_fit.sea_min_wet_pulses",
+    )
 
 
 @dataclass(frozen=True)
@@ -99,11 +108,6 @@ class Datum:
         }
 
 
-#: Surface returns with water under them (a later return of their pulse) from which the datum
-#: is theirs alone
-WET_MIN_POINTS = 30
-
-
 def survey_datum(points: Points, settings: DatumSettings | None = None) -> Datum:
     """The survey's datum: the user's level, else the gated mean of its surface returns.
 
@@ -130,7 +134,7 @@ def survey_datum(points: Points, settings: DatumSettings | None = None) -> Datum
     # water under an unclipped surface return: a later (bottom or column) return of its pulse
     later = np.isin(points.kind, (ReturnKind.BOTTOM, ReturnKind.WATER_COLUMN))
     wet = surface & ~bound & np.isin(points.pulse_id, points.pulse_id[later])
-    if np.count_nonzero(wet) >= WET_MIN_POINTS:
+    if np.count_nonzero(wet) >= max(s.min_wet_points, 1):
         # water for certain: a calm sea off nadir from high up returns only the seabed on
         # many pulses, whose lone echoes (half the survey's "surface" returns on suite tuning
         # seed 7201, flat water from 694 m over a 0-5 m shoal) set the level 2.2 m down; the

@@ -1,10 +1,12 @@
-"""The survey's reading of its ambiguous surface echoes: one share of clear echoes for all.
+"""The survey's reading of its ambiguous surface echoes: its share of clear echoes, by angle.
 
 :func:`~pipeline.process.surface_step.surface_step_fit` gives each pulse two surface times, the
 echo-kept fit's and the onset alone's (:class:`StepParts`). Where a pulse's echo is ambiguous (a
 weak echo and an earlier onset are nearly the same waveform), its time is the onset's moved
 toward the echo's by :func:`echo_weight` of the survey's share of clear echoes on a column onset
-(empirical Bayes: the population sets the prior); :func:`mix_stored_echoes` sets it once every
+(empirical Bayes: the population sets the prior), counted per band of the beams' off-nadir angle
+(:func:`band_weights`: a glint needs a facet tilted by the angle, so a scan has clear echoes near
+nadir and none at its edges over a light sea); :func:`mix_stored_echoes` sets it once every
 chunk is detected, from integer counts, so the times do not depend on the chunking.
 """
 
