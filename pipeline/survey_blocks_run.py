@@ -197,8 +197,11 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
     with GridTiles(frame) as tiles:
         t0, done = time.perf_counter(), 0
         with LazTileWriter(out / "points.laz", header, ctx.instrument.amplitude_full_scale) as w:
-            # at most `side` blocks in flight; the manifest's map_wall_s stays the chunk loop's
-            tasks = runner.map(run_block, job, todo.size, ahead=side, timed=False)
+            # at most `side` blocks running (a pool of `side` keeps one more queued, so that
+            # both run while this process writes; a cluster runs all it is given); the
+            # manifest's map_wall_s stays the chunk loop's
+            ahead = side + 1 if runner.scheduler is None and side > 1 else side
+            tasks = runner.map(run_block, job, todo.size, ahead=ahead, timed=False)
             for k, res in enumerate(tasks):
                 clock.add(res.stages)
                 if res.points is not None:
