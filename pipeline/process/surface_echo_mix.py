@@ -248,9 +248,10 @@ def mix_stored_echoes(
     for c in range(len(store.chunks)):
         d = store.load_chunk(c, ["t_surface_s", "direction_meas", *ECHO_FIELDS])
         mix = d["surface_echo_state"] < 0
-        # every judged pulse's band is one of `bands`; the others are not mixed
-        at = np.clip(np.searchsorted(bands, angle_band(d["direction_meas"], band_deg)), 0, None)
-        wp = wb[np.minimum(at, max(bands.size - 1, 0))] if bands.size else np.zeros(mix.size)
+        # every judged pulse's band is one of `bands`; the others are not mixed (their index
+        # is only kept in range)
+        at = np.searchsorted(bands, angle_band(d["direction_meas"], band_deg))
+        wp = wb[np.minimum(at, bands.size - 1)] if bands.size else np.zeros(mix.size)
         t = np.where(mix, d["t_surface_onset_s"] + wp * d["surface_echo_shift_s"], d["t_surface_s"])
         store.replace_field(c, "t_surface_s", t)
     for k in (*ECHO_FIELDS, NULL_FIELD):

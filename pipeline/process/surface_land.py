@@ -58,6 +58,7 @@ __all__ = [
     "land_surface_points",
     "masked_median",
     "sea_sigma_m",
+    "where_certain",
 ]
 
 #: Largest sea sigma reported, in water bands (a band filled uniformly has no finite one).
@@ -86,6 +87,17 @@ def _plane_lstsq(x, y, z, tilt_prior_rad=None):
     return np.array([coef[0] - coef[1] * xm - coef[2] * ym, coef[1], coef[2]]), sigma
 
 
+def where_certain(mask: np.ndarray, wet: np.ndarray, st) -> np.ndarray:
+    """``mask & wet`` where at least ``st.sea_min_wet_pulses`` are so, else ``mask``, ``(m,)``.
+
+    The points of ``mask`` with water for certain under them (a bottom well below) measure the
+    sea when there are enough of them: a calm sea seen off nadir from high up returns only the
+    seabed on many pulses, whose lone echoes otherwise read as a rough, sunken sea.
+    """
+    both = mask & wet
+    return both if np.count_nonzero(both) >= st.sea_min_wet_pulses else mask
+
+
 def global_plane(ps: np.ndarray, st, wet: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Water plane from surface points: histogram mode, then iterated band fit.
 
@@ -106,10 +118,12 @@ def global_plane(ps: np.ndarray, st, wet: np.ndarray | None = None) -> tuple[np.
     sigma_m : float
         Residual standard deviation of the band fit.
     """
-    if wet is not None and np.count_nonzero(wet) >= st.sea_min_wet_pulses:
-        # the plane of the water for certain (SurfaceFitSettings.sea_min_wet_pulses): lone
-        # seabed echoes of a calm sea within the band pulled its fit down
-        ps, wet = ps[wet], None
+    if wet is not None:
+        # the plane of the water for certain: lone seabed echoes of a calm sea within the band
+        # pulled its fit down
+        certain = where_certain(np.ones(len(ps), dtype=bool), wet, st)
+        if not certain.all():
+            ps, wet = ps[certain], None
     z = ps[:, 2]
     if st.water_level_hint_m is not None:
         level = float(st.water_level_hint_m)

@@ -21,7 +21,7 @@ import numpy as np
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.returns import DetectedReturns
 from pipeline.process.surface_evidence import clipped_into_column, level_points, no_water_seen
-from pipeline.process.surface_land import global_plane, sea_sigma_m
+from pipeline.process.surface_land import global_plane, sea_sigma_m, where_certain
 
 __all__ = ["SurfaceInputs", "SurfaceWide", "surface_inputs", "surface_points_m", "surface_wide"]
 
@@ -132,17 +132,13 @@ def surface_wide(returns: DetectedReturns, st, inputs: SurfaceInputs | None = No
     # read as a rough sea (0.38 m on suite tuning seed 7201, flat water, 694 m, a 0-5 m shoal),
     # whose troughs then took them in as surface points (the planes sank to the seabed: 300
     # soundings 1-1.8 m short)
-    sea_pts = lvl & lvl_wet
-    if np.count_nonzero(sea_pts) < st.sea_min_wet_pulses:
-        sea_pts = lvl
+    sea_pts = where_certain(lvl, lvl_wet, st)
     land_sigma = sea_sigma_m(res_s[sea_pts], st) if sea_pts.any() else 0.0
     # a trough is water: the band below the level widens with the measured sea, as the land
     # margin above it does (a 2.5 m Hs sea has troughs 1.5 m down; a fixed 1 m band dropped
     # them, the pulses fell back to the mean plane and went 1-2 m deep)
     below = st.below_margin_m
-    sea_s = has_s & lvl_wet
-    if np.count_nonzero(sea_s) < st.sea_min_wet_pulses:
-        sea_s = has_s
+    sea_s = where_certain(has_s, lvl_wet, st)
     if sea_s.any():
         below = max(below, st.below_sea_sigmas * sea_sigma_m(res_s[sea_s], st))
     return SurfaceWide(
