@@ -37,7 +37,7 @@ Sampling
    (:mod:`~pipeline.uncertainty.waveform_kernel`). ``burn_steps`` are discarded (the
    independence proposal is adapted once, at their end, then fixed).
 4. Convergence, per pulse: production in chunks of ``chunk_steps`` until the chain is at
-   least ``tau_factor`` (50) integrated autocorrelation times long (emcee's
+   least ``tau_factor`` (35) integrated autocorrelation times long (emcee's
    ``integrated_time`` for all pulses at once, :func:`~pipeline.uncertainty.
    posterior_autocorr.integrated_time_blocks`; the largest over the parameters) or
    ``max_steps``; the mean

@@ -4,7 +4,8 @@ closed form.
 The independence proposal is fitted to the burn-in, whose walkers start in a small ball around
 the mode (half the Laplace sigma). When the posterior is much wider than the Laplace estimate
 (a weak water column, a barely constrained bottom width), 150 steps do not spread them: the
-fitted proposal is far too narrow, the chains crawl and never reach 50 autocorrelation times.
+fitted proposal is far too narrow, the chains crawl and never reach ``tau_factor``
+autocorrelation times.
 The restart refits the proposal to the chains' own production and discards it. The reference
 is the target itself: a Gaussian likelihood under a flat prior, whose posterior is normal with a
 mean and covariance written in the test.
