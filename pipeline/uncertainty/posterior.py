@@ -46,7 +46,10 @@ Sampling
    summaries are still given). Converged pulses leave the batch; the rest continue.
 5. Restart, once: the pulses still unconverged after ``restart_steps`` (1500) production
    steps refit their independence proposal to the second half of their own production, which
-   becomes burn-in, and start a new chain (``max_steps`` counts both). The burn-in's walkers
+   becomes burn-in, and start a new chain (``max_steps`` counts both) whose moves are
+   differential evolution but for ``restart_independence_weight`` (0.2) of them: a posterior
+   the refitted Student-t still cannot follow (a clipped surface echo's ridge, acceptance
+   0.01-0.13 on suite scenes) is followed by DE, which moves along its shape. The burn-in's walkers
    start in a ball of half the Laplace sigma and 150 steps do not spread them over a posterior
    much wider or more skewed than the Laplace estimate (weak water columns, a free bottom
    width): the proposal fitted to them is too narrow and the chain crawls. Adaptation stops at
@@ -64,6 +67,7 @@ whose chains do not converge run to ``max_steps`` and dominate).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass
 from typing import Any
@@ -271,13 +275,14 @@ def sample_batch(
     active = np.arange(n_p)
     spent = np.zeros(n_p, dtype=np.int64)  # production steps discarded by a restart
     restarted = False
+    st_run = st
     while active.size:
         a0 = active[0]
         chunk = min(st.chunk_steps, st.max_steps - int(spent[a0] + n_steps[a0]))
         chunk = max(st.thin, chunk - chunk % st.thin)  # whole stored steps
         sub_prop = (proposal[0][active], proposal[1][active])
         new_pos, (chain, acc) = _run(
-            data, active, pos[:, active], system, st, chunk, st.thin, rng, sub_prop
+            data, active, pos[:, active], system, st_run, chunk, st.thin, rng, sub_prop
         )
         pos[:, active] = new_pos
         n_steps[active] += chunk
@@ -312,6 +317,11 @@ def sample_batch(
             # 2007 ask no more of finitely many adaptations). All of them restart (their
             # chains must stay equally long), a degenerate refit keeping its old proposal
             restarted = True
+            # only the restarted chains run on (the converged ones have left), and where the
+            # Student-t could not follow their posterior after a refit to their own chains it
+            # seldom does after a second: differential evolution, which moves along a
+            # posterior's own shape, takes the larger share
+            st_run = dataclasses.replace(st, independence_weight=st.restart_independence_weight)
             k1 = k0 + chain.shape[0]
             _refit_proposal(stored[k1 // 2 : k1], active, centres, scales)
             proposal = (centres, scales * st.proposal_scale**2)

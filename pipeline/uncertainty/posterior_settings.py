@@ -54,6 +54,12 @@ class PosteriorSettings:
     independence_weight: float = setting(
         0.8, ge=0.0, le=1.0, doc="share of independence (Student-t) moves; the rest DE"
     )
+    restart_independence_weight: float = setting(
+        0.2,
+        ge=0.0,
+        le=1.0,
+        doc="share of independence moves in the chains restarted after restart_steps",
+    )
     proposal_dof: float = setting(5.0, gt=2.0, doc="Student-t degrees of freedom")
     proposal_scale: float = setting(1.2, gt=0.0, doc="proposal scale / posterior sigma")
     batch_size: int = setting(32, ge=1, le=4096, doc="pulses sampled side by side")

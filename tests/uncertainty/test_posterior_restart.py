@@ -50,14 +50,18 @@ def _whitened(draws, mean, cov):
     return np.linalg.solve(np.linalg.cholesky(cov), (draws - mean).T).T
 
 
-def test_restart_finds_a_posterior_twenty_times_wider_than_the_start(monkeypatch):
+@pytest.mark.parametrize("restart_weight", [0.2, 0.8])
+def test_restart_finds_a_posterior_twenty_times_wider_than_the_start(monkeypatch, restart_weight):
     """Without the restart no chain converges in 4000 steps (acceptance ~0.06); with it every
     one does, and its draws have the target's mean and covariance (whitened: mean 0 and
-    covariance I; ~2000 thinned draws of several hundred independent ones)."""
+    covariance I; ~2000 thinned draws of several hundred independent ones), whichever share
+    of independence moves the restarted chains run with (the default 0.2, or the 0.8 of
+    the chains before)."""
     waves, mean, cov = _gaussian_targets(monkeypatch, width=20.0)
     stuck = sample_batch(waves, FW, PosteriorSettings(restart_steps=None), seed=3)
     assert stuck.converged.sum() <= 2, stuck.flags
-    chains = sample_batch(waves, FW, PosteriorSettings(), seed=3)  # the default restarts
+    st = PosteriorSettings(restart_independence_weight=restart_weight)
+    chains = sample_batch(waves, FW, st, seed=3)
     assert chains.converged.all(), chains.flags
     for i in range(len(waves)):
         z = _whitened(chains.draws[i], mean[i], cov[i])
