@@ -29,6 +29,7 @@ from pipeline.uncertainty.posterior_target import (
 from pipeline.uncertainty.waveform_information import (
     score,
 )
+from pipeline.uncertainty.waveform_kernel import echo_rows
 from pipeline.uncertainty.waveform_model import (
     N_PARAMS,
     WaveformSystem,
@@ -139,7 +140,11 @@ def _scan_start(y, system, cos_water, ts, bg, exposure=None):
         rows = 1 if j == 2 else taus.size
         th = np.tile([0.0, ts * 1e9, off, off, off, math.log(0.1), 0.0, 0.0, 0.0], (rows, 1))
         th[:, 0], th[:, j] = depths[:rows], 0.0
-        a[:, :, col] = expected_waveform(th, m, system, cos_water) - system.offset_counts
+        if j == 4:  # the bottom's basis: its column's exp(-700) area left out (echo_rows)
+            mu = echo_rows(th, float(cos_water), m, dt, s, system.group_index, system.offset_counts)
+        else:
+            mu = expected_waveform(th, m, system, cos_water)
+        a[:, :, col] = mu - system.offset_counts
     if exposure is not None and system.poisson:
         a *= np.asarray(exposure, dtype=np.float64)[None, :, None]
     rhs = y - system.offset_counts

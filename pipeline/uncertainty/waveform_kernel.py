@@ -182,6 +182,27 @@ def model_row(th, cos_water, mu, dt, s, group_index, offset):
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
+def echo_rows(theta, cos_water, n_samples, dt, s, group_index, offset):
+    """:func:`expected_rows` of rows without a water column (N, n_samples), one ``cos_water``.
+
+    The baseline and the two echoes only, added as :func:`model_row` adds them. For rows whose
+    column area ``exp(th[3])`` is ~1e-304 (the depth scan's echo bases) the column's samples
+    lie below the last bit of any sum they enter (``tests/uncertainty/test_posterior_start.py``
+    checks the scan's start bit for bit), and forming it was most of those rows' cost.
+    """
+    n = theta.shape[0]
+    out = np.empty((n, n_samples))
+    for k in range(n):
+        th = theta[k]
+        t_s = th[1] * 1e-9
+        tau = 2.0 * group_index * th[0] / (_C * cos_water)  # as _row_setup
+        out[k, :] = offset + th[6]
+        _add_echo(out[k], t_s, s * math.exp(th[8]), math.exp(th[2]), dt)
+        _add_echo(out[k], t_s + tau, s * math.exp(th[7]), math.exp(th[4]), dt)
+    return out
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def expected_rows(theta, cos_water, n_samples, dt, s, group_index, offset):
     """Mean samples (N, n_samples) of parameter rows ``theta`` (N, 9), ``cos_water`` (N,)."""
     n = theta.shape[0]

@@ -60,3 +60,52 @@ def test_projection_of_all_pulses_is_the_per_pulse_one():
         th[:, 0] = np.abs(th[:, 0])
         each = np.array([_project(th[i], data, i, system.group_index) for i in range(16)])
         assert np.array_equal(_project_all(th, data, system.group_index), each)
+
+
+@pytest.mark.parametrize("receiver", ["full_waveform", "photon_counting"])
+def test_scan_start_without_the_bottom_basis_column_is_the_same_bit_for_bit(monkeypatch, receiver):
+    """The depth scan's bottom basis leaves out its column's exp(-700) area (``echo_rows``):
+    on waveforms drawn over depths, attenuations, angles, backgrounds and exposures, the scan's
+    start is what the whole model row (``expected_waveform``, the column included) gives."""
+    import pipeline.uncertainty.posterior_start as ps
+    from pipeline.uncertainty.waveform_model import draw_waveform, expected_waveform
+
+    system = WaveformSystem(
+        sample_interval_s=1e-9,
+        pulse_fwhm_s=3e-9,
+        receiver=receiver,
+        **(
+            {
+                "offset_counts": 100.0,
+                "counts_per_photoelectron": 5.0,
+                "electronic_noise_counts": 2.0,
+            }
+            if receiver == "full_waveform"
+            else {}
+        ),
+    )
+
+    def whole_rows(th, cos_water, m, dt, s, group_index, offset):
+        return expected_waveform(th, m, system, cos_water)
+
+    rng = np.random.default_rng(11)
+    cases = 0
+    for _ in range(40):
+        depth, k = rng.uniform(0.3, 12.0), rng.uniform(0.05, 0.8)
+        cos_w = rng.uniform(0.85, 1.0)
+        th = np.array(
+            [depth, 20.0, np.log(rng.uniform(5, 5e3)), np.log(rng.uniform(5, 500)),
+             np.log(rng.uniform(0.5, 300)), np.log(k), rng.uniform(0, 3), 0.0, 0.0]
+        )  # fmt: skip
+        m = int(rng.integers(60, 320))
+        y = draw_waveform(th, m, system, rng, cos_water=cos_w)
+        ex = rng.uniform(0.6, 1.0, m) if receiver == "photon_counting" else None
+        new = ps._scan_start(y, system, cos_w, 20e-9, th[6], ex)
+        with monkeypatch.context() as mp:
+            mp.setattr(ps, "echo_rows", whole_rows)
+            old = ps._scan_start(y, system, cos_w, 20e-9, th[6], ex)
+        assert (new is None) == (old is None)
+        if new is not None:
+            cases += 1
+            assert np.array_equal(new, old), (new, old)
+    assert cases >= 30
