@@ -46,15 +46,16 @@ Sampling
    summaries are still given). Converged pulses leave the batch; the rest continue.
 5. Restart, once: the pulses still unconverged after ``restart_steps`` (1500) production
    steps refit their independence proposal to the second half of their own production, which
-   becomes burn-in, and start a new chain (``max_steps`` counts both) whose moves are
-   differential evolution but for ``restart_independence_weight`` (0.2) of them: a posterior
-   the refitted Student-t still cannot follow (a clipped surface echo's ridge, acceptance
-   0.01-0.13 on suite scenes) is followed by DE, which moves along its shape. The burn-in's walkers
+   becomes burn-in, and start a new chain (``max_steps`` counts both). The burn-in's walkers
    start in a ball of half the Laplace sigma and 150 steps do not spread them over a posterior
    much wider or more skewed than the Laplace estimate (weak water columns, a free bottom
-   width): the proposal fitted to them is too narrow and the chain crawls. Adaptation stops at
-   the restart, so every chain is still an exact MCMC of its pulse's posterior; pulses
-   converged earlier are untouched (``tests/uncertainty/test_posterior_restart.py``).
+   width): the proposal fitted to them is too narrow and the chain crawls. The new chains'
+   moves are differential evolution but for ``restart_independence_weight`` (0.2) of them:
+   a posterior the Student-t refitted to the chains' own production still cannot follow (a
+   clipped surface echo's ridge: acceptance 0.01-0.13 on suite scenes) is followed by DE,
+   which moves along its shape. Adaptation stops at the restart, so every chain is still an
+   exact MCMC of its pulse's posterior; pulses converged earlier are untouched
+   (``tests/uncertainty/test_posterior_restart.py``).
 
 Seabed point
 ------------
@@ -317,10 +318,10 @@ def sample_batch(
             # 2007 ask no more of finitely many adaptations). All of them restart (their
             # chains must stay equally long), a degenerate refit keeping its old proposal
             restarted = True
-            # only the restarted chains run on (the converged ones have left), and where the
-            # Student-t could not follow their posterior after a refit to their own chains it
-            # seldom does after a second: differential evolution, which moves along a
-            # posterior's own shape, takes the larger share
+            # only the restarted chains run on (the converged ones have left). Where the
+            # Student-t fitted to the burn-in could not follow their posterior, the one refitted
+            # below to their own production seldom does better on suite scenes: differential
+            # evolution, which moves along a posterior's own shape, takes the larger share
             st_run = dataclasses.replace(st, independence_weight=st.restart_independence_weight)
             k1 = k0 + chain.shape[0]
             _refit_proposal(stored[k1 // 2 : k1], active, centres, scales)

@@ -66,7 +66,7 @@ FW = WaveformSystem(
     offset_counts=100.0,
 )
 PC = WaveformSystem(sample_interval_s=1e-9, pulse_fwhm_s=3e-9, receiver="photon_counting")
-# the production rules (50 tau, acceptance range); at most 2500 steps for a stuck pulse
+# the production rules (tau_factor, acceptance range, the restart); at most 4000 steps
 FAST = PosteriorSettings(max_steps=4000)
 
 

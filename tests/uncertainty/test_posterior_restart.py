@@ -85,3 +85,21 @@ def test_chains_converged_before_the_restart_are_untouched(monkeypatch, restart_
     # chain is shorter): where both batches keep as many, they are the same draws
     if plain.draws.shape == with_restart.draws.shape:
         np.testing.assert_array_equal(with_restart.draws[early], plain.draws[early])
+
+
+def test_only_the_restarted_chains_run_with_the_restart_weight(monkeypatch):
+    """The restart's move mix reaches the restarted chains and no other: at 0.2 and 0.8 the
+    pulses converged before the restart are the same to the bit, the restarted ones differ."""
+    waves, _, _ = _gaussian_targets(monkeypatch, width=5.0)
+    runs = [
+        sample_batch(waves, FW, PosteriorSettings(restart_independence_weight=w), seed=3)
+        for w in (0.2, 0.8)
+    ]
+    plain = sample_batch(waves, FW, PosteriorSettings(restart_steps=None), seed=3)
+    early = plain.converged & (plain.n_steps <= PosteriorSettings().restart_steps)
+    assert early.any() and (~early).any(), plain.n_steps
+    np.testing.assert_array_equal(runs[0].n_steps[early], runs[1].n_steps[early])
+    np.testing.assert_array_equal(runs[0].acceptance[early], runs[1].acceptance[early])
+    np.testing.assert_array_equal(runs[0].tau_steps[early], runs[1].tau_steps[early])
+    late = ~early
+    assert not np.array_equal(runs[0].acceptance[late], runs[1].acceptance[late])
