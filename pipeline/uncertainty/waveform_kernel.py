@@ -177,6 +177,12 @@ def model_row(th, cos_water, mu, dt, s, group_index, offset):
             nxt = _c_part(u, r, s, band) - fall * _c_part(u - tau, r, s, band)
         mu[i] = base + (nxt - prev) * scale
         prev = nxt
+    _add_echoes(mu, th, t_s, tau, s, dt)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _add_echoes(mu, th, t_s, tau, s, dt):
+    """Add row ``th``'s surface echo, then its bottom echo, to ``mu`` in place (that order)."""
     _add_echo(mu, t_s, s * math.exp(th[8]), math.exp(th[2]), dt)
     _add_echo(mu, t_s + tau, s * math.exp(th[7]), math.exp(th[4]), dt)
 
@@ -193,12 +199,9 @@ def echo_rows(theta, cos_water, n_samples, dt, s, group_index, offset):
     n = theta.shape[0]
     out = np.empty((n, n_samples))
     for k in range(n):
-        th = theta[k]
-        t_s = th[1] * 1e-9
-        tau = 2.0 * group_index * th[0] / (_C * cos_water)  # as _row_setup
-        out[k, :] = offset + th[6]
-        _add_echo(out[k], t_s, s * math.exp(th[8]), math.exp(th[2]), dt)
-        _add_echo(out[k], t_s + tau, s * math.exp(th[7]), math.exp(th[4]), dt)
+        t_s, _, tau, _, base, _ = _row_setup(theta[k], cos_water, s, group_index, offset)
+        out[k, :] = base
+        _add_echoes(out[k], theta[k], t_s, tau, s, dt)
     return out
 
 
