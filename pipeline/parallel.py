@@ -22,6 +22,7 @@ Results do not depend on where a task ran: every task is a pure function of ``(s
 from __future__ import annotations
 
 import contextlib
+import math
 import multiprocessing
 import os
 import pickle
@@ -189,12 +190,12 @@ def _shared_handoff(shared: Any) -> Iterator[tuple[Callable[[Any], None], tuple[
         yield _install_from, (f"{proc}/{f.fileno()}",)
 
 
-def _pool_call(fn: Callable[[Any, int], Any], index: int) -> Any:
-    return fn(_SHARED, index)
+def _pool_call(fn: Callable[..., Any], index: int, *data: Any) -> Any:
+    return fn(_SHARED, index, *data)
 
 
-def _dask_call(fn: Callable[[Any, int], Any], shared: Any, index: int) -> Any:
-    return fn(shared, index)
+def _dask_call(fn: Callable[..., Any], shared: Any, index: int, *data: Any) -> Any:
+    return fn(shared, index, *data)
 
 
 class Executor:
@@ -273,6 +274,33 @@ class Executor:
         seen = self._client.run(_file_identity, path)
         return bool(seen) and all(v == file_identity(path) for v in seen.values())
 
+    def cluster_memory(self) -> list[tuple[int, float]]:
+        """Each cluster worker's threads and the bytes it may still take; ``[]`` without one.
+
+        A worker's share is the smaller of its Dask ``memory_limit`` (0: none) and
+        :data:`~pipeline.memory_budget.MEMORY_SHARE` of its own machine's memory
+        (:func:`~pipeline.memory_budget.machine_memory_bytes`, asked on the worker), less the
+        memory it holds now. Workers that join later are not asked.
+
+        Returns
+        -------
+        list of (int, float)
+            ``(threads, bytes)`` per worker.
+        """
+        if self._client is None:
+            return []
+        from pipeline.memory_budget import MEMORY_SHARE
+
+        info = self._client.scheduler_info()["workers"]
+        machine = self._client.run(_machine_memory)
+        out = []
+        for address, w in info.items():
+            limit = float(w.get("memory_limit") or 0.0) or math.inf
+            share = min(limit, MEMORY_SHARE * float(machine.get(address, math.inf)))
+            held = float(w.get("metrics", {}).get("memory", 0.0))
+            out.append((int(w.get("nthreads", 1)), max(share - held, 0.0)))
+        return out
+
     def __enter__(self) -> Executor:
         return self
 
@@ -292,6 +320,7 @@ class Executor:
         n_tasks: int,
         ahead: int | None = None,
         timed: bool = True,
+        payload: Callable[[int], Any] | None = None,
     ) -> Iterator[Any]:
         """Yield ``fn(shared, i)`` for ``i = 0 .. n_tasks - 1``, in order, as they arrive.
 
@@ -299,22 +328,29 @@ class Executor:
         early (or an exception in a task) cancels the tasks not yet started. ``ahead``: tasks
         submitted and not yet consumed, at most (default the executor's); ``timed``: whether
         the wall seconds count in :attr:`map_wall_s` (the chunk loop's, in the manifest).
+
+        ``payload``: data of task ``i`` alone, made here as the task is submitted (so at
+        most ``ahead`` are alive) and sent with it: the task is then
+        ``fn(shared, i, payload(i))``. For what the workers cannot read themselves (a
+        cluster on other machines: a task's part of this process's files); on a cluster it
+        is scattered to a worker first, not put in the task graph.
         """
         t0 = time.perf_counter()
         ahead = self.ahead if ahead is None else max(1, int(ahead))
+        args = (lambda i: ()) if payload is None else (lambda i: (payload(i),))
         try:
             if self._client is not None:
-                yield from self._map_dask(fn, shared, n_tasks, ahead)
+                yield from self._map_dask(fn, shared, n_tasks, ahead, args)
             elif self.workers == 1 or n_tasks <= 1:
                 for i in range(n_tasks):
-                    yield fn(shared, i)
+                    yield fn(shared, i, *args(i))
             else:
-                yield from self._map_pool(fn, shared, n_tasks, ahead)
+                yield from self._map_pool(fn, shared, n_tasks, ahead, args)
         finally:
             if timed:
                 self.map_wall_s += time.perf_counter() - t0
 
-    def _map_pool(self, fn, shared, n_tasks: int, ahead: int) -> Iterator[Any]:
+    def _map_pool(self, fn, shared, n_tasks: int, ahead: int, args) -> Iterator[Any]:
         ctx = multiprocessing.get_context("spawn")
         # the file lives until the pool has shut down: every worker has read it by then
         with _shared_handoff(shared) as (initializer, initargs):
@@ -325,21 +361,34 @@ class Executor:
                 initargs=initargs,
             )
             try:
-                yield from _ordered(lambda i: pool.submit(_pool_call, fn, i), n_tasks, ahead)
+                yield from _ordered(
+                    lambda i: pool.submit(_pool_call, fn, i, *args(i)), n_tasks, ahead
+                )
             finally:
                 pool.shutdown(wait=True, cancel_futures=True)
 
-    def _map_dask(self, fn, shared, n_tasks: int, ahead: int) -> Iterator[Any]:
+    def _map_dask(self, fn, shared, n_tasks: int, ahead: int, args) -> Iterator[Any]:
         client = self._client
         shared_f = client.scatter(shared, broadcast=True, hash=False)
+
+        def submit(i: int):
+            # a task's own data goes to one worker ahead of the task (the task then runs
+            # where it lies), not into the graph the scheduler holds
+            # (in a list: a tuple or dict given alone would be scattered item by item)
+            data = [client.scatter([a], hash=False)[0] for a in args(i)]
+            return client.submit(_dask_call, fn, shared_f, i, *data, pure=False)
+
         try:
-            yield from _ordered(
-                lambda i: client.submit(_dask_call, fn, shared_f, i, pure=False),
-                n_tasks,
-                ahead,
-            )
+            yield from _ordered(submit, n_tasks, ahead)
         finally:
             client.cancel([shared_f])
+
+
+def _machine_memory() -> float:
+    """:func:`~pipeline.memory_budget.machine_memory_bytes` where this runs (a worker)."""
+    from pipeline.memory_budget import machine_memory_bytes
+
+    return machine_memory_bytes()
 
 
 def _file_identity(path: str) -> tuple | None:

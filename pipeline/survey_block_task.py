@@ -38,8 +38,9 @@ class BlockJob:
 
     Attributes
     ----------
-    store : DetectionStore or StoreReader
-        The survey's detections (a reader in another process).
+    store : DetectionStore or StoreReader or None
+        The survey's detections (a reader in another process; None: each task is sent its
+        block's pulses, :func:`run_block`'s ``loaded``).
     blocks : TileLayout
         The blocks.
     todo : (n_tasks,) int
@@ -154,7 +155,7 @@ def _quiet(*_args, **_kw) -> None:
     return None
 
 
-def run_block(job: BlockJob, k: int) -> BlockResult:
+def run_block(job: BlockJob, k: int, loaded: tuple | None = None) -> BlockResult:
     """Process block ``job.todo[k]`` with its halo and keep what is its own.
 
     Parameters
@@ -162,6 +163,11 @@ def run_block(job: BlockJob, k: int) -> BlockResult:
     job : BlockJob
     k : int
         The task: block ``job.todo[k]``.
+    loaded : (DetectedReturns or None, (n,) bool or None), optional
+        The block's pulses with its halo and which are its own, as
+        :func:`~pipeline.survey_blocks.load_blocks` gives them, where the run's process
+        sends them (its workers cannot read the store: ``job.store`` is None). Default:
+        read from ``job.store``.
 
     Returns
     -------
@@ -169,14 +175,14 @@ def run_block(job: BlockJob, k: int) -> BlockResult:
         ``points`` None where no pulse lies near enough for a point to fall in the block.
     """
     try:
-        return _run_block(job, k)
+        return _run_block(job, k, loaded)
     except Exception as exc:
         b = int(job.todo[k])
         box = ", ".join(f"{v:.1f}" for v in job.blocks.box_m(b))
         raise RuntimeError(f"block {b} (local box w, e, s, n = {box} m) failed: {exc}") from exc
 
 
-def _run_block(job: BlockJob, k: int) -> BlockResult:
+def _run_block(job: BlockJob, k: int, loaded: tuple | None) -> BlockResult:
     from pipeline.outputs.grid_tiles import cell_records
     from pipeline.survey_block_reach import processing_rows
     from pipeline.survey_blocks import (
@@ -191,8 +197,10 @@ def _run_block(job: BlockJob, k: int) -> BlockResult:
 
     b, clock = int(job.todo[k]), StageClock()
     ps, air, blocks = job.scene.process, job.ctx.instrument.air_index, job.blocks
-    with clock.stage("blocks"):
-        ret, own = load_blocks(job.store, blocks, [b], job.halo_m)
+    if loaded is None:
+        with clock.stage("blocks"):
+            loaded = load_blocks(job.store, blocks, [b], job.halo_m)
+    ret, own = loaded
     if ret is None or (job.counts[b] == 0 and not _reached(ret, blocks, b, job.reach_m, air)):
         # no pulse near enough for a point of its to fall in the block
         return BlockResult(b, stages=clock.to_dict())

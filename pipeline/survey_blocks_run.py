@@ -6,13 +6,19 @@ The passes of :mod:`pipeline.survey_blocks`, wired and timed.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import gc
 import time
 
 import numpy as np
 
 from pipeline.detection_store import SetAside
-from pipeline.memory_budget import MEMORY_SHARE, machine_memory_bytes
+from pipeline.memory_budget import (
+    BASE_BYTES,
+    BYTES_PER_PULSE,
+    MEMORY_SHARE,
+    machine_memory_bytes,
+)
 from pipeline.outputs.grid_tiles import GridFrame, GridTiles
 from pipeline.outputs.las_fields import LineEnds
 from pipeline.parallel import Executor
@@ -82,24 +88,38 @@ class CoverageAccumulator:
 
 
 def _block_runner(executor, store, counts, load: float, log):
-    """Where the blocks run: ``(runner, source, side)``.
+    """Where the blocks run: ``(runner, source, side, send)``.
 
-    ``runner``: an executor; ``source``: the store as it reads it; ``side``: blocks at once.
-    Side by side where the executor's workers can read the store (a process pool, or a Dask
-    cluster on this machine), as many as the memory holds (:func:`blocks_side_by_side`: each
-    block holds about its loaded pulses); else one after another in this process.
+    ``runner``: an executor; ``source``: the store as its workers read it; ``side``: blocks at
+    once; ``send``: the workers cannot read the store, so each task is sent its block's pulses,
+    read here (:func:`run_block`'s ``loaded``). Side by side on a process pool or a Dask
+    cluster, as many as the memory holds (:func:`blocks_side_by_side`: each block holds about
+    its loaded pulses): this machine's, or for a cluster on other machines its workers' own
+    (:meth:`~pipeline.parallel.Executor.cluster_memory`); one at a time here where only one
+    fits.
     """
     n = store.n_pulses
     if executor is None or executor.workers <= 1:
-        return Executor(workers=1), store, 1
-    reader = store.reader()
-    if reader is None or not executor.shares_file(reader.path):
-        log(
-            "  blocks one after another here: the workers cannot read this process's"
-            " detection store (no /proc, or a Dask cluster on another machine)"
-        )
-        return Executor(workers=1), store, 1
+        return Executor(workers=1), store, 1, False
     loaded = min(n, float(counts.max()) * load)
+    reader = store.reader()
+    reads = reader is not None and executor.shares_file(reader.path)
+    if not reads and executor.scheduler is not None:
+        # workers on other machines: their memory holds the blocks, not this one's
+        per_block = BASE_BYTES + BYTES_PER_PULSE * loaded
+        fits = sum(min(t, int(free // per_block)) for t, free in executor.cluster_memory())
+        side = max(1, min(executor.workers, fits))
+        log(
+            "  blocks sent to the cluster's workers with their pulses: the workers cannot"
+            " read this process's detection store (a cluster on another machine)"
+        )
+        if side < executor.workers:
+            log(
+                f"  {side} block(s) at a time, not {executor.workers}: each holds about"
+                f" {loaded:.3g} pulses (run.block_pulses), more than the workers' memory"
+                " holds side by side"
+            )
+        return executor, store, side, True
     free = MEMORY_SHARE * machine_memory_bytes() - (current_rss_mb() or 0.0) * 2.0**20
     side = blocks_side_by_side(executor.workers, loaded, free)
     if side < executor.workers:
@@ -109,10 +129,19 @@ def _block_runner(executor, store, counts, load: float, log):
             " holds side by side"
         )
     if side == 1:
-        return Executor(workers=1), store, 1
+        return Executor(workers=1), store, 1, False
+    if not reads:
+        log("  blocks sent to the workers with their pulses: this machine has no /proc")
+    source = reader if reads else store
     if executor.scheduler is None and side < executor.workers:
-        return Executor(workers=side), reader, side
-    return executor, reader, side
+        return Executor(workers=side), source, side, not reads
+    return executor, source, side, not reads
+
+
+def _block_pulses(clock, store, blocks, todo, halo: float, k: int) -> tuple:
+    """Task ``k``'s block's pulses with its halo, read here for workers that cannot."""
+    with clock.stage("blocks"):
+        return load_blocks(store, blocks, [int(todo[k])], halo)
 
 
 def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ctx, layout):
@@ -187,10 +216,10 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
         del made, sample_returns
         gc.collect()
         trim_heap()
-    runner, source, side = _block_runner(executor, store, counts, load, log)
+    runner, source, side, send = _block_runner(executor, store, counts, load, log)
     job = BlockJob(
-        source, blocks, todo, counts, halo, reach, planes_m, krige_m, scene, plan, ctx,
-        figures, layout,
+        None if send else source, blocks, todo, counts, halo, reach, planes_m, krige_m, scene,
+        plan, ctx, figures, layout,
     )  # fmt: skip
     log(f"  blocks on {side} worker(s)")
     # the survey's grid on disk, removed when the survey is finished
@@ -201,7 +230,11 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
             # both run while this process writes; a cluster runs all it is given); the
             # manifest's map_wall_s stays the chunk loop's
             ahead = side + 1 if runner.scheduler is None and side > 1 else side
-            tasks = runner.map(run_block, job, todo.size, ahead=ahead, timed=False)
+            tasks = runner.map(
+                run_block, job, todo.size, ahead=ahead, timed=False,
+                payload=functools.partial(_block_pulses, clock, store, blocks, todo, halo)
+                if send else None,
+            )  # fmt: skip
             for k, res in enumerate(tasks):
                 clock.add(res.stages)
                 if res.points is not None:
@@ -255,6 +288,7 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
             "blocks": done,
             "blocks_wall_s": blocks_wall_s,
             "block_workers": side,
+            "blocks_sent": bool(send),
             "blocks_with_pulses": int(used.size),
             "halo_m": halo,
             "sample_blocks": int(sample.size),

@@ -54,6 +54,43 @@ def test_serial_executor_maps_in_order():
         Executor(workers=0)
 
 
+def _task_with_data(shared, i, data):
+    return shared[i] * 10 + data["k"], data["block"].sum()
+
+
+@pytest.mark.parametrize("engine", ["serial", "pool", "dask"])
+def test_a_task_is_sent_its_own_data_made_here_as_it_is_submitted(engine):
+    """``payload(i)`` reaches task ``i`` alone, whole, and never more than ``ahead`` are made
+    before their results are taken (brute force: what each task must return)."""
+    made = []
+
+    def payload(i):
+        made.append(i)
+        # a dict (Dask would scatter its items one by one if given it bare) with an array
+        return {"k": i, "block": np.full(50_000, float(i))}
+
+    shared, n, ahead = [3, 1, 4, 1, 5, 9, 2], 7, 2
+    want = [(shared[i] * 10 + i, 50_000.0 * i) for i in range(n)]
+
+    def check(ex):
+        got = []
+        for i, r in enumerate(ex.map(_task_with_data, shared, n, ahead=ahead, payload=payload)):
+            assert max(made) < i + 1 + ahead  # made only as a task is submitted
+            got.append(r)
+        assert got == want and made == list(range(n))
+
+    if engine == "dask":
+        from distributed import LocalCluster
+
+        with LocalCluster(n_workers=2, threads_per_worker=1, processes=False) as cluster:
+            with Executor(scheduler=cluster.scheduler_address) as ex:
+                check(ex)
+                assert [t for t, _ in ex.cluster_memory()] == [1, 1]
+                assert all(free > 0 for _, free in ex.cluster_memory())
+    else:
+        check(Executor(workers=1 if engine == "serial" else 2))
+
+
 def test_pool_workers_read_shared_once_from_an_unnamed_file():
     """The workers read ``shared`` from a file that has no name and is gone after the pool."""
     import os

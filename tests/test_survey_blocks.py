@@ -264,6 +264,25 @@ def runs(tmp_path_factory):
         scene, address = wave_survey_scene(**sampled), cluster.scheduler_address
         run_scene(scene, root / "sampled_dask", log=got.append, workers=None, scheduler=address)
         lines["sampled_dask"] = got
+        # the same cluster as if on another machine: it cannot read the store, so each block
+        # is sent its pulses
+        from pipeline.parallel import Executor
+
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(Executor, "shares_file", lambda self, path: False)
+            got = []
+            run_scene(scene, root / "sampled_sent", log=got.append, workers=None, scheduler=address)
+            lines["sampled_sent"] = got
+    # a pool whose workers cannot read the store (no /proc): each block's pulses pickled to it
+    from pipeline.detection_store import DetectionStore
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(DetectionStore, "reader", lambda self: None)
+        got = []
+        run_scene(
+            wave_survey_scene(**sampled), root / "sampled_sent_pool", log=got.append, workers=2
+        )
+        lines["sampled_sent_pool"] = got
     return root, lines
 
 
@@ -411,7 +430,24 @@ def test_blocks_side_by_side_give_the_outputs_of_blocks_one_after_another(runs):
     # (and on 2 workers whose machine holds one block at a time: one after another)
     assert any("1 block(s) at a time, not 2" in s for s in lines["sampled_tight"])
     assert any("blocks on 1 worker(s)" in s for s in lines["sampled_tight"])
-    for name in ("sampled_w2", "sampled_dask", "sampled_tight"):
+
+    # (and on workers that cannot read the store, sent each block's pulses: a cluster on
+    # "another machine" and a pool on a machine without /proc)
+    def blocked(name):
+        return json.loads((root / name / "evaluation.json").read_text())["blocked"]
+
+    for name in ("sampled_sent", "sampled_sent_pool"):
+        assert any("blocks sent to the" in s for s in lines[name]), name
+        assert blocked(name)["blocks_sent"], name
+    assert blocked("sampled_sent_pool")["block_workers"] == 2
+    assert not any(blocked(name)["blocks_sent"] for name in ("sampled_w2", "sampled_dask"))
+    for name in (
+        "sampled_w2",
+        "sampled_dask",
+        "sampled_tight",
+        "sampled_sent",
+        "sampled_sent_pool",
+    ):
         assert any(s.startswith("  blocks on ") for s in lines[name]), name
         got = las_points_by_pulse(root / name)
         assert got.keys() == ref.keys()
@@ -451,7 +487,7 @@ def test_a_store_read_from_another_process_gives_its_chunks(tmp_path):
                 wrong.load_chunk(0)
 
 
-def test_blocks_run_side_by_side_only_where_the_workers_read_the_store_and_memory_holds(
+def test_blocks_run_side_by_side_as_memory_holds_sent_their_pulses_where_workers_cannot_read(
     tmp_path, monkeypatch
 ):
     import pipeline.survey_blocks_run as sbr
@@ -466,6 +502,9 @@ def test_blocks_run_side_by_side_only_where_the_workers_read_the_store_and_memor
 
         def shares_file(self, path):
             return self.reads
+
+        def cluster_memory(self):  # two workers of 2 threads: memory for 3.5 blocks, and 0.5
+            return [(2, 3.5 * per_block), (2, 0.5 * per_block)]
 
     rng = np.random.default_rng(4)
     counts = np.array([0, 40_000, 25_000])  # loads 4 times its own: 160 000 pulses a block
@@ -483,22 +522,30 @@ def test_blocks_run_side_by_side_only_where_the_workers_read_the_store_and_memor
             return got, said
 
         # a pool of 3, memory for 3.5 blocks: 3 at once, reading the store through /proc
-        (ex, src, side), said = runner(Executor(3), 3.5)
+        (ex, src, side, send), said = runner(Executor(3), 3.5)
         assert side == 3 and ex.workers == 3 and isinstance(src, StoreReader) and not said
+        assert not send
         # memory for 2.5: a pool of 2
-        (ex, src, side), said = runner(Executor(3), 2.5)
-        assert side == 2 and ex.workers == 2 and isinstance(src, StoreReader)
+        (ex, src, side, send), said = runner(Executor(3), 2.5)
+        assert side == 2 and ex.workers == 2 and isinstance(src, StoreReader) and not send
         assert "2 block(s) at a time, not 3" in said[0]
         # memory for 1.5: here, one after another, from the store itself
-        (ex, src, side), said = runner(Executor(3), 1.5)
-        assert side == 1 and ex.workers == 1 and src is store
+        (ex, src, side, send), said = runner(Executor(3), 1.5)
+        assert side == 1 and ex.workers == 1 and src is store and not send
         # a cluster on this machine keeps its workers, at most `side` blocks in flight
         cluster = Cluster(4, reads=True)
-        (ex, src, side), said = runner(cluster, 2.5)
-        assert ex is cluster and side == 2 and isinstance(src, StoreReader)
-        # a cluster whose workers cannot read the store: here, with a line saying why
-        (ex, src, side), said = runner(Cluster(4, reads=False), 9.0)
-        assert side == 1 and src is store and "cannot read" in said[0]
+        (ex, src, side, send), said = runner(cluster, 2.5)
+        assert ex is cluster and side == 2 and isinstance(src, StoreReader) and not send
+        # a cluster whose workers cannot read the store: each task sent its block's pulses,
+        # as many at once as the workers' memory holds (2 + 0), not this machine's (9)
+        cluster = Cluster(4, reads=False)
+        (ex, src, side, send), said = runner(cluster, 9.0)
+        assert ex is cluster and side == 2 and src is store and send
+        assert "cannot read" in said[0] and "2 block(s) at a time, not 4" in said[1]
+        # a pool on a machine without /proc: as many as this machine holds, sent their pulses
+        monkeypatch.setattr(store, "reader", lambda: None)
+        (ex, src, side, send), said = runner(Executor(3), 3.5)
+        assert side == 3 and ex.workers == 3 and src is store and send and "no /proc" in said[0]
 
 
 def _load_all(blob):
