@@ -12,7 +12,8 @@ scene and its meshes) that is sent once per worker, not once per task.
   can deadlock) and receive ``shared`` once, through the pool's initializer, which reads it
   from a file pickled once (:func:`_shared_handoff`: the workers start side by side).
 * ``scheduler`` given: a :class:`distributed.Client` on that address; ``shared`` is scattered to
-  every worker once (``broadcast=True``).
+  every worker once (``broadcast=True``). The workers' allocator keeps freed arrays for reuse
+  while the client is connected (:mod:`pipeline.worker_malloc`).
 
 Results do not depend on where a task ran: every task is a pure function of ``(shared, index)``
 (the simulation's random streams are functions of the pulse id, see
@@ -224,7 +225,12 @@ class Executor:
         if scheduler is not None:
             from distributed import Client
 
+            from pipeline.worker_malloc import GlibcThresholds
+
             self._client = Client(scheduler, set_as_default=False)
+            # Dask's workers free large arrays to the system at once; ours reuse them
+            # (pipeline.worker_malloc: the chunk loop's receiver at half the CPU)
+            self._client.register_plugin(GlibcThresholds())
             if workers is None:
                 workers = max(1, sum(self._client.nthreads().values()))
         self.workers = default_workers() if workers is None else int(workers)
@@ -310,6 +316,10 @@ class Executor:
     def close(self) -> None:
         """Disconnect from the cluster (pools live only while a :meth:`map` runs)."""
         if self._client is not None:
+            from pipeline.worker_malloc import GlibcThresholds
+
+            with contextlib.suppress(Exception):  # a cluster already gone has nothing to undo
+                self._client.unregister_worker_plugin(GlibcThresholds.name)
             self._client.close()
             self._client = None
 
