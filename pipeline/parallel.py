@@ -225,7 +225,7 @@ class Executor:
         if scheduler is not None:
             from distributed import Client
 
-            from pipeline.worker_malloc import GlibcThresholds
+            from pipeline.dask_malloc import GlibcThresholds
 
             self._client = Client(scheduler, set_as_default=False)
             # Dask's workers free large arrays to the system at once; ours reuse them
@@ -316,7 +316,7 @@ class Executor:
     def close(self) -> None:
         """Disconnect from the cluster (pools live only while a :meth:`map` runs)."""
         if self._client is not None:
-            from pipeline.worker_malloc import GlibcThresholds
+            from pipeline.dask_malloc import GlibcThresholds
 
             with contextlib.suppress(Exception):  # a cluster already gone has nothing to undo
                 self._client.unregister_worker_plugin(GlibcThresholds.name)

@@ -42,6 +42,7 @@ from pipeline.survey_finish import finish_survey, log_cleanup
 from pipeline.survey_tiles import tile_layout, write_points_by_tiles
 from pipeline.uncertainty.photon_posterior import KeptPhotons
 from pipeline.uncertainty.posterior_selection import KeptWaveforms, posterior_budget
+from pipeline.worker_malloc import after_chunks
 
 __all__ = ["SimulatedSurvey", "survey_extent_m", "simulate_detections", "run_survey"]
 
@@ -326,6 +327,7 @@ def run_survey(
     origin = (fr.origin_easting_m, fr.origin_northing_m, 0.0)
     with DetectionStore(out, ctx.instrument.air_index) as store:
         sim = simulate_detections(scene, plan, ctx, clock, store, log, progress, executor)
+        after_chunks()  # the allocator's thresholds for what follows, where chunks ran here
         trim_heap()  # the chunk loop's arrays and seabed tiles, when it ran in this process
         ctx = _measured_water(ctx, sim, log)
         xmin, xmax, ymin, ymax = sim.extent_m

@@ -1,4 +1,4 @@
-"""glibc's allocator on Dask's worker processes as it is in ours: large arrays reuse freed memory.
+"""The allocator's thresholds (glibc): the chunk loop's large arrays, Dask's worker processes.
 
 A Dask nanny starts its workers with ``MALLOC_TRIM_THRESHOLD_=65536`` (its
 ``distributed.nanny.pre-spawn-environ``), so that a worker hands freed memory back at once.
@@ -9,19 +9,17 @@ stages make and drop many such temporaries per chunk: on a 2-process ``LocalClus
 chunk loop's receiver took 12.9 CPU-s for 300 000 pulses against 6.9 without that variable
 (``benchmarks/RESULTS_e2e.md``, session 36). The stages hand memory back themselves where it
 matters (:func:`~pipeline.stages.trim_heap` at the end of a block and between stages), so
-:class:`GlibcThresholds` sets the two thresholds a process without the variable reaches,
-for as long as the run's client is connected, and puts Dask's back when it leaves.
+:class:`~pipeline.dask_malloc.GlibcThresholds` sets the two thresholds a process without the
+variable reaches (:func:`for_blocks`), for as long as the run's client is connected, and puts
+Dask's back when it leaves. The chunk loop sets its own, higher ones (:func:`for_chunks`).
 """
 
 from __future__ import annotations
 
 import ctypes
-import os
 import sys
 
-from distributed.diagnostics.plugin import WorkerPlugin
-
-__all__ = ["GlibcThresholds", "set_thresholds"]
+__all__ = ["after_chunks", "for_blocks", "for_chunks", "set_thresholds"]
 
 #: glibc's ``mallopt`` parameters (malloc.h)
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
@@ -32,6 +30,12 @@ RISEN_TRIM_BYTES = 2 * RISEN_MMAP_BYTES
 #: glibc's starting mmap threshold, where a set variable leaves it
 DEFAULT_MMAP_BYTES = 128 * 2**10
 ENV = "MALLOC_TRIM_THRESHOLD_"
+#: the chunk loop's: a chunk's waveforms and the detector's temporaries are tens of MB each,
+#: above what glibc's rule rises to, so each was mapped fresh and faulted in per chunk
+CHUNK_MMAP_BYTES = 512 * 2**20
+CHUNK_TRIM_BYTES = 2 * CHUNK_MMAP_BYTES
+#: whether this process set the chunk loop's thresholds (and has not set others since)
+_CHUNKS_HERE = False
 
 
 def set_thresholds(mmap_bytes: int, trim_bytes: int) -> bool:
@@ -47,23 +51,40 @@ def set_thresholds(mmap_bytes: int, trim_bytes: int) -> bool:
         return False
 
 
-class GlibcThresholds(WorkerPlugin):
-    """On each worker started with ``MALLOC_TRIM_THRESHOLD_``: glibc's risen thresholds.
+def for_chunks() -> bool:
+    """Set the chunk loop's thresholds, in the process running a chunk.
 
-    Only where that variable is set (a worker without it keeps glibc's dynamic rule); on
-    teardown (the run's client leaves) the variable's trim threshold and glibc's starting
-    mmap threshold are set again.
+    A chunk's arrays (its waveforms, ``(n_pulses, n_samples)`` float32, and the detector's
+    temporaries of that size) are made again for every chunk: kept in the heap rather than
+    mapped afresh, the detection of 1.5 M pulses took 53 CPU-s instead of 63 and the chunk
+    loop's sys time fell by two thirds (``benchmarks/RESULTS_e2e.md``, session 36). A chunk
+    worker's resident memory then stays at its largest chunk's (its peak, unchanged);
+    :func:`for_blocks` is set again where the same process goes on to other work
+    (:func:`after_chunks`, a block's task).
     """
+    global _CHUNKS_HERE
+    _CHUNKS_HERE = set_thresholds(CHUNK_MMAP_BYTES, CHUNK_TRIM_BYTES)
+    return _CHUNKS_HERE
 
-    name = "bathy-glibc-thresholds"
 
-    def setup(self, worker=None) -> None:
-        """Raise the thresholds where the worker was started with the variable."""
-        if os.environ.get(ENV):
-            set_thresholds(RISEN_MMAP_BYTES, RISEN_TRIM_BYTES)
+def after_chunks() -> bool:
+    """Set :func:`for_blocks` where this process ran chunks (the chunk loop on 1 worker).
 
-    def teardown(self, worker=None) -> None:
-        """Set the variable's trim threshold and glibc's starting mmap threshold again."""
-        value = os.environ.get(ENV, "")
-        if value.isdigit():
-            set_thresholds(DEFAULT_MMAP_BYTES, int(value))
+    A process that never did keeps glibc's own rule (nothing is set).
+    """
+    global _CHUNKS_HERE
+    if not _CHUNKS_HERE:
+        return False
+    _CHUNKS_HERE = False
+    return for_blocks()
+
+
+def for_blocks() -> bool:
+    """Set glibc's risen thresholds (what its dynamic rule reaches): all but the chunk loop.
+
+    Processing and the TPU gained nothing from the chunk loop's (their CPU unchanged) and
+    their peaks rose with them (a 1.5 M-pulse run's process tree by 6 %).
+    """
+    global _CHUNKS_HERE
+    _CHUNKS_HERE = False
+    return set_thresholds(RISEN_MMAP_BYTES, RISEN_TRIM_BYTES)
