@@ -41,6 +41,7 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
+from pipeline.cell_keys import cell_inverse
 from pipeline.config import setting
 from pipeline.parallel import thread_map_rows
 from pipeline.process.classify import BATHYMETRIC_POINT, SUBMERGED_OBJECT
@@ -110,9 +111,7 @@ class ObjectDetections:
 
 def _reference(xy: np.ndarray, z: np.ndarray, cell_m: float) -> np.ndarray:
     """Indices of the cell-median point of each ``cell_m`` cell (by height)."""
-    ij = np.floor(xy / cell_m).astype(np.int64)
-    _, cell = np.unique(ij, axis=0, return_inverse=True)
-    cell = cell.ravel()
+    cell = cell_inverse(np.floor(xy / cell_m).astype(np.int64))
     order = np.lexsort((z, cell))
     counts = np.bincount(cell)
     start = np.concatenate([[0], np.cumsum(counts)[:-1]])

@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from pipeline.cell_keys import cell_inverse
 from pipeline.constants import MAD_TO_SIGMA
 from pipeline.parallel import thread_map_rows
 from pipeline.process.surface_land import masked_median
@@ -80,9 +81,7 @@ def _cells(xy, dep, cell_m):
 
     Returns the cell of each sounding, the cells' mean positions and depths, their counts.
     """
-    key = np.floor(xy / cell_m).astype(np.int64)
-    _, inv = np.unique(key, axis=0, return_inverse=True)
-    inv = inv.ravel()
+    inv = cell_inverse(np.floor(xy / cell_m).astype(np.int64))
     cxy, cdep = group_means(inv, xy, dep)
     return inv, cxy, cdep, np.bincount(inv).astype(np.float64)
 

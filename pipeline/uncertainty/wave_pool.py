@@ -20,6 +20,7 @@ import dataclasses
 
 import numpy as np
 
+from pipeline.cell_keys import cell_inverse
 from pipeline.optics import SPEED_OF_LIGHT_M_S as _C_M_S
 
 __all__ = ["pooled_wave_sigma_m", "surface_wave_sigma_m", "pooled_wave"]
@@ -65,9 +66,7 @@ def pooled_wave_sigma_m(
     if cell_m <= 0.0 or n == 0:
         return own
     xy = np.asarray(xy_m, dtype=np.float64)
-    ij = np.floor(xy / cell_m).astype(np.int64)
-    _, cell = np.unique(ij, axis=0, return_inverse=True)
-    cell = cell.ravel()
+    cell = cell_inverse(np.floor(xy / cell_m).astype(np.int64))
     use = np.flatnonzero(np.asarray(contributes, dtype=bool) & np.isfinite(excess))
     if use.size == 0:  # no sounding's plane (no bottom anywhere): each keeps its own
         return own
