@@ -12,8 +12,9 @@ Run: PYTHONPATH=. .venv/bin/python benchmarks/bench_blocks_sent.py OUT [--pulses
      [--dask-env]
 
 ``--dask-env`` keeps Dask's ``MALLOC_TRIM_THRESHOLD_`` on the workers for the whole run (the
-run's plugin, :mod:`pipeline.worker_malloc`, is then not registered): what the workers cost
-before it. Results: ``benchmarks/RESULTS_e2e.md``, session 36.
+run's plugin, :mod:`pipeline.dask_malloc`, is then not registered, and the tasks then set no
+thresholds on the workers either): what the workers cost before it. Results:
+``benchmarks/RESULTS_e2e.md``, session 36.
 """
 
 from __future__ import annotations

@@ -17,14 +17,10 @@ timing terms exceed the errors.
 
 from __future__ import annotations
 
-import argparse
-import json
-from pathlib import Path
-
 import numpy as np
 
+from benchmarks.suite_scenes import suite_scenes
 from pipeline.suite.chance_tpu import SHARED_TERMS
-from pipeline.suite.generate import half as half_of
 
 _TIMING = ("timing_surface", "timing_bottom", "timing_surface_excess", "timing_bottom_excess")
 
@@ -34,27 +30,14 @@ def _rms_half(v: np.ndarray) -> float:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("suite_out", type=Path)
-    ap.add_argument("--half", default="tuning", choices=("tuning", "heldout"))
-    args = ap.parse_args()
-    draws = json.loads((args.suite_out / "draws.json").read_text())
     print(
         "| seed | scanner | surface | wind m/s | rough m | pairs | h m | measured | true relief"
         " | errors | TPU timing | TPU per-sounding |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-    for d in draws:
+    for d, z, m in suite_scenes(__doc__, receiver="full_waveform"):
         s = d["seed"]
-        if half_of(s) != args.half or d["receiver"] != "full_waveform":
-            continue
-        path = args.suite_out / "runs" / f"suite_{s:05d}" / "evaluation_points.npz"
-        if not path.is_file():
-            continue
-        z = np.load(path)
-        e, t, sg = z["tpu_error_m"], z["tpu_true_depth_m"], z["tpu_sigma_depth_m"]
-        d_ext = min(4.5 / d["attenuation_per_m"], 60.0)  # the planning extinction depth
-        m = np.flatnonzero(np.isfinite(e) & (t >= 1.0) & (t < 0.8 * d_ext) & (sg > 0))
+        e, t = z["tpu_error_m"], z["tpu_true_depth_m"]
         xy = np.column_stack([z["tpu_x_m"], z["tpu_y_m"]])
         i, j = m[:-1], m[1:]
         h = np.linalg.norm(xy[i] - xy[j], axis=1)

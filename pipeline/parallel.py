@@ -230,7 +230,8 @@ class Executor:
             self._client = Client(scheduler, set_as_default=False)
             # Dask's workers free large arrays to the system at once; ours reuse them
             # (pipeline.worker_malloc: the chunk loop's receiver at half the CPU)
-            self._client.register_plugin(GlibcThresholds())
+            self._plugin = GlibcThresholds()
+            self._client.register_plugin(self._plugin)
             if workers is None:
                 workers = max(1, sum(self._client.nthreads().values()))
         self.workers = default_workers() if workers is None else int(workers)
@@ -280,31 +281,36 @@ class Executor:
         seen = self._client.run(_file_identity, path)
         return bool(seen) and all(v == file_identity(path) for v in seen.values())
 
-    def cluster_memory(self) -> list[tuple[int, float]]:
-        """Each cluster worker's threads and the bytes it may still take; ``[]`` without one.
+    def cluster_memory(self) -> list[tuple[str, int, float]]:
+        """Each cluster worker's address, threads and the bytes it may still take.
 
-        A worker's share is the smaller of its Dask ``memory_limit`` (0: none) and
-        :data:`~pipeline.memory_budget.MEMORY_SHARE` of its own machine's memory
-        (:func:`~pipeline.memory_budget.machine_memory_bytes`, asked on the worker), less the
-        memory it holds now. Workers that join later are not asked.
+        ``[]`` without a cluster. A worker's share is
+        :data:`~pipeline.memory_budget.MEMORY_SHARE` of the smaller of its Dask
+        ``memory_limit`` (0: none; Dask pauses a worker at 80 % of it) and its own machine's
+        memory (:func:`~pipeline.memory_budget.machine_memory_bytes`, asked on the worker),
+        less the memory it holds now. Workers that join later are not asked; one that leaves
+        meanwhile counts as full.
 
         Returns
         -------
-        list of (int, float)
-            ``(threads, bytes)`` per worker.
+        list of (str, int, float)
+            ``(address, threads, bytes)`` per worker.
         """
         if self._client is None:
             return []
         from pipeline.memory_budget import MEMORY_SHARE
 
-        info = self._client.scheduler_info()["workers"]
+        try:  # every worker (some versions list 5 unless asked)
+            info = self._client.scheduler_info(n_workers=-1)["workers"]
+        except TypeError:  # older: every worker by default
+            info = self._client.scheduler_info()["workers"]
         machine = self._client.run(_machine_memory)
         out = []
         for address, w in info.items():
             limit = float(w.get("memory_limit") or 0.0) or math.inf
-            share = min(limit, MEMORY_SHARE * float(machine.get(address, math.inf)))
+            share = MEMORY_SHARE * min(limit, float(machine.get(address, 0.0)))
             held = float(w.get("metrics", {}).get("memory", 0.0))
-            out.append((int(w.get("nthreads", 1)), max(share - held, 0.0)))
+            out.append((address, int(w.get("nthreads", 1)), max(share - held, 0.0)))
         return out
 
     def __enter__(self) -> Executor:
@@ -316,10 +322,8 @@ class Executor:
     def close(self) -> None:
         """Disconnect from the cluster (pools live only while a :meth:`map` runs)."""
         if self._client is not None:
-            from pipeline.dask_malloc import GlibcThresholds
-
             with contextlib.suppress(Exception):  # a cluster already gone has nothing to undo
-                self._client.unregister_worker_plugin(GlibcThresholds.name)
+                self._client.unregister_worker_plugin(self._plugin.name)
             self._client.close()
             self._client = None
 
@@ -331,6 +335,7 @@ class Executor:
         ahead: int | None = None,
         timed: bool = True,
         payload: Callable[[int], Any] | None = None,
+        slots: list[str] | None = None,
     ) -> Iterator[Any]:
         """Yield ``fn(shared, i)`` for ``i = 0 .. n_tasks - 1``, in order, as they arrive.
 
@@ -343,14 +348,20 @@ class Executor:
         most ``ahead`` are alive) and sent with it: the task is then
         ``fn(shared, i, payload(i))``. For what the workers cannot read themselves (a
         cluster on other machines: a task's part of this process's files); on a cluster it
-        is scattered to a worker first, not put in the task graph.
+        is sent to a worker first (through the scheduler), not put in the task graph.
+
+        ``slots`` (a cluster only): worker addresses, one per task that may run at once (a
+        worker listed twice takes two); task ``i`` and its data go to ``slots[i % len]``
+        and nowhere else, and at most ``len(slots)`` are pending (``ahead`` is ignored), so
+        a task's slot is free when it is given out (the task ``len(slots)`` before it has
+        been taken): no worker holds more at once than it is listed.
         """
         t0 = time.perf_counter()
         ahead = self.ahead if ahead is None else max(1, int(ahead))
         args = (lambda i: ()) if payload is None else (lambda i: (payload(i),))
         try:
             if self._client is not None:
-                yield from self._map_dask(fn, shared, n_tasks, ahead, args)
+                yield from self._map_dask(fn, shared, n_tasks, ahead, args, slots)
             elif self.workers == 1 or n_tasks <= 1:
                 for i in range(n_tasks):
                     yield fn(shared, i, *args(i))
@@ -377,19 +388,22 @@ class Executor:
             finally:
                 pool.shutdown(wait=True, cancel_futures=True)
 
-    def _map_dask(self, fn, shared, n_tasks: int, ahead: int, args) -> Iterator[Any]:
+    def _map_dask(self, fn, shared, n_tasks: int, ahead: int, args, slots) -> Iterator[Any]:
         client = self._client
         shared_f = client.scatter(shared, broadcast=True, hash=False)
 
         def submit(i: int):
-            # a task's own data goes to one worker ahead of the task (the task then runs
+            where = {} if not slots else {"workers": [slots[i % len(slots)]]}
+            # a task's own data goes to a worker ahead of the task (the task then runs
             # where it lies), not into the graph the scheduler holds
             # (in a list: a tuple or dict given alone would be scattered item by item)
-            data = [client.scatter([a], hash=False)[0] for a in args(i)]
-            return client.submit(_dask_call, fn, shared_f, i, *data, pure=False)
+            data = [client.scatter([a], hash=False, **where)[0] for a in args(i)]
+            if where:
+                where["allow_other_workers"] = False
+            return client.submit(_dask_call, fn, shared_f, i, *data, pure=False, **where)
 
         try:
-            yield from _ordered(submit, n_tasks, ahead)
+            yield from _ordered(submit, n_tasks, len(slots) if slots else ahead)
         finally:
             client.cancel([shared_f])
 

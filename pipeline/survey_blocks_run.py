@@ -91,24 +91,31 @@ def _block_runner(executor, store, counts, load: float, log):
     """Where the blocks run: ``(runner, source, side, send)``.
 
     ``runner``: an executor; ``source``: the store as its workers read it; ``side``: blocks at
-    once; ``send``: the workers cannot read the store, so each task is sent its block's pulses,
-    read here (:func:`run_block`'s ``loaded``). Side by side on a process pool or a Dask
-    cluster, as many as the memory holds (:func:`blocks_side_by_side`: each block holds about
-    its loaded pulses): this machine's, or for a cluster on other machines its workers' own
+    once; ``send``: None where the workers read the store, else each task is sent its block's
+    pulses, read here (:func:`run_block`'s ``loaded``): True, or for a cluster on other
+    machines the workers' slots (:meth:`~pipeline.parallel.Executor.map`'s ``slots``: each
+    worker once per block its memory holds). Side by side on a process pool or a Dask cluster,
+    as many as the memory holds (:func:`blocks_side_by_side`: each block holds about its
+    loaded pulses): this machine's, or for a cluster on other machines its workers' own
     (:meth:`~pipeline.parallel.Executor.cluster_memory`); one at a time here where only one
     fits.
     """
     n = store.n_pulses
     if executor is None or executor.workers <= 1:
-        return Executor(workers=1), store, 1, False
+        return Executor(workers=1), store, 1, None
     loaded = min(n, float(counts.max()) * load)
     reader = store.reader()
     reads = reader is not None and executor.shares_file(reader.path)
     if not reads and executor.scheduler is not None:
-        # workers on other machines: their memory holds the blocks, not this one's
+        # workers on other machines: their memory holds the blocks, not this one's; each
+        # listed once per block it holds, the tasks sent to these slots in turn
         per_block = BASE_BYTES + BYTES_PER_PULSE * loaded
-        fits = sum(min(t, int(free // per_block)) for t, free in executor.cluster_memory())
-        side = max(1, min(executor.workers, fits))
+        slots = [
+            address
+            for address, threads, free in executor.cluster_memory()
+            for _ in range(min(threads, int(free // per_block)))
+        ][: executor.workers]
+        side = max(1, len(slots))
         log(
             "  blocks sent to the cluster's workers with their pulses: the workers cannot"
             " read this process's detection store (a cluster on another machine)"
@@ -119,7 +126,8 @@ def _block_runner(executor, store, counts, load: float, log):
                 f" {loaded:.3g} pulses (run.block_pulses), more than the workers' memory"
                 " holds side by side"
             )
-        return executor, store, side, True
+        # (no worker with room for one: one at a time, wherever Dask puts it)
+        return executor, store, side, slots or True
     free = MEMORY_SHARE * machine_memory_bytes() - (current_rss_mb() or 0.0) * 2.0**20
     side = blocks_side_by_side(executor.workers, loaded, free)
     if side < executor.workers:
@@ -129,13 +137,13 @@ def _block_runner(executor, store, counts, load: float, log):
             " holds side by side"
         )
     if side == 1:
-        return Executor(workers=1), store, 1, False
+        return Executor(workers=1), store, 1, None
     if not reads:
         log("  blocks sent to the workers with their pulses: this machine has no /proc")
-    source = reader if reads else store
+    source, send = (reader, None) if reads else (store, True)
     if executor.scheduler is None and side < executor.workers:
-        return Executor(workers=side), source, side, not reads
-    return executor, source, side, not reads
+        return Executor(workers=side), source, side, send
+    return executor, source, side, send
 
 
 def _block_pulses(clock, store, blocks, todo, halo: float, k: int) -> tuple:
@@ -234,6 +242,7 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
                 run_block, job, todo.size, ahead=ahead, timed=False,
                 payload=functools.partial(_block_pulses, clock, store, blocks, todo, halo)
                 if send else None,
+                slots=send if isinstance(send, list) else None,
             )  # fmt: skip
             for k, res in enumerate(tasks):
                 clock.add(res.stages)

@@ -6,12 +6,13 @@ Setting any threshold through the environment also stops glibc's dynamic mmap th
 (128 KiB, rising to 32 MiB as large blocks are freed): every array above 128 KiB is then
 mapped fresh and faulted in page by page, and freed back to the system. The pipeline's
 stages make and drop many such temporaries per chunk: on a 2-process ``LocalCluster`` the
-chunk loop's receiver took 12.9 CPU-s for 300 000 pulses against 6.9 without that variable
+chunk loop's receiver took 12.6 CPU-s for 300 000 pulses against 6.9 without that variable
 (``benchmarks/RESULTS_e2e.md``, session 36). The stages hand memory back themselves where it
 matters (:func:`~pipeline.stages.trim_heap` at the end of a block and between stages), so
 :class:`~pipeline.dask_malloc.GlibcThresholds` sets the two thresholds a process without the
 variable reaches (:func:`for_blocks`), for as long as the run's client is connected, and puts
-Dask's back when it leaves. The chunk loop sets its own, higher ones (:func:`for_chunks`).
+Dask's back when it leaves. The chunk loop sets its own, higher ones (:func:`for_chunks`);
+on a Dask worker only while a run's plugin is set up there (:func:`for_task`).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from __future__ import annotations
 import ctypes
 import sys
 
-__all__ = ["after_chunks", "for_blocks", "for_chunks", "set_thresholds"]
+__all__ = ["after_chunks", "for_blocks", "for_chunks", "for_task", "set_thresholds"]
 
 #: glibc's ``mallopt`` parameters (malloc.h)
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
@@ -36,6 +37,9 @@ CHUNK_MMAP_BYTES = 512 * 2**20
 CHUNK_TRIM_BYTES = 2 * CHUNK_MMAP_BYTES
 #: whether this process set the chunk loop's thresholds (and has not set others since)
 _CHUNKS_HERE = False
+#: runs whose Dask plugin is set up on this worker (pipeline.dask_malloc): while > 0 the
+#: tasks here may set thresholds, which the last plugin's teardown puts back
+DASK_RUNS = 0
 
 
 def set_thresholds(mmap_bytes: int, trim_bytes: int) -> bool:
@@ -56,15 +60,40 @@ def for_chunks() -> bool:
 
     A chunk's arrays (its waveforms, ``(n_pulses, n_samples)`` float32, and the detector's
     temporaries of that size) are made again for every chunk: kept in the heap rather than
-    mapped afresh, the detection of 1.5 M pulses took 53 CPU-s instead of 63 and the chunk
-    loop's sys time fell by two thirds (``benchmarks/RESULTS_e2e.md``, session 36). A chunk
-    worker's resident memory then stays at its largest chunk's (its peak, unchanged);
+    mapped afresh, the detection of 300 000 pulses at the default chunk size took 10.8 CPU-s
+    instead of 12.4 and the run's sys time 3.6 s instead of 5.8 (``benchmarks/RESULTS_e2e.md``,
+    session 36). A chunk worker's resident memory then stays near its largest chunk's (its
+    peak on 1.5 M pulses 804 -> 868 MiB, below the run's largest process, 1676 MiB);
     :func:`for_blocks` is set again where the same process goes on to other work
     (:func:`after_chunks`, a block's task).
     """
     global _CHUNKS_HERE
     _CHUNKS_HERE = set_thresholds(CHUNK_MMAP_BYTES, CHUNK_TRIM_BYTES)
     return _CHUNKS_HERE
+
+
+def _on_dask_worker() -> bool:
+    """Whether this runs inside a Dask worker's task (Dask imported and a worker found)."""
+    distributed = sys.modules.get("distributed")
+    if distributed is None:
+        return False
+    try:
+        distributed.get_worker()
+    except ValueError:
+        return False
+    return True
+
+
+def for_task(chunks: bool) -> bool:
+    """The thresholds a task sets where it runs: the chunk loop's, or the blocks'.
+
+    On a Dask worker only while a run's plugin is set up there (a worker its nanny started
+    with ``MALLOC_TRIM_THRESHOLD_``, whose setting the plugin puts back when the run leaves):
+    a worker without it keeps glibc's own rule, which nothing could turn on again.
+    """
+    if DASK_RUNS <= 0 and _on_dask_worker():
+        return False
+    return for_chunks() if chunks else for_blocks()
 
 
 def after_chunks() -> bool:

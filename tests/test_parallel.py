@@ -54,6 +54,12 @@ def test_serial_executor_maps_in_order():
         Executor(workers=0)
 
 
+def _worker_of(shared, i, data):
+    from distributed import get_worker
+
+    return get_worker().address, data["k"]
+
+
 def _task_with_data(shared, i, data):
     return shared[i] * 10 + data["k"], data["block"].sum()
 
@@ -75,7 +81,7 @@ def test_a_task_is_sent_its_own_data_made_here_as_it_is_submitted(engine):
     def check(ex):
         got = []
         for i, r in enumerate(ex.map(_task_with_data, shared, n, ahead=ahead, payload=payload)):
-            assert max(made) < i + 1 + ahead  # made only as a task is submitted
+            assert max(made) <= i + ahead - 1  # made only as a task is submitted
             got.append(r)
         assert got == want and made == list(range(n))
 
@@ -85,8 +91,13 @@ def test_a_task_is_sent_its_own_data_made_here_as_it_is_submitted(engine):
         with LocalCluster(n_workers=2, threads_per_worker=1, processes=False) as cluster:
             with Executor(scheduler=cluster.scheduler_address) as ex:
                 check(ex)
-                assert [t for t, _ in ex.cluster_memory()] == [1, 1]
-                assert all(free > 0 for _, free in ex.cluster_memory())
+                memory = ex.cluster_memory()
+                assert [t for _, t, _ in memory] == [1, 1]
+                assert all(free > 0 for _, _, free in memory)
+                # tasks and their data given slots: all on the one worker listed (twice)
+                first = memory[0][0]
+                got = list(ex.map(_worker_of, None, 5, payload=payload, slots=[first, first]))
+                assert got == [(first, i) for i in range(5)]
     else:
         check(Executor(workers=1 if engine == "serial" else 2))
 

@@ -504,7 +504,7 @@ def test_blocks_run_side_by_side_as_memory_holds_sent_their_pulses_where_workers
             return self.reads
 
         def cluster_memory(self):  # two workers of 2 threads: memory for 3.5 blocks, and 0.5
-            return [(2, 3.5 * per_block), (2, 0.5 * per_block)]
+            return [("tcp://a:1", 2, 3.5 * per_block), ("tcp://b:1", 2, 0.5 * per_block)]
 
     rng = np.random.default_rng(4)
     counts = np.array([0, 40_000, 25_000])  # loads 4 times its own: 160 000 pulses a block
@@ -537,15 +537,17 @@ def test_blocks_run_side_by_side_as_memory_holds_sent_their_pulses_where_workers
         (ex, src, side, send), said = runner(cluster, 2.5)
         assert ex is cluster and side == 2 and isinstance(src, StoreReader) and not send
         # a cluster whose workers cannot read the store: each task sent its block's pulses,
-        # as many at once as the workers' memory holds (2 + 0), not this machine's (9)
+        # as many at once as the workers' memory holds (2 + 0), not this machine's (9), and
+        # only to the worker that holds them (twice: its two threads)
         cluster = Cluster(4, reads=False)
         (ex, src, side, send), said = runner(cluster, 9.0)
-        assert ex is cluster and side == 2 and src is store and send
+        assert ex is cluster and side == 2 and src is store and send == ["tcp://a:1"] * 2
         assert "cannot read" in said[0] and "2 block(s) at a time, not 4" in said[1]
         # a pool on a machine without /proc: as many as this machine holds, sent their pulses
         monkeypatch.setattr(store, "reader", lambda: None)
         (ex, src, side, send), said = runner(Executor(3), 3.5)
-        assert side == 3 and ex.workers == 3 and src is store and send and "no /proc" in said[0]
+        assert side == 3 and ex.workers == 3 and src is store and send is True
+        assert "no /proc" in said[0]
 
 
 def _load_all(blob):
