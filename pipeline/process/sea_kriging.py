@@ -41,6 +41,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from pipeline.parallel import thread_map
+from pipeline.process.kriging_kernels import fill_gram, pair_lags
 from pipeline.process.returns import DetectedReturns, PointFlag
 from pipeline.process.sea_correlation import LAG_EDGES_M, MIN_PAIRS, time_pairs
 
@@ -146,17 +147,15 @@ class SeaField:
         # each pair of neighbours once: the distance matrix is symmetric, exactly (a - b is
         # -(b - a) in floating point), and its diagonal is set below
         iu, ju = np.triu_indices(k, 1)
-        diag = np.arange(k)
         q = np.column_stack([xy, self.speed_m_s * t])
         _, nn = tree.query(q, k=k, workers=-1)
         nn = np.asarray(nn).reshape(len(q), k)
         ok = np.abs(self.t_s[nn] - t[:, None]) <= self.window_s
         x, y = ex[nn], ey[nn]
-        upper = self.covariance_m2(_distance(x[:, iu] - x[:, ju], y[:, iu] - y[:, ju]))
-        upper *= ok[:, iu] & ok[:, ju]
-        gram = np.empty((len(q), k, k))
-        gram[:, iu, ju] = gram[:, ju, iu] = upper
-        gram[:, diag, diag] = c0 + self.nugget_m2  # out-of-window echoes: decoupled
+        # the pairs' lags and the matrix's filling compiled (exact operations: the same
+        # bits), the covariance's exp in numpy's own (a compiled exp may round otherwise)
+        upper = self.covariance_m2(pair_lags(x, y, iu, ju))
+        gram = fill_gram(upper, ok, iu, ju, c0 + self.nugget_m2)  # out-of-window: decoupled
         kv = self.covariance_m2(_distance(x - xy[:, 0, None], y - xy[:, 1, None])) * ok
         w = np.linalg.solve(gram, kv[..., None])[..., 0]
         height = np.sum(w * self.height_m[nn] * ok, axis=1)
