@@ -19,7 +19,7 @@ class GlibcThresholds(WorkerPlugin):
     """On each worker started with ``MALLOC_TRIM_THRESHOLD_``: glibc's risen thresholds.
 
     Only where that variable is set (a worker without it keeps glibc's dynamic rule, and the
-    run's tasks leave it so: :func:`~pipeline.worker_malloc.for_task`). Each run registers
+    run's tasks leave it so: :func:`~pipeline.worker_malloc.for_chunk_task`). Each run registers
     its own (``name``); when the last one set up on a worker is torn down (its client
     leaves), the variable's trim threshold and glibc's starting mmap threshold are set again.
     """

@@ -194,9 +194,9 @@ def _run_block(job: BlockJob, k: int, loaded: tuple | None) -> BlockResult:
     )
     from pipeline.survey_processing import process_survey
     from pipeline.survey_tiles import points_tile_order, returns_position_m
-    from pipeline.worker_malloc import for_task
+    from pipeline.worker_malloc import after_chunks
 
-    for_task(chunks=False)  # a worker that ran chunks before leaves their thresholds
+    after_chunks()  # a worker that ran chunks before (a Dask worker) leaves their thresholds
     b, clock = int(job.todo[k]), StageClock()
     ps, air, blocks = job.scene.process, job.ctx.instrument.air_index, job.blocks
     if loaded is None:

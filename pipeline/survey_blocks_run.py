@@ -87,6 +87,15 @@ class CoverageAccumulator:
         return float(self.seen.mean())
 
 
+def _say_fewer(log, side: int, workers: int, loaded: float, whose: str) -> None:
+    """Log that ``side`` blocks run at once, not ``workers``, as ``whose`` memory holds them."""
+    if side < workers:
+        log(
+            f"  {side} block(s) at a time, not {workers}: each holds about {loaded:.3g}"
+            f" pulses (run.block_pulses), more than {whose} memory holds side by side"
+        )
+
+
 def _block_runner(executor, store, counts, load: float, log):
     """Where the blocks run: ``(runner, source, side, send)``.
 
@@ -120,22 +129,12 @@ def _block_runner(executor, store, counts, load: float, log):
             "  blocks sent to the cluster's workers with their pulses: the workers cannot"
             " read this process's detection store (a cluster on another machine)"
         )
-        if side < executor.workers:
-            log(
-                f"  {side} block(s) at a time, not {executor.workers}: each holds about"
-                f" {loaded:.3g} pulses (run.block_pulses), more than the workers' memory"
-                " holds side by side"
-            )
+        _say_fewer(log, side, executor.workers, loaded, "the workers'")
         # (no worker with room for one: one at a time, wherever Dask puts it)
         return executor, store, side, slots or True
     free = MEMORY_SHARE * machine_memory_bytes() - (current_rss_mb() or 0.0) * 2.0**20
     side = blocks_side_by_side(executor.workers, loaded, free)
-    if side < executor.workers:
-        log(
-            f"  {side} block(s) at a time, not {executor.workers}: each holds about"
-            f" {loaded:.3g} pulses (run.block_pulses), more than this machine's memory"
-            " holds side by side"
-        )
+    _say_fewer(log, side, executor.workers, loaded, "this machine's")
     if side == 1:
         return Executor(workers=1), store, 1, None
     if not reads:

@@ -96,9 +96,9 @@ def run_chunk(job: ChunkJob, c: int) -> ChunkResult:
     from pipeline.simulate.detector import describe_pulse_flags
     from pipeline.simulate.trace import trace
     from pipeline.simulate.trace_settings import resolved_trace_settings
-    from pipeline.worker_malloc import for_task
+    from pipeline.worker_malloc import for_chunk_task
 
-    for_task(chunks=True)  # a chunk's arrays reused from the heap, not mapped afresh
+    for_chunk_task()  # a chunk's arrays reused from the heap, not mapped afresh
     scene, clock = job.scene, StageClock()
     with clock.stage("survey"):
         pulses = survey.generate_pulses(

@@ -12,7 +12,8 @@ matters (:func:`~pipeline.stages.trim_heap` at the end of a block and between st
 :class:`~pipeline.dask_malloc.GlibcThresholds` sets the two thresholds a process without the
 variable reaches (:func:`for_blocks`), for as long as the run's client is connected, and puts
 Dask's back when it leaves. The chunk loop sets its own, higher ones (:func:`for_chunks`);
-on a Dask worker only while a run's plugin is set up there (:func:`for_task`).
+on a Dask worker only while a run's plugin is set up there (:func:`for_chunk_task`), and
+whatever ran in a process after chunks finds :func:`for_blocks` again (:func:`after_chunks`).
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from __future__ import annotations
 import ctypes
 import sys
 
-__all__ = ["after_chunks", "for_blocks", "for_chunks", "for_task", "set_thresholds"]
+__all__ = ["after_chunks", "for_blocks", "for_chunk_task", "for_chunks", "set_thresholds"]
 
 #: glibc's ``mallopt`` parameters (malloc.h)
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
@@ -65,7 +66,7 @@ def for_chunks() -> bool:
     session 36). A chunk worker's resident memory then stays near its largest chunk's (its
     peak on 1.5 M pulses 804 -> 868 MiB, below the run's largest process, 1676 MiB);
     :func:`for_blocks` is set again where the same process goes on to other work
-    (:func:`after_chunks`, a block's task).
+    (:func:`after_chunks`: the run's process, a block's task).
     """
     global _CHUNKS_HERE
     _CHUNKS_HERE = set_thresholds(CHUNK_MMAP_BYTES, CHUNK_TRIM_BYTES)
@@ -84,8 +85,8 @@ def _on_dask_worker() -> bool:
     return True
 
 
-def for_task(chunks: bool) -> bool:
-    """The thresholds a task sets where it runs: the chunk loop's, or the blocks'.
+def for_chunk_task() -> bool:
+    """:func:`for_chunks`, where a chunk's task runs.
 
     On a Dask worker only while a run's plugin is set up there (a worker its nanny started
     with ``MALLOC_TRIM_THRESHOLD_``, whose setting the plugin puts back when the run leaves):
@@ -93,13 +94,14 @@ def for_task(chunks: bool) -> bool:
     """
     if DASK_RUNS <= 0 and _on_dask_worker():
         return False
-    return for_chunks() if chunks else for_blocks()
+    return for_chunks()
 
 
 def after_chunks() -> bool:
-    """Set :func:`for_blocks` where this process ran chunks (the chunk loop on 1 worker).
+    """Set :func:`for_blocks` where this process ran chunks since it was last set.
 
-    A process that never did keeps glibc's own rule (nothing is set).
+    The run's process after a chunk loop on 1 worker; a Dask worker's block after its chunks.
+    A process that never ran one keeps glibc's own rule (nothing is set).
     """
     global _CHUNKS_HERE
     if not _CHUNKS_HERE:

@@ -91,9 +91,9 @@ def test_the_chunk_loops_thresholds_keep_a_chunks_arrays_and_are_left_after_it()
 
 def _chunk_task(shared, i):
     """What a chunk's task does first: the chunk loop's thresholds, if it may set them here."""
-    from pipeline.worker_malloc import for_task
+    from pipeline.worker_malloc import for_chunk_task
 
-    return for_task(chunks=True)
+    return for_chunk_task()
 
 
 def _big_faults():
@@ -139,4 +139,4 @@ def test_a_task_on_a_dask_worker_without_the_variable_sets_nothing(monkeypatch):
         with Executor(scheduler=cluster.scheduler_address) as ex:
             assert list(ex.map(_chunk_task, None, 2)) == [False, False]
     assert calls == [] and wm.DASK_RUNS == 0
-    assert wm.for_task(chunks=True) and calls  # outside a Dask worker: set
+    assert wm.for_chunk_task() and calls  # outside a Dask worker: set
