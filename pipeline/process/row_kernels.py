@@ -60,6 +60,8 @@ def pairwise_sum(a: np.ndarray, lo: int, n: int) -> float:
     calls itself is not cached safely): ``size`` and ``start`` of the pending runs, their
     partial sums combined as the recursion returns.
     """
+    if n <= _BLOCK:  # one leaf: no stack to allocate (a row's neighbours, a short waveform)
+        return _leaf(a, lo, n)
     # depth: a run halves each level, 48 levels cover any array
     start = np.empty(48, np.int64)
     size = np.empty(48, np.int64)

@@ -41,7 +41,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from pipeline.parallel import thread_map
-from pipeline.process.kriging_kernels import fill_gram, pair_lags
+from pipeline.process.kriging_kernels import fill_gram, pair_lags, spd_solve
 from pipeline.process.returns import DetectedReturns, PointFlag
 from pipeline.process.sea_correlation import LAG_EDGES_M, MIN_PAIRS, time_pairs
 
@@ -157,7 +157,7 @@ class SeaField:
         upper = self.covariance_m2(pair_lags(x, y, iu, ju))
         gram = fill_gram(upper, ok, iu, ju, c0 + self.nugget_m2)  # out-of-window: decoupled
         kv = self.covariance_m2(_distance(x - xy[:, 0, None], y - xy[:, 1, None])) * ok
-        w = np.linalg.solve(gram, kv[..., None])[..., 0]
+        w = spd_solve(gram, kv)
         height = np.sum(w * self.height_m[nn] * ok, axis=1)
         sigma = np.sqrt(np.maximum(c0 - np.sum(w * kv, axis=1), 0.0))
         return height, sigma, ok.sum(axis=1)

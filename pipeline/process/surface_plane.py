@@ -11,27 +11,32 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.process.plane_kernels import plane_moments, sym3_inverse
+
 __all__ = ["solve_plane", "major_axis", "solve_along", "window_samples"]
 
 
 def solve_plane(w, dx, dy, z, lam):
-    """Batched weighted least squares with a ridge ``lam`` on the slopes; params and inverse."""
-    sw = w.sum(1)
-    sx, sy = (w * dx).sum(1), (w * dy).sum(1)
-    sxx, syy, sxy = (w * dx * dx).sum(1), (w * dy * dy).sum(1), (w * dx * dy).sum(1)
+    """Batched weighted least squares with a ridge ``lam`` on the slopes; params and inverse.
+
+    The normal equations' sums and the ``3 x 3`` inverses are compiled
+    (:mod:`pipeline.process.plane_kernels`); a row without weight gets the identity.
+    """
+    mom = plane_moments(w, dx, dy, z)
+    sw = mom[:, 0]
     m = len(sw)
     a = np.empty((m, 3, 3))
     a[:, 0, 0] = sw
-    a[:, 0, 1] = a[:, 1, 0] = sx
-    a[:, 0, 2] = a[:, 2, 0] = sy
-    a[:, 1, 1] = sxx + lam
-    a[:, 2, 2] = syy + lam
-    a[:, 1, 2] = a[:, 2, 1] = sxy
+    a[:, 0, 1] = a[:, 1, 0] = mom[:, 1]
+    a[:, 0, 2] = a[:, 2, 0] = mom[:, 2]
+    a[:, 1, 1] = mom[:, 3] + lam
+    a[:, 2, 2] = mom[:, 4] + lam
+    a[:, 1, 2] = a[:, 2, 1] = mom[:, 5]
     bad = sw <= 0
     a[bad] = np.eye(3)
-    rhs = np.stack([(w * z).sum(1), (w * dx * z).sum(1), (w * dy * z).sum(1)], axis=1)
+    rhs = mom[:, 6:9].copy()
     rhs[bad] = 0.0
-    inv = np.linalg.inv(a)
+    inv = sym3_inverse(a)
     params = np.einsum("mij,mj->mi", inv, rhs)
     return params, inv
 

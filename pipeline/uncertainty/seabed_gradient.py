@@ -49,6 +49,7 @@ from scipy.spatial import cKDTree
 from pipeline.cell_keys import cell_inverse
 from pipeline.constants import MAD_TO_SIGMA
 from pipeline.parallel import thread_map_rows
+from pipeline.process.plane_kernels import plane_moments, sym3_inverse
 from pipeline.process.surface_land import masked_median
 from pipeline.uncertainty.tpu_settings import X, Y
 
@@ -143,16 +144,16 @@ def _bayes_planes(w, dx, dy, z, noise_var, prior_mean, prior_prec):
     ``prior_prec`` (m, 2, 2) of ``(b, c)``; ``a`` is free. Rows with fewer than
     :data:`_MIN_SOUNDINGS` soundings: the prior.
     """
-    sw = w.sum(1)
-    s = [w * dx, w * dy]
+    mom = plane_moments(w, dx, dy, z)
+    sw = mom[:, 0]
     a = np.empty((len(sw), 3, 3))
     a[:, 0, 0] = sw
-    a[:, 0, 1] = a[:, 1, 0] = s[0].sum(1)
-    a[:, 0, 2] = a[:, 2, 0] = s[1].sum(1)
-    a[:, 1, 1] = (s[0] * dx).sum(1)
-    a[:, 2, 2] = (s[1] * dy).sum(1)
-    a[:, 1, 2] = a[:, 2, 1] = (s[0] * dy).sum(1)
-    rhs = np.stack([(w * z).sum(1), (s[0] * z).sum(1), (s[1] * z).sum(1)], axis=1)
+    a[:, 0, 1] = a[:, 1, 0] = mom[:, 1]
+    a[:, 0, 2] = a[:, 2, 0] = mom[:, 2]
+    a[:, 1, 1] = mom[:, 3]
+    a[:, 2, 2] = mom[:, 4]
+    a[:, 1, 2] = a[:, 2, 1] = mom[:, 5]
+    rhs = mom[:, 6:9].copy()
     a /= noise_var[:, None, None]
     rhs /= noise_var[:, None]
     a[:, 1:, 1:] += prior_prec
@@ -160,12 +161,15 @@ def _bayes_planes(w, dx, dy, z, noise_var, prior_mean, prior_prec):
     bad = sw < _MIN_SOUNDINGS
     a[bad] = np.eye(3)
     rhs[bad] = 0.0
-    inv = np.linalg.inv(a)
+    inv = sym3_inverse(a)
     mean = np.einsum("mij,mj->mi", inv, rhs)[:, 1:]
-    cov = inv[:, 1:, 1:]
-    prior_cov = np.linalg.inv(np.where(bad[:, None, None], prior_prec, np.eye(2)))
-    mean = np.where(bad[:, None], prior_mean, mean)
-    cov = np.where(bad[:, None, None], prior_cov, cov)
+    cov = inv[:, 1:, 1:].copy()
+    if bad.any():  # the prior's covariance: its precision's 2 x 2 inverse, by cofactors
+        pp = prior_prec[bad]
+        det = pp[:, 0, 0] * pp[:, 1, 1] - pp[:, 0, 1] * pp[:, 1, 0]
+        adj = np.stack([pp[:, 1, 1], -pp[:, 0, 1], -pp[:, 1, 0], pp[:, 0, 0]], axis=1)
+        mean[bad] = prior_mean[bad]
+        cov[bad] = (adj / det[:, None]).reshape(-1, 2, 2)
     return mean, cov
 
 

@@ -210,6 +210,8 @@ def test_kriging_predicts_what_the_dense_formula_gives_bit_for_bit():
     # distances as sqrt(dx² + dy²): the values np.linalg.norm of every difference gives
     from scipy.spatial import cKDTree
 
+    from pipeline.process.kriging_kernels import spd_solve
+
     rng = np.random.default_rng(11)
     m, n, k = 3000, 500, 12
     field = _random_field(rng, m, k)
@@ -223,11 +225,15 @@ def test_kriging_predicts_what_the_dense_formula_gives_bit_for_bit():
     gram *= ok[:, :, None] & ok[:, None, :]
     gram[:, np.arange(k), np.arange(k)] = 0.04 + 1e-3
     kv = field.covariance_m2(np.linalg.norm(p - q[:, None, :], axis=-1)) * ok
-    w = np.linalg.solve(gram, kv[..., None])[..., 0]
+    # the dense matrices solved by the same Cholesky factors: the fill's bits are the
+    # formula's; LAPACK's LU of them gives the same heights to rounding
+    w = spd_solve(gram, kv)
     assert (used < k).any() and (used == k).any()  # some echoes out of the window
     np.testing.assert_array_equal(height, np.sum(w * field.height_m[nn] * ok, axis=1))
     np.testing.assert_array_equal(sigma, np.sqrt(np.maximum(0.04 - np.sum(w * kv, axis=1), 0.0)))
     np.testing.assert_array_equal(used, ok.sum(axis=1))
+    w_lu = np.linalg.solve(gram, kv[..., None])[..., 0]
+    np.testing.assert_allclose(height, np.sum(w_lu * field.height_m[nn] * ok, axis=1), atol=1e-12)
 
 
 def test_kriging_in_blocks_on_threads_is_the_same_bit_for_bit(monkeypatch):
