@@ -18,9 +18,8 @@ from pathlib import Path
 
 from pipeline.errors import SceneError
 from pipeline.memory_budget import (
-    BASE_BYTES,
-    BYTES_PER_PULSE,
     MEMORY_SHARE,
+    held_bytes,
     machine_memory_bytes,
 )
 
@@ -97,18 +96,25 @@ def _check_survey(scene) -> None:
     _check_photon_windows(scene)
     mem = MEMORY_SHARE * machine_memory_bytes()
     n = lines.n_pulses_total
-    held = n
     run = getattr(scene, "run", None)
-    if run is not None and (run.block_m is not None or n > run.block_pulses):
-        held = min(n, max(run.block_pulses, run.sample_pulses))
-    need = BASE_BYTES + BYTES_PER_PULSE * held
+    blocked = run is not None and (run.block_m is not None or n > run.block_pulses)
+    if run is None:
+        need = held_bytes(n, n, n, False)
+    else:
+        need = held_bytes(n, run.block_pulses, run.sample_pulses, blocked)
     if need > mem:
+        how = (
+            f"blocked: its sample (`run.sample_pulses` = {run.sample_pulses:.3g}) held whole"
+            f" and blocks of `run.block_pulses` = {run.block_pulses:.3g}"
+            if blocked
+            else "held whole (`run.block_pulses` or fewer)"
+        )
         raise SceneError(
             f"`scanner.prf_hz` = {sc.prf_hz:g} over `flight.area_m` = {list(fl.area_m)} gives"
-            f" {n:.3g} pulses, {held:.3g} held at a time (`run.block_pulses`,"
-            f" `run.sample_pulses`): about {need / 1e9:.3g} GB at {BYTES_PER_PULSE / 1e3:g} kB"
-            f" per pulse, more than {mem / 1e9:.3g} GB ({MEMORY_SHARE:.0%} of this machine's"
-            " memory); lower the pulse rate, the area, `flight.n_lines` or `run.block_pulses`."
+            f" {n:.3g} pulses, {how}: about {need / 1e9:.3g} GB"
+            f" (pipeline/memory_budget.py), more than {mem / 1e9:.3g} GB ({MEMORY_SHARE:.0%} of"
+            " this machine's memory); lower the pulse rate, the area, `flight.n_lines`,"
+            " `run.block_pulses` or `run.sample_pulses`."
         )
     extent = survey_extent_m(scene, lines)
     _check_window_keys(scene, lines, extent)

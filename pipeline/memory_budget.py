@@ -8,13 +8,28 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["BASE_BYTES", "BYTES_PER_PULSE", "MEMORY_SHARE", "machine_memory_bytes"]
+__all__ = [
+    "BASE_BYTES",
+    "BYTES_PER_PULSE",
+    "MEMORY_SHARE",
+    "WHOLE_BASE_BYTES",
+    "WHOLE_BYTES_PER_PULSE",
+    "held_bytes",
+    "machine_memory_bytes",
+]
 
-#: Peak memory of a survey run held whole: 434 MB + 1.44 kB per pulse (measured with
-#: ``/usr/bin/time -v`` on the Palmer scene). A survey of more than ``run.block_pulses`` is
-#: processed block by block (:mod:`pipeline.survey_blocks`): each process holds about
-#: ``max(run.block_pulses, run.sample_pulses)`` pulses at a time, and as many blocks run at once
-#: as the memory holds (:func:`~pipeline.survey_block_task.blocks_side_by_side`).
+#: Peak memory of a survey run held whole (the largest process): 0.89 GB + 1.64 kB per pulse,
+#: fitted to 1322, 1802 and 2418 MiB at 300 000, 600 000 and 1 000 000 pulses (the Palmer scene,
+#: posteriors off, 2 workers, 227f9e5; ``benchmarks/RESULTS_e2e.md``, session 37). A survey of
+#: up to ``run.block_pulses`` pulses is held whole; a larger one holds its sample
+#: (``run.sample_pulses``) whole and its blocks one per process (:data:`BASE_BYTES`).
+WHOLE_BASE_BYTES = 0.89e9
+WHOLE_BYTES_PER_PULSE = 1.64e3
+#: Peak memory of a block's process (:mod:`pipeline.survey_blocks`) by the pulses it loads with
+#: its halo: 434 MB + 1.44 kB per pulse, a bound measured on surveys held whole before session
+#: 37, which holds a block's (1.56 GiB at blocks of about 1 M loaded pulses, 3 M and 10 M pulse
+#: surveys; a block processes only what the points it keeps read). As many blocks run at once
+#: as the memory holds by it (:func:`~pipeline.survey_block_task.blocks_side_by_side`).
 BASE_BYTES = 434e6
 BYTES_PER_PULSE = 1.44e3
 #: Share of the machine's memory a run may plan to use.
@@ -39,3 +54,17 @@ def machine_memory_bytes() -> float:
         if value.isdigit():  # "max": no limit
             limit = min(limit, float(value))
     return limit
+
+
+def held_bytes(n_pulses: int, block_pulses: int, sample_pulses: int, blocked: bool) -> float:
+    """Peak memory a survey's largest process plans for (bytes).
+
+    Held whole: :data:`WHOLE_BASE_BYTES` + :data:`WHOLE_BYTES_PER_PULSE` per pulse. Blocked:
+    the larger of its sample held whole (at most ``sample_pulses``) and one block of
+    ``block_pulses`` loaded pulses (:data:`BASE_BYTES` + :data:`BYTES_PER_PULSE` each).
+    """
+    if not blocked:
+        return WHOLE_BASE_BYTES + WHOLE_BYTES_PER_PULSE * n_pulses
+    sample = WHOLE_BASE_BYTES + WHOLE_BYTES_PER_PULSE * min(n_pulses, sample_pulses)
+    block = BASE_BYTES + BYTES_PER_PULSE * min(n_pulses, block_pulses)
+    return max(sample, block)

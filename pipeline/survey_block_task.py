@@ -116,7 +116,7 @@ def blocks_side_by_side(workers: int, loaded_pulses: float, free_bytes: float) -
 
     Each running block is a process holding its loaded pulses
     (:data:`~pipeline.memory_budget.BASE_BYTES` + :data:`~pipeline.memory_budget.BYTES_PER_PULSE`
-    each, the measured cost of a survey held whole).
+    each, a bound of a block's measured peak).
 
     Parameters
     ----------

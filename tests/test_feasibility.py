@@ -118,3 +118,36 @@ def test_the_temporary_disk_is_the_one_measured(tmp_path, monkeypatch):
     # the same disk (tmp_path and scratch are): the outputs' pulses take their share of it
     with pytest.raises(SceneError, match="the same disk"):
         check_disk(1000, tmp_path / "out", fits, 5.0)
+
+
+def test_a_survey_held_whole_is_planned_at_its_measured_cost(tmp_path, capsys, monkeypatch):
+    """Held whole, a survey needs 0.89 GB + 1.64 kB a pulse (its largest process).
+
+    The figures measured at 300 k, 600 k and 1 M pulses (1.39, 1.89, 2.54 GB;
+    ``pipeline/memory_budget.py``). The Palmer scene (~1 M pulses) held whole, on a machine
+    whose share is just below that: ``bathy validate`` refuses it and names the keys that
+    block it. Blocked (blocks of a quarter of its pulses, a sample of a fifth), its sample and
+    a block fit, and it passes.
+    """
+    import pipeline.feasibility as feas
+    from pipeline.memory_budget import held_bytes
+    from pipeline.scene import load_scene
+    from pipeline.simulate.trajectory import plan_lines
+
+    path = _scene(tmp_path, "[process]", "[run]\nblock_pulses = 2000000\n\n[process]")
+    scene = load_scene(path)
+    n = plan_lines(scene.flight, scene.scanner).n_pulses_total
+    assert 500_000 < n < scene.run.block_pulses  # held whole
+    whole = 0.89e9 + 1.64e3 * n
+    assert held_bytes(n, scene.run.block_pulses, scene.run.sample_pulses, False) == whole
+    share = 0.95 * whole  # the run's share of the machine: just below what it needs
+    monkeypatch.setattr(feas, "machine_memory_bytes", lambda: share / feas.MEMORY_SHARE)
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "held whole" in err and "`run.block_pulses`" in err
+    blocked = _scene(
+        tmp_path,
+        "[process]",
+        f"[run]\nblock_pulses = {n // 4}\nsample_pulses = {n // 5}\n\n[process]",
+    )
+    assert main(["validate", str(blocked)]) == 0
