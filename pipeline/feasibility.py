@@ -103,12 +103,20 @@ def _check_survey(scene) -> None:
     else:
         need = held_bytes(n, run.block_pulses, run.sample_pulses, blocked)
     if need > mem:
-        how = (
-            f"blocked: its sample (`run.sample_pulses` = {run.sample_pulses:.3g}) held whole"
-            f" and blocks of `run.block_pulses` = {run.block_pulses:.3g}"
-            if blocked
-            else "held whole (`run.block_pulses` or fewer)"
-        )
+        if not blocked:
+            limit = "" if run is None else f" = {run.block_pulses:_}"
+            how = f"held whole (`run.block_pulses`{limit} or fewer)"
+        else:
+            size = (
+                f"`run.block_m` = {run.block_m:g} m, at most `run.block_pulses` ="
+                f" {run.block_pulses:_} planned"
+                if run.block_m is not None
+                else f"`run.block_pulses` = {run.block_pulses:_}"
+            )
+            how = (
+                f"blocked: its sample (`run.sample_pulses` = {run.sample_pulses:_}) held whole"
+                f" and blocks of {size}"
+            )
         raise SceneError(
             f"`scanner.prf_hz` = {sc.prf_hz:g} over `flight.area_m` = {list(fl.area_m)} gives"
             f" {n:.3g} pulses, {how}: about {need / 1e9:.3g} GB"

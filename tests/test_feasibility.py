@@ -151,3 +151,11 @@ def test_a_survey_held_whole_is_planned_at_its_measured_cost(tmp_path, capsys, m
         f"[run]\nblock_pulses = {n // 4}\nsample_pulses = {n // 5}\n\n[process]",
     )
     assert main(["validate", str(blocked)]) == 0
+    capsys.readouterr()
+    # a machine without room for its sample held whole: refused, blocked, the values named
+    sample = 0.89e9 + 1.64e3 * (n // 5)
+    monkeypatch.setattr(feas, "machine_memory_bytes", lambda: 0.9 * sample / feas.MEMORY_SHARE)
+    assert main(["validate", str(blocked)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "blocked" in err
+    assert f"`run.sample_pulses` = {n // 5:_}" in err and f"`run.block_pulses` = {n // 4:_}" in err

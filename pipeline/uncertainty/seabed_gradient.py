@@ -156,13 +156,16 @@ def _bayes_planes(w, dx, dy, z, noise_var, prior_mean, prior_prec):
     rhs = mom[:, 6:9].copy()
     a /= noise_var[:, None, None]
     rhs /= noise_var[:, None]
+    # a precision made by an LU inverse can be uneven in its last bit: the matrix's two halves
+    # must agree, as the inverse reads one of them
+    prior_prec = 0.5 * (prior_prec + np.swapaxes(prior_prec, 1, 2))
     a[:, 1:, 1:] += prior_prec
     rhs[:, 1:] += np.einsum("mij,mj->mi", prior_prec, prior_mean)
     bad = sw < _MIN_SOUNDINGS
     a[bad] = np.eye(3)
     rhs[bad] = 0.0
     inv = sym3_inverse(a)
-    mean = np.einsum("mij,mj->mi", inv, rhs)[:, 1:]
+    mean = np.ascontiguousarray(np.einsum("mij,mj->mi", inv, rhs)[:, 1:])
     cov = inv[:, 1:, 1:].copy()
     if bad.any():  # the prior's covariance: its precision's 2 x 2 inverse, by cofactors
         pp = prior_prec[bad]

@@ -234,6 +234,8 @@ def test_kriging_predicts_what_the_dense_formula_gives_bit_for_bit():
     np.testing.assert_array_equal(used, ok.sum(axis=1))
     w_lu = np.linalg.solve(gram, kv[..., None])[..., 0]
     np.testing.assert_allclose(height, np.sum(w_lu * field.height_m[nn] * ok, axis=1), atol=1e-12)
+    lu_sigma = np.sqrt(np.maximum(0.04 - np.sum(w_lu * kv, axis=1), 0.0))
+    np.testing.assert_allclose(sigma, lu_sigma, rtol=1e-9, atol=1e-12)
 
 
 def test_kriging_in_blocks_on_threads_is_the_same_bit_for_bit(monkeypatch):
