@@ -9,12 +9,13 @@ process tree, ``os.wait4``); peak RSS of the largest process (``ru_maxrss``) and
 tree (sum over the parent and its workers, sampled every 0.1 s with psutil); machine facts.
 
 Run: .venv/bin/python benchmarks/bench_e2e.py [--pulses 150000] [--workers 1 2]
-     [--memory 100000 300000 1000000] [--out FILE.md]
+     [--memory 100000 300000 1000000] [--out FILE.md] [--log-dir DIR]
 The scene flies without run-in (so small surveys are possible). The throughput runs keep the
 scene's posteriors (their default budget); the memory series
 turns them off. Prints the markdown (tables and the command); ``--out`` also writes it to a
-file. ``benchmarks/RESULTS_e2e.md`` is a hand-kept record: paste a run's tables into a section
-there rather than writing over it.
+file; ``--log-dir`` keeps each run's log (its chunks and blocks as they finish: a survey of
+hours can be followed). ``benchmarks/RESULTS_e2e.md`` is a hand-kept record: paste a run's
+tables into a section there rather than writing over it.
 """
 
 from __future__ import annotations
@@ -68,16 +69,22 @@ def palmer(pulses: int, posteriors: bool, chunk: int) -> dict:
     return data
 
 
-def run_one(scene: dict, workers: int, tmp: Path, name: str) -> dict:
-    """``bathy run`` in a child; its figures from the manifest and the rusage."""
+def run_one(scene: dict, workers: int, tmp: Path, name: str, log_dir: Path | None = None) -> dict:
+    """``bathy run`` in a child; its figures from the manifest and the rusage.
+
+    ``log_dir``: the run's log (its chunks and blocks as they are done) goes to
+    ``log_dir/<name>.log`` instead of being silenced, to follow a long run.
+    """
     path = tmp / f"{name}.toml"
     path.write_text(to_toml(scene))  # the stress suite's scene writer
     out = tmp / name
-    cmd = [str(BATHY), "run", str(path), "--out", str(out), "--overwrite", "--quiet"]
+    cmd = [str(BATHY), "run", str(path), "--out", str(out), "--overwrite"]
+    cmd += [] if log_dir is not None else ["--quiet"]
     cmd += ["--workers", str(workers)]
     env = dict(os.environ, PYTHONPATH=str(ROOT), MPLBACKEND="Agg")
     t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, env=env)
+    log = None if log_dir is None else open(Path(log_dir) / f"{name}.log", "w")  # noqa: SIM115
+    proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT if log else None)
     peak_tree = [0]
     done = threading.Event()
 
@@ -98,6 +105,8 @@ def run_one(scene: dict, workers: int, tmp: Path, name: str) -> dict:
     done.set()
     th.join()
     proc.returncode = os.waitstatus_to_exitcode(status)
+    if log is not None:
+        log.close()
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} exited {proc.returncode}")
     man = json.loads((out / "manifest.json").read_text())
@@ -249,6 +258,7 @@ def main() -> None:
     ap.add_argument("--memory-workers", type=int, default=2)
     ap.add_argument("--chunk", type=int, default=20_000, help="run.chunk_pulses")
     ap.add_argument("--out", default=None, help="also write the markdown to this file")
+    ap.add_argument("--log-dir", default=None, help="write each run's log here (its progress)")
     ap.add_argument(
         "--set",
         action="append",
@@ -262,7 +272,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="bench_e2e_") as tmp:
         scene = palmer(args.pulses, posteriors=True, chunk=args.chunk)
         for w in args.workers:
-            runs.append(run_one(scene, w, Path(tmp), f"w{w}"))
+            runs.append(run_one(scene, w, Path(tmp), f"w{w}", args.log_dir))
             print(json.dumps({k: v for k, v in runs[-1].items() if k != "stages"}), flush=True)
         for n in args.memory:
             scene = palmer(n, posteriors=False, chunk=args.chunk)
@@ -270,7 +280,7 @@ def main() -> None:
                 key, value = kv.split("=", 1)
                 section, name = key.split(".", 1)
                 scene.setdefault(section, {})[name] = float(value) if "." in value else int(value)
-            mem_runs.append(run_one(scene, args.memory_workers, Path(tmp), f"m{n}"))
+            mem_runs.append(run_one(scene, args.memory_workers, Path(tmp), f"m{n}", args.log_dir))
             print(json.dumps({k: v for k, v in mem_runs[-1].items() if k != "stages"}), flush=True)
             for st, v in mem_runs[-1]["stages"].items():  # wall, CPU (all workers), own peak
                 peak = v.get("peak_rss_mb")
