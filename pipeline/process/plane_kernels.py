@@ -24,7 +24,7 @@ import numpy as np
 
 from pipeline.process.row_kernels import pairwise_sum
 
-__all__ = ["MOMENTS", "plane_moments", "sym3_inverse"]
+__all__ = ["MOMENTS", "normal_equations", "plane_moments", "sym3_inverse"]
 
 #: The columns of :func:`plane_moments`, in order (``w`` weight, ``x = dx``, ``y = dy``).
 MOMENTS = ("w", "wx", "wy", "wxx", "wyy", "wxy", "wz", "wxz", "wyz")
@@ -119,3 +119,19 @@ def sym3_inverse(a) -> np.ndarray:
     if a.ndim != 3 or a.shape[1:] != (3, 3):
         raise ValueError(f"sym3_inverse needs (m, 3, 3) matrices; got {a.shape}")
     return _sym3_inverse(a)
+
+
+def normal_equations(mom: np.ndarray, ridge=0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The plane's normal matrix ``(m, 3, 3)`` and right-hand side ``(m, 3)`` from its moments.
+
+    ``mom``: :func:`plane_moments`' ``(m, 9)``; ``ridge`` (scalar or ``(m,)``) is added to the
+    two slopes' diagonal. Both are new arrays, free to be scaled in place.
+    """
+    a = np.empty((len(mom), 3, 3))
+    a[:, 0, 0] = mom[:, 0]
+    a[:, 0, 1] = a[:, 1, 0] = mom[:, 1]
+    a[:, 0, 2] = a[:, 2, 0] = mom[:, 2]
+    a[:, 1, 1] = mom[:, 3] + ridge
+    a[:, 2, 2] = mom[:, 4] + ridge
+    a[:, 1, 2] = a[:, 2, 1] = mom[:, 5]
+    return a, mom[:, 6:9].copy()

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.process.plane_kernels import plane_moments, sym3_inverse
+from pipeline.process.plane_kernels import normal_equations, plane_moments, sym3_inverse
 
 __all__ = ["solve_plane", "major_axis", "solve_along", "window_samples"]
 
@@ -24,17 +24,9 @@ def solve_plane(w, dx, dy, z, lam):
     """
     mom = plane_moments(w, dx, dy, z)
     sw = mom[:, 0]
-    m = len(sw)
-    a = np.empty((m, 3, 3))
-    a[:, 0, 0] = sw
-    a[:, 0, 1] = a[:, 1, 0] = mom[:, 1]
-    a[:, 0, 2] = a[:, 2, 0] = mom[:, 2]
-    a[:, 1, 1] = mom[:, 3] + lam
-    a[:, 2, 2] = mom[:, 4] + lam
-    a[:, 1, 2] = a[:, 2, 1] = mom[:, 5]
+    a, rhs = normal_equations(mom, lam)
     bad = sw <= 0
     a[bad] = np.eye(3)
-    rhs = mom[:, 6:9].copy()
     rhs[bad] = 0.0
     inv = sym3_inverse(a)
     params = np.einsum("mij,mj->mi", inv, rhs)

@@ -49,7 +49,7 @@ from scipy.spatial import cKDTree
 from pipeline.cell_keys import cell_inverse
 from pipeline.constants import MAD_TO_SIGMA
 from pipeline.parallel import thread_map_rows
-from pipeline.process.plane_kernels import plane_moments, sym3_inverse
+from pipeline.process.plane_kernels import normal_equations, plane_moments, sym3_inverse
 from pipeline.process.surface_land import masked_median
 from pipeline.uncertainty.tpu_settings import X, Y
 
@@ -146,14 +146,7 @@ def _bayes_planes(w, dx, dy, z, noise_var, prior_mean, prior_prec):
     """
     mom = plane_moments(w, dx, dy, z)
     sw = mom[:, 0]
-    a = np.empty((len(sw), 3, 3))
-    a[:, 0, 0] = sw
-    a[:, 0, 1] = a[:, 1, 0] = mom[:, 1]
-    a[:, 0, 2] = a[:, 2, 0] = mom[:, 2]
-    a[:, 1, 1] = mom[:, 3]
-    a[:, 2, 2] = mom[:, 4]
-    a[:, 1, 2] = a[:, 2, 1] = mom[:, 5]
-    rhs = mom[:, 6:9].copy()
+    a, rhs = normal_equations(mom)
     a /= noise_var[:, None, None]
     rhs /= noise_var[:, None]
     # a precision made by an LU inverse can be uneven in its last bit: the matrix's two halves
