@@ -361,7 +361,7 @@ def run_survey(
             "grid": write_grid_tif(out / "grid.tif", grid, unc.cells),
             "grid_nc": write_grid_nc(out / "grid.nc", grid, unc.cells),
         }
-        return files, processed.points.select(las_order)
+        return files, las_order
 
     return finish_survey(
         scene, plan, out, clock, log, progress, executor, sim, ctx, made, covered, deliver

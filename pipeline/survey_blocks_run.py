@@ -289,7 +289,7 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
             }
             # the views' points in the order a points file of the sample would hold them
             order, _ = points_tile_order(made.processed.points, sample_returns, layout, air)
-            return files, made.processed.points.select(order)
+            return files, order
 
         blocked = {
             "block_m": blocks.tile_m,

@@ -6,6 +6,8 @@ block by block (:mod:`pipeline.survey_blocks`), whose evaluation is that of its 
 
 from __future__ import annotations
 
+from pipeline.stages import trim_heap
+
 __all__ = ["log_cleanup", "finish_survey"]
 
 
@@ -33,8 +35,9 @@ def finish_survey(
     """Posteriors, outputs, views, evaluation and report of a processed survey.
 
     ``made``: :func:`~pipeline.survey_processing.process_survey` of ``sim.returns``;
-    ``deliver(unc, grid) -> (files, view_points)`` writes the points and the grid (in the
-    outputs stage) and gives the points the views show, in the points file's order;
+    ``deliver(unc, grid) -> (files, view_order)`` writes the points and the grid (in the
+    outputs stage) and gives the rows of ``made.processed.points`` in the points file's order
+    (the views show them so: a view's point i is the LAS's point i);
     ``extra``: entries added to ``evaluation.json`` (and the report) before the report.
 
     Returns
@@ -63,8 +66,10 @@ def finish_survey(
                 # the waveform's own sigma: the cells add the TPU's other terms themselves
                 std = p.depth_m["std"] if p.waveform_std_m is None else p.waveform_std_m
                 unc = with_posteriors(unc, grid, post.point_index, p.converged, std)
+    trim_heap()  # the TPU's and the cleanup's freed temporaries: the stages below start low
     with clock.stage("outputs"):
-        files, view_points = deliver(unc, grid)
+        files, view_order = deliver(unc, grid)
+    trim_heap()
     pictures = None  # left out by the plan (run.views = false)
     if plan.runs("views"):
         with clock.stage("views"):
@@ -72,9 +77,13 @@ def finish_survey(
             # costs only the views (one warning line)
             from pipeline.outputs.view3d import write_views
 
-            # in the LAS's order: a view's point i is the LAS's point i
+            # in the LAS's order, made here and let go after: ~80 B a point that the
+            # evaluation does not need held beside its own arrays
+            view_points = processed.points.select(view_order)
             vtp, pictures = write_views(out / "view", view_points, sim, origin, fr.crs, log)
             files.update({f"view_{k}": p for k, p in vtp.items()})
+            del view_points
+        trim_heap()  # the rendering's buffers
     with clock.stage("evaluate"):
         from pipeline.survey_report import evaluate_survey
 

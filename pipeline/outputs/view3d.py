@@ -22,7 +22,7 @@ from pipeline.outputs.atomic import atomic_path
 from pipeline.process.classify import BATHYMETRIC_POINT, CLASS_NAMES
 
 __all__ = ["MESH_FILES", "COLOR_BY", "meshes", "write_vtp", "read_vtp", "render", "png_bytes"]
-__all__ += ["write_views", "has_display", "view_folder"]
+__all__ += ["write_views", "render_pictures", "has_display", "view_folder"]
 
 #: The ``.vtp`` file of each mesh, in the run's ``view/`` folder.
 MESH_FILES = {
@@ -325,10 +325,9 @@ def write_views(
     files, images = {}, []
     try:
         scene = view_scene(points, sim.returns, sim.truth, origin_m, crs)
-        mesh_by_name = meshes(scene)
-        files = write_vtp(mesh_by_name, folder)
-        for color_by, alt in REPORT_VIEWS:
-            images.append((png_bytes(render(mesh_by_name, color_by)), alt))
+        files = write_vtp(meshes(scene), folder)
+        del scene
+        images = render_pictures(folder)
     except Exception as exc:  # noqa: BLE001 - any failure here must not end the run
         msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
         log(
@@ -336,6 +335,30 @@ def write_views(
             f" {type(exc).__name__}: {msg}"
         )
     return files, images
+
+
+def _render_report_views(folder: str) -> list[tuple[bytes, str]]:
+    """The report's pictures of the meshes written in ``folder`` (run in a child process)."""
+    mesh_by_name = read_vtp(Path(folder))
+    return [(png_bytes(render(mesh_by_name, c)), alt) for c, alt in REPORT_VIEWS]
+
+
+def render_pictures(folder: Path) -> list[tuple[bytes, str]]:
+    """The report's pictures (:data:`REPORT_VIEWS`) of the ``.vtp`` files in ``folder``.
+
+    Rendered in a fresh child process: the OpenGL stack (Mesa's llvmpipe) takes ~300 MiB
+    whatever the picture, 160 of which its heap keeps after the window is closed, and a
+    driver that crashes would end the process it runs in. Here it costs the run neither the
+    memory (the survey's arrays stay in the parent, beside nothing) nor, on a crash, more than
+    the pictures (``BrokenProcessPool``, which :func:`write_views` turns into its warning).
+    The child reads the files just written: VTK's XML keeps every float64 exactly, so the
+    pictures are those of the meshes in memory.
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        return pool.submit(_render_report_views, str(folder)).result()
 
 
 def view_folder(

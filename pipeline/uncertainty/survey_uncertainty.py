@@ -297,6 +297,14 @@ def survey_uncertainty(
     order = np.argsort(tpu.pulse_id)
     pos = order[np.searchsorted(tpu.pulse_id[order], points40.pulse_id)]
     tpu40 = take_tpu(tpu, pos)
+    left_out = {
+        "pulses": len(tpu.left_out),
+        "bathymetric_points": int(np.count_nonzero(no_tpu)),
+        "by_reason": tpu.left_out.counts(),
+    }
+    # every bottom pulse's terms (~380 B a pulse) are not read again: let them go before the
+    # wave terms below raise the run's peak
+    del tpu
     # each bathymetric point's row among the bottom pulses (of grad, grad_cov), and the
     # flight-line direction of its pulse
     at40 = np.searchsorted(bottom_rows, tpu40.row)
@@ -362,11 +370,7 @@ def survey_uncertainty(
         points40=points40,
         is40=is40,
         no_tpu=no_tpu,
-        left_out={
-            "pulses": len(tpu.left_out),
-            "bathymetric_points": int(np.count_nonzero(no_tpu)),
-            "by_reason": tpu.left_out.counts(),
-        },
+        left_out=left_out,
         cells=cells,
         summary=iho.order_summary(cells.order).to_dict(),
         wide=TpuSurveyWide(

@@ -228,7 +228,9 @@ def test_a_render_failure_costs_only_the_views(tmp_path, monkeypatch):
     def broken(*a, **k):
         raise RuntimeError("no OpenGL here")
 
-    monkeypatch.setattr(V, "render", broken)
+    # the pictures are rendered in a child process (V.render_pictures), where a monkeypatch of
+    # V.render does not reach: the child's failure is what the run sees
+    monkeypatch.setattr(V, "render_pictures", broken)
     data = tomllib.loads((ROOT / "data_synthetic" / "scenes" / "palmer_survey.toml").read_text())
     data["flight"].update(area_m=[0.0, 20.0, 0.0, 20.0], run_in_m=0.0)
     data["scanner"]["prf_hz"] = 2000.0
@@ -245,3 +247,10 @@ def test_a_render_failure_costs_only_the_views(tmp_path, monkeypatch):
     text = (tmp_path / "report.html").read_text()
     assert "id='view3d'" in text and "were not rendered" in text
     assert os.path.getsize(tmp_path / "manifest.json") > 0
+
+
+def test_a_failure_in_the_render_child_reaches_the_run(tmp_path):
+    # the child reads the folder: without points.vtp it raises, and the parent gets that error
+    # (not a hang, not a silent empty list)
+    with pytest.raises(FileNotFoundError, match="points.vtp"):
+        V.render_pictures(tmp_path)
