@@ -83,6 +83,8 @@ def run_one(scene: dict, workers: int, tmp: Path, name: str, log_dir: Path | Non
     cmd += ["--workers", str(workers)]
     env = dict(os.environ, PYTHONPATH=str(ROOT), MPLBACKEND="Agg")
     t0 = time.perf_counter()
+    if log_dir is not None:
+        Path(log_dir).mkdir(parents=True, exist_ok=True)
     log = None if log_dir is None else open(Path(log_dir) / f"{name}.log", "w")  # noqa: SIM115
     proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT if log else None)
     peak_tree = [0]
@@ -241,9 +243,9 @@ def report(runs: list[dict], mem_runs: list[dict], command: str) -> str:
         lines += [
             "",
             "The chunk loop holds at most 2 × workers chunks and spills each chunk's detections",
-            "to disk. A survey of more than run.block_pulses is processed in blocks",
-            "(pipeline/survey_blocks.py, one block per worker at a time); a smaller one is",
-            "held whole, its peak growing with the pulses (the last column).",
+            "to disk. A survey of more than run.whole_pulses (or run.block_pulses) is",
+            "processed in blocks (pipeline/survey_blocks.py, one block per worker at a time);",
+            "a smaller one is held whole, its peak growing with the pulses (the last column).",
         ]
     return "\n".join(lines) + "\n"
 

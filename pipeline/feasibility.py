@@ -20,6 +20,7 @@ from pipeline.errors import SceneError
 from pipeline.memory_budget import (
     MEMORY_SHARE,
     held_bytes,
+    held_whole,
     machine_memory_bytes,
 )
 
@@ -97,15 +98,20 @@ def _check_survey(scene) -> None:
     mem = MEMORY_SHARE * machine_memory_bytes()
     n = lines.n_pulses_total
     run = getattr(scene, "run", None)
-    blocked = run is not None and (run.block_m is not None or n > run.block_pulses)
+    blocked = run is not None and not held_whole(run, n)
     if run is None:
         need = held_bytes(n, n, n, False)
     else:
         need = held_bytes(n, run.block_pulses, run.sample_pulses, blocked)
     if need > mem:
         if not blocked:
-            limit = "" if run is None else f" = {run.block_pulses:_}"
-            how = f"held whole (`run.block_pulses`{limit} or fewer)"
+            limit = (
+                ""
+                if run is None
+                else f": `run.whole_pulses` = {run.whole_pulses:_}, `run.block_pulses` ="
+                f" {run.block_pulses:_}"
+            )
+            how = f"held whole (no more pulses than the smaller of{limit})"
         else:
             size = (
                 f"`run.block_m` = {run.block_m:g} m, at most `run.block_pulses` ="
@@ -122,7 +128,7 @@ def _check_survey(scene) -> None:
             f" {n:.3g} pulses, {how}: about {need / 1e9:.3g} GB"
             f" (pipeline/memory_budget.py), more than {mem / 1e9:.3g} GB ({MEMORY_SHARE:.0%} of"
             " this machine's memory); lower the pulse rate, the area, `flight.n_lines`,"
-            " `run.block_pulses` or `run.sample_pulses`."
+            " `run.whole_pulses`, `run.block_pulses` or `run.sample_pulses`."
         )
     extent = survey_extent_m(scene, lines)
     _check_window_keys(scene, lines, extent)

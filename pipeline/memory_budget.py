@@ -15,16 +15,18 @@ __all__ = [
     "WHOLE_BASE_BYTES",
     "WHOLE_BYTES_PER_PULSE",
     "held_bytes",
+    "held_whole",
     "machine_memory_bytes",
 ]
 
-#: Peak memory of a survey run held whole (the largest process): 0.89 GB + 1.64 kB per pulse,
-#: fitted to 1322, 1802 and 2418 MiB at 300 000, 600 000 and 1 000 000 pulses (the Palmer scene,
-#: posteriors off, 2 workers, 227f9e5; ``benchmarks/RESULTS_e2e.md``, session 37). A survey of
-#: up to ``run.block_pulses`` pulses is held whole; a larger one holds its sample
+#: Peak memory of a survey run held whole (the largest process): 0.5 GB + 1.77 kB per pulse,
+#: the line through the largest of 1028 and 1316 MiB at 300 000 and 500 000 pulses (1 worker)
+#: and 2160 MiB at 1 000 000 (2 workers), the Palmer scene, posteriors off, session 38's code
+#: (``benchmarks/RESULTS_e2e.md``; 0.89 GB + 1.64 kB before its memory changes). A survey of
+#: up to :func:`held_whole`'s limit is held whole; a larger one holds its sample
 #: (``run.sample_pulses``) whole and its blocks one per process (:data:`BASE_BYTES`).
-WHOLE_BASE_BYTES = 0.89e9
-WHOLE_BYTES_PER_PULSE = 1.64e3
+WHOLE_BASE_BYTES = 0.5e9
+WHOLE_BYTES_PER_PULSE = 1.77e3
 #: Peak memory of a block's process (:mod:`pipeline.survey_blocks`) by the pulses it loads with
 #: its halo: 434 MB + 1.44 kB per pulse, a bound measured on surveys held whole before session
 #: 37, which holds a block's (1.56 GiB at blocks of about 1 M loaded pulses, 3 M and 10 M pulse
@@ -54,6 +56,16 @@ def machine_memory_bytes() -> float:
         if value.isdigit():  # "max": no limit
             limit = min(limit, float(value))
     return limit
+
+
+def held_whole(run, n_pulses: int) -> bool:
+    """Whether a survey of ``n_pulses`` is processed whole, in one process, by ``run``.
+
+    Not when ``run.block_m`` is set, nor beyond ``run.whole_pulses`` (the memory a survey held
+    whole needs grows with it: :data:`WHOLE_BYTES_PER_PULSE`) or ``run.block_pulses`` (a
+    survey larger than one block).
+    """
+    return run.block_m is None and int(n_pulses) <= min(run.whole_pulses, run.block_pulses)
 
 
 def held_bytes(n_pulses: int, block_pulses: int, sample_pulses: int, blocked: bool) -> float:

@@ -7,8 +7,8 @@ receiver's data, spilled chunk by chunk to disk (:mod:`pipeline.detection_store`
 survey-wide statistics the later stages need are streamed). Processing, the grid and the TPU
 (:func:`pipeline.survey_processing.process_survey`) then see only those and the
 :class:`~pipeline.process.context.ProcessingContext`: loaded back whole, or, for a survey of
-more than ``run.block_pulses`` pulses, block by block with a halo (:mod:`pipeline.survey_blocks`)
-so memory stays bounded. The evaluate stage alone meets the truth
+more pulses than ``run.whole_pulses`` or ``run.block_pulses``, block by block with a halo
+(:mod:`pipeline.survey_blocks`) so memory stays bounded. The evaluate stage alone meets the truth
 (:mod:`pipeline.survey_report`, :mod:`pipeline.survey_finish`). Every stage runs only where
 the plan (:func:`pipeline.stages.plan`) says so, under the
 :class:`~pipeline.stages.StageClock`. The grid and ``points.laz`` are made tile by tile

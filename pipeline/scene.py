@@ -245,6 +245,15 @@ class RunSettings:
         doc="write the 3D views (view/*.vtp) and the report's pictures; false leaves them out "
         "(runs of many scenes, as bathy suite makes: a few seconds and hundreds of MB each)",
     )
+    whole_pulses: int = setting(
+        750_000,
+        ge=1000,
+        le=1_000_000_000,
+        doc="a survey of more pulses (or of more than run.block_pulses) is processed block by "
+        "block: held whole, its process needs about 0.5 GB + 1.77 kB a pulse (2 GiB near "
+        "930 000 pulses; pipeline.memory_budget), blocked at most what its sample or a block "
+        "needs, whatever the survey's size",
+    )
     block_pulses: int = setting(
         1_000_000,
         ge=1000,

@@ -1,7 +1,8 @@
 """Surveys too large to hold: processing block by block after the chunk loop (issue 15).
 
-A survey whose pulses outnumber ``run.block_pulses`` (or any survey, when ``run.block_m`` is
-set) is not loaded back from the :class:`~pipeline.detection_store.DetectionStore` whole.
+A survey whose pulses outnumber ``run.whole_pulses`` or ``run.block_pulses`` (or any survey,
+when ``run.block_m`` is set: :func:`~pipeline.memory_budget.held_whole`) is not loaded back
+from the :class:`~pipeline.detection_store.DetectionStore` whole.
 After the chunk loop it runs in four passes, each holding a bounded part of the survey:
 
 1. **Blocks.** Square blocks of whole grid cells over the grid's bounds (:func:`block_layout`:
@@ -76,8 +77,9 @@ __all__ = [
 
 def is_blocked(scene, n_pulses: int) -> bool:
     """Whether the survey is processed block by block (module notes)."""
-    run = scene.run
-    return run.block_m is not None or int(n_pulses) > run.block_pulses
+    from pipeline.memory_budget import held_whole
+
+    return not held_whole(scene.run, n_pulses)
 
 
 def block_halo_m(ctx, ps, beam_reach_m: float) -> float:

@@ -75,7 +75,7 @@ def finish_survey(
         with clock.stage("views"):
             # the evaluation side (the truth's seabed and water, the points' errors); a failure
             # costs only the views (one warning line)
-            from pipeline.outputs.view3d import write_views
+            from pipeline.outputs.view_render import write_views
 
             # in the LAS's order, made here and let go after: ~80 B a point that the
             # evaluation does not need held beside its own arrays

@@ -20,7 +20,7 @@ from pipeline.process.context import ProcessingContext
 from pipeline.process.grid import Grid
 from pipeline.process.refraction import ProcessedPoints
 from pipeline.process.returns import DetectedReturns
-from pipeline.stages import Plan, StageClock
+from pipeline.stages import Plan, StageClock, trim_heap
 from pipeline.survey_tiles import TileLayout, grid_by_tiles
 
 __all__ = ["SurveyFigures", "SurveyProducts", "process_survey"]
@@ -161,6 +161,7 @@ def process_survey(
         keep = None if tpu_keep is None else tpu_keep(processed.points)
         unc = survey_uncertainty(returns, processed, ctx, grid, wide=fig.tpu_wide, keep=keep)
         processed = dataclasses.replace(processed, points=with_tpu(processed.points, unc))
+    trim_heap()  # the TPU's temporaries: the class-43 and rejection tests start low
     left_on = unc.tpu40.terms.get(UNCORRECTED_TERM)
     if left_on is not None and left_on.size:
         log(

@@ -121,10 +121,11 @@ def test_the_temporary_disk_is_the_one_measured(tmp_path, monkeypatch):
 
 
 def test_a_survey_held_whole_is_planned_at_its_measured_cost(tmp_path, capsys, monkeypatch):
-    """Held whole, a survey needs 0.89 GB + 1.64 kB a pulse (its largest process).
+    """Held whole, a survey needs 0.5 GB + 1.77 kB a pulse (its largest process).
 
-    The figures measured at 300 k, 600 k and 1 M pulses (1.39, 1.89, 2.54 GB;
-    ``pipeline/memory_budget.py``). The Palmer scene (~1 M pulses) held whole, on a machine
+    The line through the figures measured at 500 k and 1 M pulses (1.38, 2.26 GB;
+    ``pipeline/memory_budget.py``). The Palmer scene (~1 M pulses) held whole (``run.whole_pulses``
+    and ``run.block_pulses`` raised past it), on a machine
     whose share is just below that: ``bathy validate`` refuses it and names the keys that
     block it. Blocked (blocks of a quarter of its pulses, a sample of a fifth), its sample and
     a block fit, and it passes.
@@ -134,17 +135,19 @@ def test_a_survey_held_whole_is_planned_at_its_measured_cost(tmp_path, capsys, m
     from pipeline.scene import load_scene
     from pipeline.simulate.trajectory import plan_lines
 
-    path = _scene(tmp_path, "[process]", "[run]\nblock_pulses = 2000000\n\n[process]")
+    two_m = "[run]\nblock_pulses = 2000000\nwhole_pulses = 2000000\n\n[process]"
+    path = _scene(tmp_path, "[process]", two_m)
     scene = load_scene(path)
     n = plan_lines(scene.flight, scene.scanner).n_pulses_total
-    assert 500_000 < n < scene.run.block_pulses  # held whole
-    whole = 0.89e9 + 1.64e3 * n
+    assert 500_000 < n < scene.run.whole_pulses  # held whole
+    whole = 0.5e9 + 1.77e3 * n
     assert held_bytes(n, scene.run.block_pulses, scene.run.sample_pulses, False) == whole
     share = 0.95 * whole  # the run's share of the machine: just below what it needs
     monkeypatch.setattr(feas, "machine_memory_bytes", lambda: share / feas.MEMORY_SHARE)
     assert main(["validate", str(path)]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "held whole" in err and "`run.block_pulses`" in err
+    assert len(err.splitlines()) == 1 and "held whole" in err
+    assert "`run.whole_pulses` = 2_000_000" in err and "`run.block_pulses` = 2_000_000" in err
     blocked = _scene(
         tmp_path,
         "[process]",
@@ -153,9 +156,27 @@ def test_a_survey_held_whole_is_planned_at_its_measured_cost(tmp_path, capsys, m
     assert main(["validate", str(blocked)]) == 0
     capsys.readouterr()
     # a machine without room for its sample held whole: refused, blocked, the values named
-    sample = 0.89e9 + 1.64e3 * (n // 5)
+    sample = 0.5e9 + 1.77e3 * (n // 5)
     monkeypatch.setattr(feas, "machine_memory_bytes", lambda: 0.9 * sample / feas.MEMORY_SHARE)
     assert main(["validate", str(blocked)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "blocked" in err
     assert f"`run.sample_pulses` = {n // 5:_}" in err and f"`run.block_pulses` = {n // 4:_}" in err
+
+
+def test_a_survey_past_whole_pulses_is_blocked_though_smaller_than_a_block():
+    """Held whole, a survey's process grows ~1.77 kB a pulse; past ``run.whole_pulses`` it is
+    blocked even when one block (``run.block_pulses``) could hold it, and ``block_m`` blocks any.
+    """
+    import dataclasses
+
+    from pipeline.scene import load_scene
+    from pipeline.survey_blocks import is_blocked
+
+    scene = load_scene(ROOT / "data_synthetic" / "scenes" / "palmer_survey.toml")
+    run = dataclasses.replace(scene.run, whole_pulses=750_000, block_pulses=1_000_000)
+    at = dataclasses.replace(scene, run=run)
+    assert not is_blocked(at, 750_000) and is_blocked(at, 750_001)
+    small_blocks = dataclasses.replace(run, whole_pulses=2_000_000, block_pulses=100_000)
+    assert is_blocked(dataclasses.replace(scene, run=small_blocks), 100_001)
+    assert is_blocked(dataclasses.replace(scene, run=dataclasses.replace(run, block_m=50.0)), 10)

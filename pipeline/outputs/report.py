@@ -86,7 +86,7 @@ def write_survey_report(
 
     Parameters are those of :func:`pipeline.survey_report.evaluate_survey` (plus the ``plan``
     and the ``evaluation`` it returned); ``sim.truth`` is read for the errors only. ``views``:
-    the 3D pictures, ``(png, alt)`` each (:func:`pipeline.outputs.view3d.write_views`); None
+    the 3D pictures, ``(png, alt)`` each (:func:`pipeline.outputs.view_render.write_views`); None
     when the run left the views out.
     """
     truth, pts = sim.truth, processed.points

@@ -2,12 +2,14 @@
 
 One path from the scene to the picture: a :class:`~pipeline.outputs.view_scene.ViewScene`
 becomes meshes (:func:`meshes`), which are written as ``.vtp`` files (:func:`write_vtp`) and
-rendered (:func:`render`); ``bathy view OUT`` reads the written files back
+rendered (:func:`render`; a run's pictures in a child interpreter,
+:mod:`pipeline.outputs.view_render`); ``bathy view OUT`` reads the written files back
 (:func:`read_vtp`) and renders them the same way, in a window or off-screen to a PNG.
 
 pyvista (VTK) is imported here alone and only when called, so a machine where it cannot load
-or render still gets every other output of a run (:func:`write_views` turns any failure into
-one warning line). Off-screen rendering uses VTK's EGL window (Mesa's EGL needs no X server).
+or render still gets every other output of a run (:func:`pipeline.outputs.view_render.
+write_views` turns any failure into one warning line). Off-screen rendering uses VTK's EGL
+window (Mesa's EGL needs no X server).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from pipeline.outputs.atomic import atomic_path
 from pipeline.process.classify import BATHYMETRIC_POINT, CLASS_NAMES
 
 __all__ = ["MESH_FILES", "COLOR_BY", "meshes", "write_vtp", "read_vtp", "render", "png_bytes"]
-__all__ += ["write_views", "render_pictures", "has_display", "view_folder"]
+__all__ += ["has_display", "view_folder"]
 
 #: The ``.vtp`` file of each mesh, in the run's ``view/`` folder.
 MESH_FILES = {
@@ -302,63 +304,6 @@ def png_bytes(image: np.ndarray) -> bytes:
     buf = io.BytesIO()
     mpimg.imsave(buf, image, format="png")
     return buf.getvalue()
-
-
-def write_views(
-    folder: Path, points, sim, origin_m, crs: str, log=print
-) -> tuple[dict[str, Path], list[tuple[bytes, str]]]:
-    """Write ``folder/*.vtp`` and render the report's pictures of a run; never raises.
-
-    The scene is :func:`pipeline.outputs.view_scene.view_scene` of the processed ``points``
-    and ``sim`` (its detections, and its truth: this runs on the evaluation side). A failure
-    (no pyvista, no OpenGL, a writer error) costs only the 3D views: one warning line in the
-    log, and the files written before it are kept.
-
-    Returns
-    -------
-    files : dict of str to Path
-        The ``.vtp`` files written, by mesh name.
-    images : list of (png bytes, alt text)
-    """
-    from pipeline.outputs.view_scene import view_scene
-
-    files, images = {}, []
-    try:
-        scene = view_scene(points, sim.returns, sim.truth, origin_m, crs)
-        files = write_vtp(meshes(scene), folder)
-        del scene
-        images = render_pictures(folder)
-    except Exception as exc:  # noqa: BLE001 - any failure here must not end the run
-        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-        log(
-            f"  WARNING: 3D views incomplete ({len(files)} .vtp files, {len(images)} pictures):"
-            f" {type(exc).__name__}: {msg}"
-        )
-    return files, images
-
-
-def _render_report_views(folder: str) -> list[tuple[bytes, str]]:
-    """The report's pictures of the meshes written in ``folder`` (run in a child process)."""
-    mesh_by_name = read_vtp(Path(folder))
-    return [(png_bytes(render(mesh_by_name, c)), alt) for c, alt in REPORT_VIEWS]
-
-
-def render_pictures(folder: Path) -> list[tuple[bytes, str]]:
-    """The report's pictures (:data:`REPORT_VIEWS`) of the ``.vtp`` files in ``folder``.
-
-    Rendered in a fresh child process: the OpenGL stack (Mesa's llvmpipe) takes ~300 MiB
-    whatever the picture, 160 of which its heap keeps after the window is closed, and a
-    driver that crashes would end the process it runs in. Here it costs the run neither the
-    memory (the survey's arrays stay in the parent, beside nothing) nor, on a crash, more than
-    the pictures (``BrokenProcessPool``, which :func:`write_views` turns into its warning).
-    The child reads the files just written: VTK's XML keeps every float64 exactly, so the
-    pictures are those of the meshes in memory.
-    """
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
-    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
-        return pool.submit(_render_report_views, str(folder)).result()
 
 
 def view_folder(

@@ -47,10 +47,12 @@ class FeatureSettings:
     kind: str = setting(choices=FEATURE_KINDS, doc="feature type")
     x_m: float = setting(doc="local easting of its centre")
     y_m: float = setting(doc="local northing of its centre")
-    size_m: float = setting(1.0, gt=0.0, le=1000.0, doc="cube side (IHO: 0.5, 1, 2 m)")
-    length_m: float = setting(20.0, gt=0.0, doc="wreck length, or ridge/channel length")
-    width_m: float = setting(5.0, gt=0.0, doc="wreck width, or ridge/channel FWHM")
-    height_m: float = setting(2.0, gt=0.0, le=100.0, doc="wreck/ridge height or channel depth")
+    # at least 1 cm: below any footprint, and a smaller box's triangles degenerate against
+    # coordinates of hundreds of metres (seabed.features[0].size_m = 1e-300 was a crash)
+    size_m: float = setting(1.0, ge=0.01, le=1000.0, doc="cube side (IHO: 0.5, 1, 2 m)")
+    length_m: float = setting(20.0, ge=0.01, doc="wreck length, or ridge/channel length")
+    width_m: float = setting(5.0, ge=0.01, doc="wreck width, or ridge/channel FWHM")
+    height_m: float = setting(2.0, ge=0.01, le=100.0, doc="wreck/ridge height or channel depth")
     heading_deg: float = setting(0.0, ge=-360.0, le=360.0, doc="orientation, from north")
 
 

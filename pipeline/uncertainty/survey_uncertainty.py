@@ -296,14 +296,14 @@ def survey_uncertainty(
     # TPU rows are per pulse with a bottom; keep those of the bathymetric points, same order
     order = np.argsort(tpu.pulse_id)
     pos = order[np.searchsorted(tpu.pulse_id[order], points40.pulse_id)]
-    tpu40 = take_tpu(tpu, pos)
     left_out = {
         "pulses": len(tpu.left_out),
         "bathymetric_points": int(np.count_nonzero(no_tpu)),
         "by_reason": tpu.left_out.counts(),
     }
-    # every bottom pulse's terms (~380 B a pulse) are not read again: let them go before the
-    # wave terms below raise the run's peak
+    # every bottom pulse's terms (~380 B a pulse) are not read again: taken term by term (not
+    # held beside their copy) and let go before the wave terms below raise the run's peak
+    tpu40 = take_tpu(tpu, pos, consume=True)
     del tpu
     # each bathymetric point's row among the bottom pulses (of grad, grad_cov), and the
     # flight-line direction of its pulse

@@ -7,6 +7,7 @@ is written here: ``2 m + tan(5.33 deg) x`` (aspect east, flat water at level 0).
 
 from __future__ import annotations
 
+import io
 import math
 import os
 import tomllib
@@ -18,8 +19,9 @@ import pytest
 
 from pipeline.cli import main
 from pipeline.outputs import view3d as V
+from pipeline.outputs import view_render
 from pipeline.outputs.las import read_points_laz
-from pipeline.outputs.view_scene import ViewScene, surface_grid
+from pipeline.outputs.view_scene import Surface, ViewScene, surface_grid
 from pipeline.run import existing_outputs, run_scene
 from pipeline.scene import parse_scene
 
@@ -228,9 +230,9 @@ def test_a_render_failure_costs_only_the_views(tmp_path, monkeypatch):
     def broken(*a, **k):
         raise RuntimeError("no OpenGL here")
 
-    # the pictures are rendered in a child process (V.render_pictures), where a monkeypatch of
+    # the pictures are rendered in a child interpreter (view_render), where a monkeypatch of
     # V.render does not reach: the child's failure is what the run sees
-    monkeypatch.setattr(V, "render_pictures", broken)
+    monkeypatch.setattr(view_render, "render_pictures", broken)
     data = tomllib.loads((ROOT / "data_synthetic" / "scenes" / "palmer_survey.toml").read_text())
     data["flight"].update(area_m=[0.0, 20.0, 0.0, 20.0], run_in_m=0.0)
     data["scanner"]["prf_hz"] = 2000.0
@@ -250,7 +252,37 @@ def test_a_render_failure_costs_only_the_views(tmp_path, monkeypatch):
 
 
 def test_a_failure_in_the_render_child_reaches_the_run(tmp_path):
-    # the child reads the folder: without points.vtp it raises, and the parent gets that error
-    # (not a hang, not a silent empty list)
-    with pytest.raises(FileNotFoundError, match="points.vtp"):
-        V.render_pictures(tmp_path)
+    # the child reads the folder: without points.vtp it fails, and the parent raises with the
+    # child's own last line (not a hang, not a silent empty list)
+    with pytest.raises(RuntimeError, match="FileNotFoundError: no points.vtp"):
+        view_render.render_pictures(tmp_path)
+
+
+def test_the_child_renders_what_the_parent_would(tmp_path):
+    # the pictures from the files written equal those rendered from the meshes in memory
+    # (VTK's XML keeps every float64): a child interpreter changes nothing but the process
+    rng = np.random.default_rng(5)
+    n = 400
+    xyz = np.c_[rng.uniform(0, 50, n), rng.uniform(0, 30, n), -rng.uniform(2, 8, n)]
+    x, y = np.linspace(-5, 55, 12), np.linspace(-5, 35, 9)
+    scene = ViewScene(
+        xyz_m=xyz,
+        classification=np.full(n, 40, np.uint8),
+        depth_m=-xyz[:, 2],
+        error_m=rng.normal(0, 0.1, n),
+        uncertainty_v_m=np.full(n, 0.1),
+        seabed=Surface(x, y, np.full((9, 12), -8.0)),
+        water=Surface(x, y, np.zeros((9, 12))),
+        beams_m=np.zeros((0, 3, 3)),
+        beam_pulse_id=np.zeros(0, np.int64),
+        origin_m=np.zeros(3),
+        crs="EPSG:32619",
+    )
+    mesh_by_name = V.meshes(scene)
+    V.write_vtp(mesh_by_name, tmp_path)
+    pictures = view_render.render_pictures(tmp_path)
+    assert [alt for _, alt in pictures] == [alt for _, alt in V.REPORT_VIEWS]
+    for (png, _), (color_by, _) in zip(pictures, V.REPORT_VIEWS, strict=True):
+        child = mpimg.imread(io.BytesIO(png))
+        here = mpimg.imread(io.BytesIO(V.png_bytes(V.render(mesh_by_name, color_by))))
+        np.testing.assert_array_equal(child, here)
