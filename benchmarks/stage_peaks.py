@@ -64,7 +64,7 @@ def main() -> None:
     if len(sys.argv) > 3:
         run.update(block_pulses=int(sys.argv[2]), sample_pulses=int(sys.argv[3]))
     else:
-        run["block_pulses"] = 10 * n  # one piece
+        run["block_pulses"] = run["whole_pulses"] = 10 * n  # one piece
     stages.StageClock.stage = _labelled
     threading.Thread(target=_sample, daemon=True).start()
     with tempfile.TemporaryDirectory() as tmp:

@@ -19,6 +19,7 @@ from pathlib import Path
 from pipeline.errors import SceneError
 from pipeline.memory_budget import (
     MEMORY_SHARE,
+    VIEWS_CHILD_BYTES,
     held_bytes,
     held_whole,
     machine_memory_bytes,
@@ -103,15 +104,15 @@ def _check_survey(scene) -> None:
         need = held_bytes(n, n, n, False)
     else:
         need = held_bytes(n, run.block_pulses, run.sample_pulses, blocked)
+        need += VIEWS_CHILD_BYTES if run.views else 0.0
     if need > mem:
         if not blocked:
-            limit = (
-                ""
+            how = (
+                "held whole"
                 if run is None
-                else f": `run.whole_pulses` = {run.whole_pulses:_}, `run.block_pulses` ="
-                f" {run.block_pulses:_}"
+                else "held whole (no more pulses than the smaller of `run.whole_pulses` ="
+                f" {run.whole_pulses:_} and `run.block_pulses` = {run.block_pulses:_})"
             )
-            how = f"held whole (no more pulses than the smaller of{limit})"
         else:
             size = (
                 f"`run.block_m` = {run.block_m:g} m, at most `run.block_pulses` ="

@@ -12,6 +12,7 @@ __all__ = [
     "BASE_BYTES",
     "BYTES_PER_PULSE",
     "MEMORY_SHARE",
+    "VIEWS_CHILD_BYTES",
     "WHOLE_BASE_BYTES",
     "WHOLE_BYTES_PER_PULSE",
     "held_bytes",
@@ -20,9 +21,10 @@ __all__ = [
 ]
 
 #: Peak memory of a survey run held whole (the largest process): 0.5 GB + 1.77 kB per pulse,
-#: the line through the largest of 1028 and 1316 MiB at 300 000 and 500 000 pulses (1 worker)
-#: and 2160 MiB at 1 000 000 (2 workers), the Palmer scene, posteriors off, session 38's code
-#: (``benchmarks/RESULTS_e2e.md``; 0.89 GB + 1.64 kB before its memory changes). A survey of
+#: the line through 1316 MiB at 500 000 pulses (1 worker) and 2160 MiB at 1 000 000 (2
+#: workers, whose parent peaks 100-200 MiB above one worker's), the Palmer scene, posteriors
+#: off, session 38's code (``benchmarks/RESULTS_e2e.md``; 0.89 GB + 1.64 kB before its memory
+#: changes). It under-plans 300 000 pulses (1 worker) by 4 % (983 against 1028 MiB). A survey of
 #: up to :func:`held_whole`'s limit is held whole; a larger one holds its sample
 #: (``run.sample_pulses``) whole and its blocks one per process (:data:`BASE_BYTES`).
 WHOLE_BASE_BYTES = 0.5e9
@@ -34,6 +36,11 @@ WHOLE_BYTES_PER_PULSE = 1.77e3
 #: as the memory holds by it (:func:`~pipeline.survey_block_task.blocks_side_by_side`).
 BASE_BYTES = 434e6
 BYTES_PER_PULSE = 1.44e3
+#: The report's pictures' child interpreter (:mod:`pipeline.outputs.view_render`): Mesa's
+#: OpenGL and the meshes read back, 400-500 MiB at 1 M pulses, beside the parent (which waits
+#: holding its survey's evaluation arrays, below its own peak). Planned on top of the largest
+#: process when the run makes its views.
+VIEWS_CHILD_BYTES = 0.5e9
 #: Share of the machine's memory a run may plan to use.
 MEMORY_SHARE = 0.8
 #: Where a control group's memory limit is read (cgroup v2, then v1).

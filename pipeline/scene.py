@@ -252,14 +252,16 @@ class RunSettings:
         doc="a survey of more pulses (or of more than run.block_pulses) is processed block by "
         "block: held whole, its process needs about 0.5 GB + 1.77 kB a pulse (2 GiB near "
         "930 000 pulses; pipeline.memory_budget), blocked at most what its sample or a block "
-        "needs, whatever the survey's size",
+        "needs, whatever the survey's size (the sample, run.sample_pulses, is held whole: "
+        "keep it below)",
     )
     block_pulses: int = setting(
         1_000_000,
         ge=1000,
         le=1_000_000_000,
-        doc="a survey of more pulses is processed block by block after the chunk loop, each "
-        "block (with its halo) holding about this many pulses: memory stays bounded "
+        doc="a survey of more pulses (or of more than run.whole_pulses) is processed block by "
+        "block after the chunk loop, each block (with its halo) holding about this many "
+        "pulses: memory stays bounded "
         "(pipeline.survey_blocks)",
     )
     block_m: float | None = setting(

@@ -171,6 +171,13 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
     ps, fr, run = scene.process, scene.frame, scene.run
     origin = (fr.origin_easting_m, fr.origin_northing_m, 0.0)
     n_pulses = store.n_pulses
+    why = (
+        f"run.block_m = {run.block_m:g} m"
+        if run.block_m is not None
+        else f"more than run.whole_pulses = {run.whole_pulses} or run.block_pulses ="
+        f" {run.block_pulses}"
+    )
+    log(f"  {n_pulses} pulses, processed block by block ({why})")
     with clock.stage("blocks"):
         # the sample's blocks: about an eighth of it each, so it spreads over the survey
         pre = block_layout(scene, layout.bounds_m, n_pulses, 0.0, run.sample_pulses // 8)

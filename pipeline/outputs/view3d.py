@@ -7,9 +7,9 @@ rendered (:func:`render`; a run's pictures in a child interpreter,
 (:func:`read_vtp`) and renders them the same way, in a window or off-screen to a PNG.
 
 pyvista (VTK) is imported here alone and only when called, so a machine where it cannot load
-or render still gets every other output of a run (:func:`pipeline.outputs.view_render.
-write_views` turns any failure into one warning line). Off-screen rendering uses VTK's EGL
-window (Mesa's EGL needs no X server).
+or render still gets every other output of a run
+(:func:`pipeline.outputs.view_render.write_views` turns any failure into one warning line).
+Off-screen rendering uses VTK's EGL window (Mesa's EGL needs no X server).
 """
 
 from __future__ import annotations

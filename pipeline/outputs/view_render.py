@@ -1,10 +1,9 @@
 """A run's 3D views: ``view/*.vtp`` written, and the report's pictures rendered by a child.
 
 :func:`write_views` makes the meshes (:mod:`pipeline.outputs.view3d`) and writes them;
-``python -m pipeline.outputs.view_render FOLDER OUT_DIR`` renders each of
-:data:`~pipeline.outputs.view3d.REPORT_VIEWS` from the meshes in ``FOLDER`` and writes them as
-``OUT_DIR/0.png``, ``OUT_DIR/1.png``, ... (each atomically). :func:`render_pictures` runs it
-and reads them back.
+:func:`render_pictures` runs :func:`main` in a child interpreter, which renders each of
+:data:`~pipeline.outputs.view3d.REPORT_VIEWS` from the meshes written and writes them as
+``OUT_DIR/0.png``, ``OUT_DIR/1.png``, ... (each atomically), and reads them back.
 
 Why a child: the OpenGL stack (Mesa's llvmpipe) takes ~300 MiB whatever is drawn, 160 of
 which its heap keeps after the window is closed, and a driver that crashes ends the process
@@ -17,7 +16,6 @@ written: VTK's XML keeps every float64 exactly, so the pictures are those of the
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import tempfile
@@ -39,13 +37,21 @@ def render_pictures(folder: Path, timeout_s: float = TIMEOUT_S) -> list[tuple[by
     RuntimeError
         The child failed (its last line of error), crashed (the signal) or timed out.
     """
-    root = str(Path(__file__).resolve().parents[2])  # where `pipeline` is imported from
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([root] + [p for p in [env.get("PYTHONPATH")] if p])
+    # the parent's own `pipeline` (a source tree, or site-packages when installed), whatever
+    # the path holds (a relative PYTHONPATH entry, or the current directory without -P, could
+    # name another checkout): imported from its folder, which then leaves the path, so that
+    # the package's submodules come from it and nothing else is shadowed
+    root = str(Path(__file__).resolve().parents[2])
+    boot = (
+        f"import sys; sys.path.insert(0, {root!r}); import pipeline; sys.path.pop(0); "
+        "from pipeline.outputs.view_render import main; sys.exit(main(sys.argv[1:]))"
+    )
     with tempfile.TemporaryDirectory(prefix="bathy_views_") as tmp:
-        cmd = [sys.executable, "-m", "pipeline.outputs.view_render", str(folder), tmp]
+        cmd = [sys.executable, "-P", "-c", boot, str(folder), tmp]
         try:
-            done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout_s)
+            done = subprocess.run(
+                cmd, capture_output=True, text=True, errors="replace", timeout=timeout_s
+            )
         except subprocess.TimeoutExpired as exc:
             raise RuntimeError(f"the pictures' render took more than {timeout_s:g} s") from exc
         if done.returncode != 0:
@@ -67,8 +73,9 @@ def write_views(
 
     The scene is :func:`pipeline.outputs.view_scene.view_scene` of the processed ``points``
     and ``sim`` (its detections, and its truth: this runs on the evaluation side). A failure
-    (no pyvista, no OpenGL, a writer error) costs only the 3D views: one warning line in the
-    log, and the files written before it are kept.
+    (no pyvista, no OpenGL, a writer error, the render child's failure) costs only the 3D
+    views: one warning line in the log, and the files written before it are kept; the
+    pictures come all or none (one child renders them).
 
     Returns
     -------
@@ -103,7 +110,3 @@ def main(argv: list[str] | None = None) -> int:
         with atomic_path(Path(out) / f"{i}.png") as tmp:
             tmp.write_bytes(V.png_bytes(V.render(mesh_by_name, color_by)))
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -39,6 +39,7 @@ def test_consuming_take_gives_the_rows_a_copy_gives_and_empties_the_source():
     for k, a in keep.items():
         np.testing.assert_array_equal(taken.terms[k], a[index])
         np.testing.assert_array_equal(copied.terms[k], a[index])
-    for name in ("row", "pulse_id", "xyz_m", "sigma_v_m", "sigma_depth_m"):
-        np.testing.assert_array_equal(getattr(taken, name), getattr(copied, name))
+    for name in ("row", "pulse_id", "xyz_m", "sigma_v_m", "sigma_h_m", "sigma_depth_m"):
+        np.testing.assert_array_equal(getattr(taken, name), getattr(src, name)[index])
+        np.testing.assert_array_equal(getattr(copied, name), getattr(src, name)[index])
     assert len(taken) == index.size
