@@ -258,42 +258,12 @@ def test_a_failure_in_the_render_child_reaches_the_run(tmp_path):
         view_render.render_pictures(tmp_path)
 
 
-def test_the_child_imports_this_pipeline_not_the_current_directorys(tmp_path, monkeypatch):
-    # a run started in a folder holding another `pipeline` (another checkout): the child must
-    # not import it (it would fail here, the pictures lost)
-    (tmp_path / "pipeline").mkdir()
-    (tmp_path / "pipeline" / "__init__.py").write_text("raise ImportError('the wrong pipeline')")
-    folder = tmp_path / "view"
-    x = np.linspace(0.0, 10.0, 4)
-    scene = ViewScene(
-        xyz_m=np.c_[x, x, -x],
-        classification=np.full(4, 40, np.uint8),
-        depth_m=x,
-        error_m=np.zeros(4),
-        uncertainty_v_m=np.full(4, 0.1),
-        seabed=Surface(x, x, np.full((4, 4), -10.0)),
-        water=Surface(x, x, np.zeros((4, 4))),
-        beams_m=np.zeros((0, 3, 3)),
-        beam_pulse_id=np.zeros(0, np.int64),
-        origin_m=np.zeros(3),
-        crs="EPSG:32619",
-    )
-    V.write_vtp(V.meshes(scene), folder)
-    monkeypatch.chdir(tmp_path)
-    pictures = view_render.render_pictures(folder)
-    assert len(pictures) == len(V.REPORT_VIEWS) and all(
-        p[:8] == b"\x89PNG\r\n\x1a\n" for p, _ in pictures
-    )
-
-
-def test_the_child_renders_what_the_parent_would(tmp_path):
-    # the pictures from the files written equal those rendered from the meshes in memory
-    # (VTK's XML keeps every float64): a child interpreter changes nothing but the process
-    rng = np.random.default_rng(5)
-    n = 400
+def _random_scene(n: int, seed: int) -> ViewScene:
+    """``n`` class-40 points over a 50 m x 30 m box, 2-8 m deep, with flat truth surfaces."""
+    rng = np.random.default_rng(seed)
     xyz = np.c_[rng.uniform(0, 50, n), rng.uniform(0, 30, n), -rng.uniform(2, 8, n)]
     x, y = np.linspace(-5, 55, 12), np.linspace(-5, 35, 9)
-    scene = ViewScene(
+    return ViewScene(
         xyz_m=xyz,
         classification=np.full(n, 40, np.uint8),
         depth_m=-xyz[:, 2],
@@ -306,6 +276,26 @@ def test_the_child_renders_what_the_parent_would(tmp_path):
         origin_m=np.zeros(3),
         crs="EPSG:32619",
     )
+
+
+def test_the_child_imports_this_pipeline_not_the_current_directorys(tmp_path, monkeypatch):
+    # a run started in a folder holding another `pipeline` (another checkout): the child must
+    # not import it (it would fail here, the pictures lost)
+    (tmp_path / "pipeline").mkdir()
+    (tmp_path / "pipeline" / "__init__.py").write_text("raise ImportError('the wrong pipeline')")
+    folder = tmp_path / "view"
+    V.write_vtp(V.meshes(_random_scene(4, 1)), folder)
+    monkeypatch.chdir(tmp_path)
+    pictures = view_render.render_pictures(folder)
+    assert len(pictures) == len(V.REPORT_VIEWS) and all(
+        p[:8] == b"\x89PNG\r\n\x1a\n" for p, _ in pictures
+    )
+
+
+def test_the_child_renders_what_the_parent_would(tmp_path):
+    # the pictures from the files written equal those rendered from the meshes in memory
+    # (VTK's XML keeps every float64): a child interpreter changes nothing but the process
+    scene = _random_scene(400, 5)
     mesh_by_name = V.meshes(scene)
     V.write_vtp(mesh_by_name, tmp_path)
     pictures = view_render.render_pictures(tmp_path)
