@@ -28,7 +28,7 @@ import numpy as np
 from scipy.special import ndtr
 
 from pipeline.constants import MAD_TO_SIGMA
-from pipeline.process.row_kernels import median_of, pairwise_sum
+from pipeline.process.row_kernels import COUNT_HALF, counted_median, median_of, pairwise_sum
 
 __all__ = ["difference_noise_sigma", "window_baseline"]
 
@@ -125,6 +125,8 @@ def _difference_start(y, mad_to_sigma):
     quantum = np.zeros(n)
     start = np.empty(n)
     buf = np.empty(k)
+    twice = np.empty(k)
+    counts = np.zeros(2 * COUNT_HALF + 1, np.int64)
     for p in range(n):
         nan = False
         for c in range(k):
@@ -134,15 +136,23 @@ def _difference_start(y, mad_to_sigma):
             med[p] = np.nan
             start[p] = np.nan
             continue
-        md = median_of(buf, k)
+        # integer codes: counted (the same median, ~4x faster than selecting); else selected
+        md = counted_median(buf, k, counts)
+        if md != md:
+            md = median_of(buf, k)
         q = np.inf
         for c in range(k):
             a = abs((y[p, c + 1] - y[p, c]) - md)
             buf[c] = a
+            twice[c] = 2.0 * a  # an integer also where the median is a half-integer
             if a > 0.0 and a < q:
                 q = a
         q = q if q < np.inf else 0.0
-        mad = mad_to_sigma * median_of(buf, k)
+        # (2 lower + 2 upper) / 2 is lower + upper exactly: halved, median_of's own figure
+        mad_a = 0.5 * counted_median(twice, k, counts)
+        if mad_a != mad_a:
+            mad_a = median_of(buf, k)
+        mad = mad_to_sigma * mad_a
         med[p] = md
         quantum[p] = q
         start[p] = mad if (mad >= q or mad != mad) else q

@@ -12,10 +12,12 @@ values, so the same median.
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
-__all__ = ["pairwise_sum", "median_of"]
+__all__ = ["pairwise_sum", "median_of", "counted_median", "COUNT_HALF"]
 
 #: numpy's block below which a row is added with 8 partial sums (``PW_BLOCKSIZE``)
 _BLOCK = 128
@@ -134,4 +136,60 @@ def median_of(buf: np.ndarray, m: int) -> float:
     for c in range(1, hi):
         if buf[c] > lower:
             lower = buf[c]
+    return (lower + upper) / 2.0
+
+
+#: Half-width of :func:`counted_median`'s band of integer values (counts array ``2 h + 1``).
+COUNT_HALF = 1024
+
+
+@numba.njit(cache=True, nogil=True)
+def _rank_value(counts, below: int, r: int, half: int, lo: int, hi: int) -> float:
+    """The ``r``-th smallest value (0-based) from a band's counts; NaN outside the band."""
+    if r < below:
+        return np.nan
+    seen = below
+    for b in range(lo, hi + 1):
+        seen += counts[b]
+        if seen > r:
+            return float(b - half)
+    return np.nan
+
+
+@numba.njit(cache=True, nogil=True)
+def counted_median(buf: np.ndarray, m: int, counts: np.ndarray) -> float:
+    """:func:`median_of` ``buf[:m]`` for integer values, by counting; NaN where it cannot.
+
+    The values are counted in a band of integers ``[-h, h]`` (``counts``: ``2 h + 1`` zeros,
+    given back zeroed; ``h`` = :data:`COUNT_HALF`), the middle rank(s) read from the running
+    count: ``O(m + range)``, not quickselect's data-dependent swaps. The same middle values as
+    a sort, so the same median to the bit (``(lower + upper) / 2`` for even ``m``). NaN
+    (nothing counted, ``buf`` untouched) where a value is not an integer or a middle rank lies
+    outside the band: the caller then selects (:func:`median_of`).
+    """
+    half = (counts.size - 1) // 2
+    for c in range(m):
+        v = buf[c]
+        if v != math.floor(v):
+            return np.nan
+    below = 0
+    lo, hi = counts.size, -1
+    for c in range(m):
+        v = buf[c]
+        if v < -half:
+            below += 1
+        elif v <= half:
+            b = int(v) + half
+            counts[b] += 1
+            lo = min(lo, b)
+            hi = max(hi, b)
+    h = m // 2
+    upper = _rank_value(counts, below, h, half, lo, hi)
+    lower = upper if m % 2 == 1 else _rank_value(counts, below, h - 1, half, lo, hi)
+    for c in range(m):  # only the touched bins: the band can be much wider than the values
+        v = buf[c]
+        if -half <= v <= half:
+            counts[int(v) + half] = 0
+    if m % 2 == 1:
+        return upper
     return (lower + upper) / 2.0

@@ -133,20 +133,32 @@ def _nnls2(yy, gg, hh, gh, gy, hy):
 
 @numba.njit(cache=True, nogil=True)
 def _step_sse(filt, i_peak, k_idx, k_w, decay, offsets, grid, sg, g_tab, h_tab, gg_tab, infl):
-    """Per pulse and candidate: residuals (echo + onset, onset alone), SNRs, amplitudes.
+    """Per pulse and candidate the residuals; at the best candidate the SNRs and amplitudes.
 
-    The amplitudes are the echo's and the onset's of the echo + onset fit, ``(n, k, 2)``.
+    ``g_tab`` ``(w, k)`` and ``h_tab`` ``(decays, w, k)``: the echo and the onsets at each
+    window sample and candidate (:func:`_step_tables`).
 
-    The SNRs ``(n, k, 2)`` are the echo's and the onset's amplitudes over their standard errors
-    (residual noise, ``infl`` for the filtered samples' correlation).
+    Returns ``sse, sse1`` ``(n, k)``: the residuals of echo + onset and of the onset alone;
+    ``best`` ``(n,)``: each pulse's ``np.argmin(sse, axis=1)``; ``snr, amp`` ``(n, 2)``: at
+    that candidate, the echo's and the onset's amplitudes of the echo + onset fit and those
+    over their standard errors (residual noise, ``infl`` for the filtered samples'
+    correlation). Only the best candidate's are read: each would cost two square roots.
+
+    Each candidate's Gram sums are added over the window's samples in order; the candidates
+    are the inner loop (contiguous in the tables: the compiler vectorises it), each sum
+    still added sample by sample, as one candidate at a time would.
     """
     n, m = filt.shape
-    k_n, w_n = g_tab.shape
+    w_n, k_n = g_tab.shape
     sse = np.empty((n, k_n))
     sse1 = np.empty((n, k_n))
-    snr = np.zeros((n, k_n, 2))
-    amp = np.zeros((n, k_n, 2))
+    best = np.zeros(n, np.int64)
+    snr = np.zeros((n, 2))
+    amp = np.zeros((n, 2))
     y = np.empty(w_n)
+    # every candidate's Gram sums (separate arrays: the compiler sees they do not overlap)
+    gg, hh, gh = np.empty(k_n), np.empty(k_n), np.empty(k_n)
+    gy, hy = np.empty(k_n), np.empty(k_n)
     for p in range(n):
         i = i_peak[p]
         q, wq = k_idx[p], k_w[p]
@@ -157,35 +169,50 @@ def _step_sse(filt, i_peak, k_idx, k_w, decay, offsets, grid, sg, g_tab, h_tab, 
             c = min(max(i + offsets[j], 0), m - 1)
             y[j] = filt[p, c]
             yy += y[j] * y[j]
-        for k in range(k_n):
-            gg = hh = gh = gy = hy = 0.0
-            for j in range(w_n):
-                if cut:  # the window leaves the waveform: this pulse's own clipped columns
-                    c = min(max(i + offsets[j], 0), m - 1)
+        gg[:], hh[:], gh[:], gy[:], hy[:] = 0.0, 0.0, 0.0, 0.0, 0.0
+        for j in range(w_n):
+            yj = y[j]
+            if cut:  # the window leaves the waveform: this pulse's own clipped columns
+                c = min(max(i + offsets[j], 0), m - 1)
+                for k in range(k_n):
                     z = (c - (i + grid[k])) / sg
                     g = math.exp(-0.5 * z * z)
                     h = _onset(z, ks)
-                    gg += g * g
-                else:  # between the two tabulated decays around the pulse's own (log-linear)
-                    g = g_tab[k, j]
-                    h = (1.0 - wq) * h_tab[q, k, j] + wq * h_tab[q + 1, k, j]
-                hh += h * h
-                gh += g * h
-                gy += g * y[j]
-                hy += h * y[j]
-            if not cut:
-                gg = gg_tab[k]
-            sse[p, k], a, b = _nnls2(yy, gg, hh, gh, gy, hy)
-            amp[p, k, 0], amp[p, k, 1] = a, b
-            sse1[p, k] = yy - hy * hy / hh if (hy > 0.0 and hh > 0.0) else yy
-            det = gg * hh - gh * gh
-            if det > 1e-12 * gg * hh:
-                var1 = max(sse[p, k], 0.0) / max(w_n - 3, 1) * infl / det
-                if a > 0.0:
-                    snr[p, k, 0] = a / math.sqrt(var1 * hh) if var1 > 0.0 else np.inf
-                if b > 0.0:
-                    snr[p, k, 1] = b / math.sqrt(var1 * gg) if var1 > 0.0 else np.inf
-    return sse, sse1, snr, amp
+                    gg[k] += g * g
+                    hh[k] += h * h
+                    gh[k] += g * h
+                    gy[k] += g * yj
+                    hy[k] += h * yj
+            else:  # between the two tabulated decays around the pulse's own (log-linear)
+                g_j, h0, h1 = g_tab[j], h_tab[q, j], h_tab[q + 1, j]
+                for k in range(k_n):
+                    g = g_j[k]
+                    h = (1.0 - wq) * h0[k] + wq * h1[k]
+                    hh[k] += h * h
+                    gh[k] += g * h
+                    gy[k] += g * yj
+                    hy[k] += h * yj
+        kb, low, nan = 0, np.inf, False
+        for k in range(k_n):
+            g2 = gg[k] if cut else gg_tab[k]
+            v = _nnls2(yy, g2, hh[k], gh[k], gy[k], hy[k])[0]
+            sse[p, k] = v
+            sse1[p, k] = yy - hy[k] * hy[k] / hh[k] if (hy[k] > 0.0 and hh[k] > 0.0) else yy
+            # np.argmin's pick: the first NaN, else the first smallest
+            if not nan and (v != v or v < low):
+                kb, low, nan = k, v, v != v
+        best[p] = kb
+        g2 = gg[kb] if cut else gg_tab[kb]
+        v, a, b = _nnls2(yy, g2, hh[kb], gh[kb], gy[kb], hy[kb])
+        amp[p, 0], amp[p, 1] = a, b
+        det = g2 * hh[kb] - gh[kb] * gh[kb]
+        if det > 1e-12 * g2 * hh[kb]:
+            var1 = max(v, 0.0) / max(w_n - 3, 1) * infl / det
+            if a > 0.0:
+                snr[p, 0] = a / math.sqrt(var1 * hh[kb]) if var1 > 0.0 else np.inf
+            if b > 0.0:
+                snr[p, 1] = b / math.sqrt(var1 * g2) if var1 > 0.0 else np.inf
+    return sse, sse1, best, snr, amp
 
 
 def decay_index(decay: np.ndarray | None, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -253,22 +280,20 @@ def surface_step_fit(
     n = filt.shape[0]
     k_dec, k_row, k_w = decay_index(decay, n)
     tabs = _step_tables(float(sg))
-    sse2, sse1, snr, amp = _step_sse(filt, i_peak, k_row, k_w, k_dec, *tabs)
+    sse2, sse1, _, snr, amp = _step_sse(filt, i_peak, k_row, k_w, k_dec, *tabs)
     t_echo = _refined(sse2, i_peak)
     if echo_sigma is None:
         return (t_echo, t_echo) if with_echo_time else t_echo
-    rows = np.arange(n)
-    best = np.argmin(sse2, axis=1)
     # clear: significant, and the echo's peak above the onset's (a weaker "echo" is also an
     # onset earlier by ~ a σ √(2π) / b samples: the fit cannot tell which)
-    a_best, b_best = amp[rows, best, 0], amp[rows, best, 1]
-    clear = snr[rows, best, 0] >= echo_sigma
+    a_best, b_best = amp[:, 0], amp[:, 1]
+    clear = snr[:, 0] >= echo_sigma
     # the onset's peak is a 251-point exp and erfc per pulse (a tenth of detection): only
     # where the SNR test passed (elsewhere the pulse is not clear whatever it is), once per
     # distinct decay (a third of the pulses share 0, no column; each row is its own)
     k_clear, k_inv = np.unique(k_dec[clear], return_inverse=True)
     clear[clear] = a_best[clear] >= b_best[clear] * onset_peak(sg, k_clear)[k_inv]
-    on_column = clear & (snr[rows, best, 1] >= echo_sigma)
+    on_column = clear & (snr[:, 1] >= echo_sigma)
     # an onset alone whose best candidate is the first lies earlier than the candidates: a weak
     # column under a slow decay rises for several samples and first crosses the peak threshold
     # late (calm water off nadir, no echo: suite CI seed 9001, half its water pulses, the
@@ -299,7 +324,7 @@ def _step_tables(sg: float) -> tuple:
     """The candidates' tables of :func:`surface_step_fit` for a response σ ``sg`` (samples).
 
     ``(offsets, STEP_GRID, sg, g, h, gg, infl)``: the window's sample offsets, the echo ``g``
-    (k, w) and the onsets ``h`` (decays, k, w) at every candidate, ``gg`` the echo's sums of
+    (w, k) and the onsets ``h`` (decays, w, k) at every candidate, ``gg`` the echo's sums of
     squares and ``infl`` the noise correlation's inflation. The same for every pulse of a
     system (a posterior's start runs the detector on one pulse at a time: these were most of
     its cost), so kept, read-only.
@@ -313,6 +338,8 @@ def _step_tables(sg: float) -> tuple:
     # noise of the filtered samples is correlated over ~2√π σ_raw samples (σ_raw = sg/√2)
     infl = max(1.0, 2.0 * math.sqrt(math.pi) * sg / math.sqrt(2.0))
     gg = (g * g).sum(1)
+    # the kernel's layout: candidates last (its inner loop)
+    g, h = np.ascontiguousarray(g.T), np.ascontiguousarray(h.transpose(0, 2, 1))
     for a in (offsets, g, h, gg):
         a.setflags(write=False)
     return offsets, STEP_GRID, sg, g, h, gg, infl
@@ -338,7 +365,7 @@ def _onset_lookback(filt, i_peak, sse1, sse2, candidates, k_row, k_w, k_dec, tab
             break
         i_fit[edge] -= ONSET_LOOKBACK_SAMPLES
         sub = np.flatnonzero(edge)
-        sse2_fit[sub], sse1[sub], _, _ = _step_sse(
+        sse2_fit[sub], sse1[sub], _, _, _ = _step_sse(
             filt[sub], i_fit[sub], k_row[sub], k_w[sub], k_dec[sub], *tabs
         )
     lost = (i_fit != i_peak) & (np.argmin(sse1, axis=1) == 0)

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from pipeline.process.row_kernels import median_of, pairwise_sum
+from pipeline.process.row_kernels import COUNT_HALF, counted_median, median_of, pairwise_sum
 
 
 def test_pairwise_sum_is_numpys_sum_of_a_row_bit_for_bit():
@@ -37,6 +37,31 @@ def test_median_of_is_numpys_median():
         assert median_of(v.copy(), m) == np.median(v), trial
 
 
+def test_counted_median_is_numpys_median_of_integers_or_nan():
+    rng = np.random.default_rng(7)
+    counts = np.zeros(2 * COUNT_HALF + 1, np.int64)
+    outside = 0
+    for trial in range(3000):
+        m = int(rng.integers(1, 700))
+        v = np.round(rng.normal(size=m) * 10.0 ** rng.uniform(-1, 3) + rng.uniform(-1500, 1500))
+        if trial % 4 == 0:  # echoes far outside the band: counted above or below it
+            v[rng.integers(0, m, 1 + m // 20)] = rng.choice([-1, 1]) * 50_000.0
+        got = counted_median(v.copy(), m, counts)
+        want = np.median(v)
+        assert not counts.any(), trial  # given back zeroed
+        if np.isnan(got):  # a middle value outside [-h, h]: the caller selects instead
+            outside += 1
+            srt = np.sort(v)
+            assert max(abs(srt[m // 2]), abs(srt[(m - 1) // 2])) > COUNT_HALF, trial
+        else:
+            assert got == want, trial
+    assert 50 < outside < 1500  # both paths taken
+    # not integers (one is enough): not counted
+    v = np.array([1.0, 2.0, 2.5])
+    assert np.isnan(counted_median(v, 3, counts))
+    assert np.isnan(counted_median(np.array([1.0, np.nan, 2.0]), 3, counts))
+
+
 def _noise_sigma_numpy(y):
     """The clipped second moment of detect_noise's docstring, in whole-array numpy."""
     from pipeline.constants import MAD_TO_SIGMA
@@ -62,7 +87,8 @@ def test_the_noise_kernel_gives_the_whole_array_figures_bit_for_bit():
     rng = np.random.default_rng(6)
     for trial in range(60):
         n, m = int(rng.integers(1, 200)), int(rng.integers(3, 600))
-        y = np.round(100.0 + rng.normal(0.0, 1.0, (n, m)) * 10.0 ** rng.uniform(-1.5, 1.5, (n, 1)))
+        # up to ~3000 counts of noise: medians past the counted band (selected instead)
+        y = np.round(100.0 + rng.normal(0.0, 1.0, (n, m)) * 10.0 ** rng.uniform(-1.5, 3.5, (n, 1)))
         if trial % 2:
             y[:, m // 3 : m // 3 + 5] += 500.0  # echoes, clipped out
         if trial % 5 == 0:
