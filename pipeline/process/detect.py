@@ -46,6 +46,12 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from pipeline.constants import FWHM_TO_SIGMA
+from pipeline.process.detect_candidates import (
+    bottom_candidates,
+    local_variance,
+    pick_bottom,
+    strongest_before,
+)
 from pipeline.process.detect_clipped import clipped_bottom, clipped_echoes
 from pipeline.process.detect_merged import column_decay, fit_merged, merged_bottoms
 from pipeline.process.detect_near import column_excess
@@ -314,50 +320,44 @@ def _detect_block(
     resid = filt - flank_trend(
         filt, gap=gap, length=max(3, round(0.5 * s.trend_fwhm * fwhm_samples))
     )
-    rpeak = np.zeros_like(peak)
-    rpeak[:, 1:-1] = (resid[:, 1:-1] >= resid[:, :-2]) & (resid[:, 1:-1] > resid[:, 2:])
     # after the surface, and not in the last samples, where the trend is one-sided and an echo
     # would be cut by the end of the window
     cols = np.arange(m)[None, :]
     # a surface echo wider than the system response (a footprint over waves or a slope) needs
     # the separation in proportion: its own tail is not a bottom
     widen = np.maximum(width_s / (math.sqrt(2.0) * sigma_samples), 1.0)
-    after = (cols > (i_s + sep * widen)[:, None]) & (cols < m - gap)
-    # local noise: electronic + shot noise of the trend the bottom sits on (filtered domain)
-    trend = np.maximum(filt - resid, 0.0)
-    local_var = noise_f[:, None] ** 2 + shot_noise_counts * trend * kernel_sq
-    local_thr = s.threshold_sigma * np.sqrt(local_var)
-    # just below the surface the flank trend fails on the surface + column-onset hump: there
-    # a candidate must stand above the column extrapolated back from the samples after it
-    cand = rpeak & after & has_s[:, None] & (resid > local_thr)
     # just below the surface the flank trend undershoots the hump of the surface echo and the
     # column onset (worst where the column is as bright as the surface echo, at low altitude):
     # a candidate there must also stand above the column carried back from below it (the test
     # is one-sided: it only removes candidates)
     zone = math.ceil(sep + NEAR_SURFACE_FWHM * fwhm_samples)
     i_zone = np.minimum(i_s + zone, m - 1)
-    near = cand & has_s[:, None] & (cols <= i_zone[:, None])
+    # residual peaks above the local noise: electronic + shot noise of the trend the bottom
+    # sits on (filtered domain), compiled row by row (pipeline.process.detect_candidates)
+    cand, near_any = bottom_candidates(
+        filt, resid, noise_f, i_s + sep * widen, gap, has_s, shot_noise_counts, kernel_sq,
+        s.threshold_sigma, i_zone,
+    )  # fmt: skip
     # (only the pulses with such a candidate: the column carried back costs a log and an exp
     # per sample, and a pulse's test reads its own samples alone)
-    r_near = np.flatnonzero(near.any(axis=1))
+    r_near = np.flatnonzero(near_any)
     if r_near.size:
         width = 4 * gap
         f_near, nf_near = filt[r_near], noise_f[r_near]
+        near = cand[r_near] & (cols <= i_zone[r_near, None])
         excess, column, carried = column_excess(f_near, 3.0 * nf_near, gap + math.ceil(sep), width)
         # the carried-back level is a mean of ~width/2 independent filtered samples, scaled
         # up by the decay it is carried back over: its noise adds to the candidate's own
         col_var = nf_near[:, None] ** 2 + shot_noise_counts * np.maximum(carried, 0.0) * kernel_sq
-        thr_near = s.threshold_sigma * np.sqrt(local_var[r_near] + col_var * 2.0 / width)
-        cand[r_near] &= ~(near[r_near] & column & (excess <= thr_near))
+        var_near = local_variance(
+            f_near, resid[r_near], nf_near[:, None], shot_noise_counts, kernel_sq
+        )
+        thr_near = s.threshold_sigma * np.sqrt(var_near + col_var * 2.0 / width)
+        cand[r_near] &= ~(near & column & (excess <= thr_near))
     cand &= ~clip_merged[:, None]
-    has_b = cand.any(axis=1)
-    pick = cand
-    if s.bottom_pick == "last":
-        # the strongest candidate near the latest one (not the latest itself: noise bumps on
-        # the trailing flank of a wide bottom echo would bias it late)
-        last = m - 1 - np.argmax(cand[:, ::-1], axis=1)
-        pick = cand & (cols >= (last - sep)[:, None])
-    i_b = np.where(has_b, np.argmax(np.where(pick, resid, -np.inf), axis=1), 0)
+    # the strongest candidate, with bottom_pick = "last" near the latest one (not the latest
+    # itself: noise bumps on the trailing flank of a wide bottom echo would bias it late)
+    has_b, i_b, beyond = pick_bottom(cand, resid, sep, s.bottom_pick == "last")
     t_idx_b, _, width_b = parabolic_peak(resid, i_b)
     if top_code is not None and saturated.any():
         # a bottom clipped on a plateau of its own: timed from its edges, or no bottom
@@ -365,14 +365,16 @@ def _detect_block(
         t_idx_b = np.where(on_top & has_b & np.isfinite(t_clip), t_clip, t_idx_b)
         has_b &= ~(on_top & ~np.isfinite(t_clip))
     amp_b = resid[np.arange(n), i_b]
-    snr_b_local = amp_b / np.sqrt(local_var[np.arange(n), i_b])
+    # the local noise at each picked sample (the candidates' threshold's)
+    var_at_b = local_variance(filt[np.arange(n), i_b], amp_b, noise_f, shot_noise_counts, kernel_sq)
+    snr_b_local = amp_b / np.sqrt(var_at_b)
 
     flags = np.zeros(n, dtype=np.uint16)
     flags[saturated] |= np.uint16(DetectorFlag.SATURATED)
     flags[clip_merged] |= np.uint16(DetectorFlag.CLIPPED_MERGED)
     # another significant return clearly after the reported bottom: a layer or object above
     # the seabed may have been taken for it (bottom_pick = "last" reports the later one)
-    later = has_b & np.any(cand & (cols > (i_b + sep)[:, None]), axis=1)
+    later = has_b & beyond
     flags[later] |= np.uint16(DetectorFlag.MULTIPLE_BOTTOM_CANDIDATES)
     # a surface peak wider than the system response hides a bottom just below it
     # (the filtered system response has σ √2 samples; 15 % wider means a second return)
@@ -400,7 +402,7 @@ def _detect_block(
     snr_b = np.where(has_b, snr_b_local, amp_b / noise_f)
     # each return's timing sigma from its amplitude, width and the raw noise under it
     sig_ts = echo_timing_sigma_samples(amp_s, width_s, sigma_samples, noise**2, shot_noise_counts)
-    var_b = local_var[np.arange(n), i_b] / kernel_sq
+    var_b = var_at_b / kernel_sq
     sig_tb = echo_timing_sigma_samples(amp_b, width_b, sigma_samples, var_b, shot_noise_counts)
     flags[has_s & (snr_s < 2 * s.threshold_sigma)] |= np.uint16(DetectorFlag.LOW_SNR)
     zero = np.zeros(n)
@@ -408,9 +410,7 @@ def _detect_block(
     if s.column_returns:
         # the other candidates, clear of the bottom as the bottom is clear of the surface
         # (a merged, fitted bottom leaves no room: its candidates list is empty)
-        ccand = cand & has_b[:, None] & (cols < (t_idx_b - sep)[:, None])
-        has_c = ccand.any(axis=1)
-        i_c = np.where(has_c, np.argmax(np.where(ccand, resid, -np.inf), axis=1), 0)
+        has_c, i_c = strongest_before(cand, resid, np.where(has_b, t_idx_b - sep, -np.inf))
         # timed on the filtered waveform's own peak (within 2 samples): a layer echo wider
         # than the trend's gap raises its own flank trend, which would pull a residual peak
         # early; the column's slope under it moves the filtered peak far less
@@ -420,7 +420,8 @@ def _detect_block(
         # (with a separation under 2 samples that peak could pass a neighbour: keep the order)
         has_c &= (t_idx_c > t_idx_s) & (t_idx_c < t_idx_b)
         amp_c = resid[rows, i_c]
-        snr_c = amp_c / np.sqrt(local_var[rows, i_c])
+        var_c = local_variance(filt[rows, i_c], amp_c, noise_f, shot_noise_counts, kernel_sq)
+        snr_c = amp_c / np.sqrt(var_c)
     else:
         has_c, t_idx_c, amp_c, snr_c = np.zeros(n, dtype=bool), zero, zero, zero
     return WaveformDetections(
