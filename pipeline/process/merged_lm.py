@@ -116,22 +116,33 @@ def lm_fit(x, y, win, p0, kk, sg, npar, iterations):  # pragma: no cover - compi
     jtj = np.empty((6, 6))
     step = np.empty(6)
     trial = np.empty(6)
+    gram = np.empty((6, 6))  # JᵀJ and -Jᵀr at the current point, undamped
+    grad = np.empty(6)
     for q in range(n):
         p = p_out[q]
         lam = 1e-2
         # the model and its Jacobian at the trial point serve the next step when it is taken
         c = _model(x[q], y[q], win[q], p, kk[q], sg, npar, jac, r, True)
+        moved = True
         for _ in range(iterations):
-            for i in range(npar):
-                for k in range(npar):
+            if moved:
+                # (JᵀJ is symmetric: its lower half is the upper's, the same products summed
+                # in the same order; a rejected step leaves the point, and these, as they were)
+                for i in range(npar):
+                    for k in range(i, npar):
+                        s = 0.0
+                        for j in range(w):
+                            s += jac[j, i] * jac[j, k]
+                        gram[i, k] = s
+                        gram[k, i] = s
                     s = 0.0
                     for j in range(w):
-                        s += jac[j, i] * jac[j, k]
-                    jtj[i, k] = s
-                s = 0.0
-                for j in range(w):
-                    s += jac[j, i] * r[j]
-                step[i] = -s  # -Jᵀr
+                        s += jac[j, i] * r[j]
+                    grad[i] = -s  # -Jᵀr
+            for i in range(npar):
+                step[i] = grad[i]
+                for k in range(npar):
+                    jtj[i, k] = gram[i, k]
             for i in range(npar):
                 jtj[i, i] += lam * (jtj[i, i] + 1e-12)
             ok = _solve(jtj, step, npar)
@@ -141,7 +152,8 @@ def lm_fit(x, y, win, p0, kk, sg, npar, iterations):  # pragma: no cover - compi
             trial[4] = max(trial[4], 0.0)
             trial[5] = min(max(trial[5], sg), 3.0 * sg)
             c_new = _model(x[q], y[q], win[q], trial, kk[q], sg, npar, jac_t, r_t, True)
-            if ok and c_new < c:
+            moved = ok and c_new < c
+            if moved:
                 for i in range(6):
                     p[i] = trial[i]
                 c = c_new
