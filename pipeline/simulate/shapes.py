@@ -30,6 +30,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import log_ndtr, ndtr
 
+from pipeline.simulate.column_kernel import column_rows
+
 __all__ = [
     "fast_ndtr",
     "gauss_cdf",
@@ -149,47 +151,6 @@ def column_cdf(x_s, rate_per_s, width_s, sigma_s):
     return np.clip(out, 0.0, 1.0)
 
 
-def _edge_cdf(x, r, s, precise):
-    """Untruncated exponential-plus-Gaussian CDF by the full formula (edge bins only).
-
-    ``psi = exp(-r x + r^2 s^2/2) Phi(b)``, ``b = x/s - r s``: the exponent is at most
-    ``5 r s`` where ``b >= -5``, and ``log Phi`` is added first below. ``Phi`` is tabulated
-    (1e-12 absolute) except where ``precise``: there the truncated CDF divides by a small
-    ``1 - tau`` that would magnify the table's error.
-    """
-    z = x / s
-    rs = r * s
-    b = z - rs
-    expo = -r * x + 0.5 * rs * rs
-    low = b < -5.0
-    mid = ~low
-    phi_b = np.where(precise[mid], ndtr(b[mid]), fast_ndtr(b[mid]))
-    psi = np.empty(x.shape)
-    psi[mid] = np.exp(expo[mid]) * phi_b
-    psi[low] = np.exp(expo[low] + log_ndtr(b[low]))
-    return np.where(precise, ndtr(z), fast_ndtr(z)) - psi
-
-
-def _numerator(x, r, w, s, tau, e):
-    """``F_inf(x) - tau F_inf(x - w)``, each term by its cheapest exact form.
-
-    ``e = exp(-r x + r^2 s^2 / 2)`` clipped at 1; a term is 0 below ``-9 s``, ``1 - e`` (first)
-    or ``tau - e`` (second) beyond ``s (9 + r s)``, and the full formula in between.
-    """
-    terms = []
-    for shift, scale, plain in ((0.0, 1.0, 1.0), (w, tau, tau)):
-        xs = x - shift
-        zero = xs < -_EDGE * s
-        inner = xs > s * (_EDGE + r * s)
-        edge = ~zero & ~inner
-        term = np.where(inner, plain - e, 0.0)
-        scale = np.broadcast_to(scale, x.shape)
-        precise = tau[edge] > 0.99  # 1 - tau < 0.01 would magnify table errors > 100x
-        term[edge] = scale[edge] * _edge_cdf(xs[edge], r[edge], s[edge], precise)
-        terms.append(term)
-    return terms[0] - terms[1]
-
-
 def column_bin_integrals(x0_s, dt: float, m: int, rate_per_s, width_s, sigma_s):
     """Probabilities of the column shape in ``m`` contiguous bins, one row per column.
 
@@ -241,35 +202,16 @@ def column_bin_integrals(x0_s, dt: float, m: int, rate_per_s, width_s, sigma_s):
     width = last - first
     if width <= 0:
         return out
-    x = (x0 + dt * first)[:, None] + dt * np.arange(width + 1)
-    rs2 = 0.5 * (r * s) ** 2
-    e = np.minimum(-r[:, None] * x + rs2[:, None], 0.0)
-    np.exp(e, out=e)  # exp is SIMD-vectorised; near e = 1 the edge zone takes over
-    cdf = (1.0 - e) / norm[:, None]
-    # the two edge zones [b, a] and [b + w, a + w] by the full formula, indexed directly; in
-    # a long column (w > a - b) the start zone only needs the first term and the end zone only
-    # the second (the first is 1 - e there): one special-function evaluation per edge
+    # the two edge zones [b, a] and [b + w, a + w] by the full formula: each row's edges from
+    # its zone's first one on (h edges); in a long column (w > a - b) the start zone only
+    # needs the first term and the end zone only the second (the first is 1 - e there); the
+    # clipped exponent gives exactly 0 before b, and clipping to 1 handles edges past a + w.
+    # Compiled row by row (pipeline.simulate.column_kernel); bins past a row's end hold 0
     h = int(np.ceil(float(np.max((a - b) / dt)))) + 2
-    long_ = w > (a - b) + 2.0 * dt
-    for zone, z0 in enumerate((b, b + w)):
-        j0 = np.ceil((z0 - x0) / dt).astype(np.int64) - first
-        cols = j0[:, None] + np.arange(h)
-        ok = (cols >= 0) & (cols <= width)
-        rr, cc = np.nonzero(ok)
-        cc = cols[rr, cc]
-        xs, lg = x[rr, cc], long_[rr]
-        num = np.empty(xs.shape)
-        if zone == 0:
-            num[lg] = _edge_cdf(xs[lg], r[rr][lg], s[rr][lg], np.zeros(lg.sum(), dtype=bool))
-        else:
-            ri, si, ti, wi = r[rr][lg], s[rr][lg], tau[rr][lg], w[rr][lg]
-            second = ti * _edge_cdf(xs[lg] - wi, ri, si, np.zeros(lg.sum(), dtype=bool))
-            num[lg] = 1.0 - e[rr, cc][lg] - second
-        sh = ~lg
-        num[sh] = _numerator(xs[sh], r[rr][sh], w[rr][sh], s[rr][sh], tau[rr][sh], e[rr, cc][sh])
-        cdf[rr, cc] = num / norm[rr]
-    np.clip(cdf, 0.0, 1.0, out=cdf)
-    out[reg, first:last] = np.diff(cdf, axis=1)  # bins past a row's end hold 1 - 1 = 0
+    column_rows(
+        x0, float(dt), first, width, h, r, w, s, a, b, tau, norm, _EDGE, _TAB, _TAB_Z, _TAB_N,
+        out, reg.astype(np.int64),
+    )  # fmt: skip
     return out
 
 
