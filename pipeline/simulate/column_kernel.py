@@ -96,9 +96,27 @@ def _numerator(x, r, w, s, tau, e, edge, tab, half_span, per_unit):
 
 @numba.njit(cache=True, nogil=True)
 def column_rows(
-    x0, dt, first, width, h, r, w, s, a, b, tau, norm, edge, tab, half_span, per_unit, out, rows
+    x0,
+    dt,
+    first,
+    width,
+    h,
+    r,
+    w,
+    s,
+    a,
+    b,
+    tau,
+    norm,
+    edge,
+    tab,
+    half_span,
+    per_unit,
+    out,
+    rows,
+    scale,
 ):
-    """Bin probabilities of regular columns into ``out[rows[i], first:first + width]``.
+    """Bin probabilities of regular columns, times ``scale``, added to ``out[rows[i]]``.
 
     Parameters
     ----------
@@ -116,9 +134,11 @@ def column_rows(
     tab, half_span, per_unit
         The normal CDF's table (:data:`~pipeline.simulate.shapes._TAB`), its span and step.
     out : (n, m) float64
-        Written (zeros expected outside the block).
+        Added to, in ``[first, first + width)`` (the probabilities are 0 outside).
     rows : (k,) int64
         Row of ``out`` of each column.
+    scale : (k,) float64
+        Each column's expected count.
     """
     k = x0.size
     cdf = np.empty(width + 1)
@@ -148,7 +168,7 @@ def column_rows(
         prev = _unit(cdf[0])
         for j in range(width):
             cur = _unit(cdf[j + 1])
-            out[row, first + j] = cur - prev
+            out[row, first + j] += scale[p] * (cur - prev)
             prev = cur
 
 

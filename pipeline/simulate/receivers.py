@@ -27,12 +27,13 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
 from pipeline.simulate.photon import KIND_COLUMN, KIND_GAUSS, KIND_UNIFORM, Components
-from pipeline.simulate.shapes import column_bin_integrals, gauss_cdf
+from pipeline.simulate.shapes import add_column_bins, gauss_cdf
 
-__all__ = ["expected_samples", "digitise", "dead_time_filter"]
+__all__ = ["expected_samples", "digitise", "digitise_drawn", "dead_time_filter"]
 
 _GAUSS_HALF_WIDTH = 8.5  # sigmas: the mass outside is 2e-17
 
@@ -75,10 +76,10 @@ def _add_column(out, comps, t0, dt, m):
     for col in np.flatnonzero(is_col.any(axis=0)):
         p = np.flatnonzero(is_col[:, col])
         x0 = t0[p] - 0.5 * dt - comps.centre_s[p, col]
-        prob = column_bin_integrals(
-            x0, dt, m, comps.rate_per_s[p, col], comps.width_s[p, col], comps.sigma_s[p, col]
-        )
-        out[p] += comps.expected[p, col][:, None] * prob
+        add_column_bins(
+            out, p, comps.expected[p, col], x0, dt, comps.rate_per_s[p, col],
+            comps.width_s[p, col], comps.sigma_s[p, col],
+        )  # fmt: skip
 
 
 def expected_samples(comps: Components, t0_s: np.ndarray, dt: float, m: int) -> np.ndarray:
@@ -136,6 +137,63 @@ def digitise(detector, mean_pe, excess_pe=None, normals=None):
     top = float(detector.top_code)
     saturated = np.any(v >= top, axis=1)
     return np.clip(v, 0.0, top).astype(np.float32), saturated
+
+
+def digitise_drawn(detector, drawn, mu, normals):
+    """:func:`digitise` of drawn photoelectron counts plus strong expectations, in one pass.
+
+    The same figures as ``digitise(detector, n + mu, (F - 1) n + F mu, normals)`` with
+    ``n = drawn.reshape(mu.shape)``, every product and sum in that order, without its five
+    ``(n, m)`` float64 temporaries (:func:`_digitise_rows`).
+
+    Parameters
+    ----------
+    detector : DetectorSettings
+    drawn : (n * m,) int64
+        Drawn photoelectrons per sample, row by row (a ``bincount``).
+    mu : (n, m) float64 or None
+        Expected photoelectrons of the strong components (None: none).
+    normals : (n, m) float32
+        Standard normals, one per sample.
+
+    Returns
+    -------
+    samples : (n, m) float32
+    saturated : (n,) bool
+    """
+    n, m = normals.shape
+    f = float(detector.excess_noise_factor)
+    g = float(detector.counts_per_photoelectron)
+    en2 = float(detector.electronic_noise_counts) ** 2
+    strong = mu is not None
+    mu_arr = mu if strong else np.zeros((1, 1))
+    out = np.empty((n, m), dtype=np.float32)
+    sat = np.zeros(n, dtype=bool)
+    _digitise_rows(
+        drawn, mu_arr, strong, normals, f, g, float(detector.baseline_counts), en2,
+        float(detector.top_code), out, sat,
+    )  # fmt: skip
+    return out, sat
+
+
+@numba.njit(cache=True, nogil=True)
+def _digitise_rows(drawn, mu, strong, normals, f, g, base, en2, top, out, sat):
+    """:func:`digitise_drawn`'s loop: each sample once, in :func:`digitise`'s order."""
+    n, m = out.shape
+    for p in range(n):
+        hit = False
+        for c in range(m):
+            k = float(drawn[p * m + c])
+            u = mu[p, c] if strong else 0.0
+            mean = k + u
+            excess = (f - 1.0) * k + f * u
+            v = base + g * mean
+            var = g * g * excess + en2
+            v = v + math.sqrt(var) * np.float64(normals[p, c])
+            v = np.floor(v + 0.5)
+            hit |= v >= top
+            out[p, c] = np.float32(0.0 if v < 0.0 else (top if v > top else v))
+        sat[p] = hit
 
 
 def dead_time_filter(group: np.ndarray, times_s: np.ndarray, dead_time_s: float):

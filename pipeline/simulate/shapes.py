@@ -37,6 +37,7 @@ __all__ = [
     "gauss_cdf",
     "column_cdf",
     "column_bin_integrals",
+    "add_column_bins",
     "column_depth_time",
 ]
 
@@ -179,17 +180,45 @@ def column_bin_integrals(x0_s, dt: float, m: int, rate_per_s, width_s, sigma_s):
     touch ``[b, a]`` or ``[b + w, a + w]`` need the full formula. Rows that :func:`column_cdf`
     treats as uniform or as a point (``r w < 5e-8`` or ``w < 1e-6 s``) are passed to it.
     """
+    out = np.zeros((np.size(x0_s), m))
+    add_column_bins(out, np.arange(out.shape[0]), np.ones(out.shape[0]), x0_s, dt, rate_per_s,
+                    width_s, sigma_s)  # fmt: skip
+    return out
+
+
+def add_column_bins(out, rows, scale, x0_s, dt: float, rate_per_s, width_s, sigma_s) -> None:
+    """``out[rows] += scale[:, None] * column_bin_integrals(...)``, in place.
+
+    Parameters
+    ----------
+    out : (n, m) float64
+        Accumulated into; ``m`` bins per row.
+    rows : (k,) int
+        Row of ``out`` of each column (distinct).
+    scale : (k,) float64
+        Each column's expected count.
+    x0_s, dt, rate_per_s, width_s, sigma_s
+        As :func:`column_bin_integrals`.
+
+    Notes
+    -----
+    The same products and sums as ``out[rows] += scale[:, None] * prob`` of the whole rows
+    (a bin outside a column's block gains ``scale * 0``: nothing), without the ``(k, m)``
+    array of probabilities for the regular columns.
+    """
+    m = out.shape[1]
+    rows = np.asarray(rows, dtype=np.int64)
+    scale = np.asarray(scale, dtype=np.float64)
     x0, r, w, s = (np.asarray(a, dtype=np.float64) for a in (x0_s, rate_per_s, width_s, sigma_s))
-    k = x0.size
-    out = np.zeros((k, m))
     special = (w < 1e-6 * s) | (r * w < 5e-8)
     if np.any(special):
         x = x0[special, None] + dt * np.arange(m + 1)
         sp = np.flatnonzero(special)
-        out[sp] = np.diff(column_cdf(x, r[sp, None], w[sp, None], s[sp, None]), axis=1)
+        prob = np.diff(column_cdf(x, r[sp, None], w[sp, None], s[sp, None]), axis=1)
+        out[rows[sp]] += scale[sp, None] * prob
     reg = np.flatnonzero(~special)
     if reg.size == 0:
-        return out
+        return
     x0, r, w, s = x0[reg], r[reg], w[reg], s[reg]
     a, b = s * (_EDGE + r * s), -_EDGE * s
     tau = np.exp(-r * w)
@@ -201,7 +230,7 @@ def column_bin_integrals(x0_s, dt: float, m: int, rate_per_s, width_s, sigma_s):
     last = int(np.clip(np.ceil(np.max((a + w - x0) / dt)), 0, m))
     width = last - first
     if width <= 0:
-        return out
+        return
     # the two edge zones [b, a] and [b + w, a + w] by the full formula: each row's edges from
     # its zone's first one on (h edges); in a long column (w > a - b) the start zone only
     # needs the first term and the end zone only the second (the first is 1 - e there); the
@@ -210,9 +239,8 @@ def column_bin_integrals(x0_s, dt: float, m: int, rate_per_s, width_s, sigma_s):
     h = int(np.ceil(float(np.max((a - b) / dt)))) + 2
     column_rows(
         x0, float(dt), first, width, h, r, w, s, a, b, tau, norm, _EDGE, _TAB, _TAB_Z, _TAB_N,
-        out, reg.astype(np.int64),
+        out, rows[reg], scale[reg],
     )  # fmt: skip
-    return out
 
 
 def column_depth_time(u, rate_per_s, width_s):

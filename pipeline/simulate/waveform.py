@@ -59,7 +59,12 @@ from pipeline.simulate.photon import (
     uniform_pair,
 )
 from pipeline.simulate.quality import pulse_flags
-from pipeline.simulate.receivers import dead_time_filter, digitise, expected_samples
+from pipeline.simulate.receivers import (
+    dead_time_filter,
+    digitise,
+    digitise_drawn,
+    expected_samples,
+)
 
 __all__ = [
     "Waveforms",
@@ -303,7 +308,6 @@ def simulate_waveforms(
     samples = np.empty((b.n_pulses, m), dtype=np.float32)
     flags = np.empty(b.n_pulses, dtype=np.uint16)
     thr = detector.strong_return_photoelectrons
-    f = detector.excess_noise_factor
     for s in _slices(b.n_pulses):
         sb = _sub_budget(b, s)
         comps, ctype = build_components(sb)
@@ -320,13 +324,13 @@ def simulate_waveforms(
             idx = np.floor((times - sb.t0_s[pulse]) / dt + 0.5).astype(np.int64)
             ok = (idx >= 0) & (idx < m)
             n_pe = np.bincount(pulse[ok] * m + idx[ok], minlength=sb.n_pulses * m)
-            n_pe = n_pe.reshape(sb.n_pulses, m).astype(np.float64)
-            mu = np.zeros_like(n_pe)
+            mu = None
             if strong.any():
                 mu = expected_samples(comps.with_expected(np.where(strong, comps.expected, 0.0)),
                                       sb.t0_s, dt, m)  # fmt: skip
             z = block_normals(seed, STREAM_SAMPLES, sb.pulse_id, m)
-            samples[s], sat = digitise(detector, n_pe + mu, (f - 1.0) * n_pe + f * mu, z)
+            # (digitise of n + mu, (F - 1) n + F mu, in one compiled pass)
+            samples[s], sat = digitise_drawn(detector, n_pe, mu, z)
         flags[s] = fl | np.where(sat, D.SATURATED, 0).astype(np.uint16)
     _check_finite("samples", samples)
     return Waveforms(b.pulse_id.copy(), b.t0_s.copy(), dt, samples, flags)

@@ -200,3 +200,32 @@ def test_noise_free_waveform_is_gain_times_expected_plus_baseline():
     times = wf.sample_times_s()
     assert times.shape == wf.samples.shape
     assert np.all(np.diff(times, axis=1) == pytest.approx(1e-9))
+
+
+def test_digitise_drawn_is_digitise_of_the_sums_bit_for_bit():
+    # the one-pass kernel against digitise of the whole-array sums it replaced: drawn counts,
+    # strong expectations (or none), saturation and clipping at both ends
+    from pipeline.simulate.detector import DetectorSettings
+    from pipeline.simulate.receivers import digitise, digitise_drawn
+
+    rng = np.random.default_rng(11)
+    det = DetectorSettings(
+        bit_depth=12, baseline_counts=11.0, counts_per_photoelectron=7.7, excess_noise_factor=1.3,
+        electronic_noise_counts=2.1,
+    )  # fmt: skip
+    n, m = 64, 300
+    drawn = rng.poisson(rng.uniform(0.0, 40.0, (n, 1)), (n, m)).astype(np.int64)
+    mu = rng.exponential(30.0, (n, m)) * (rng.random((n, 1)) < 0.7)
+    mu[:3] = 800.0  # saturated rows
+    z = rng.standard_normal((n, m), dtype=np.float32) * 3.0  # some below 0 after rounding
+    f = det.excess_noise_factor
+    for strong in (mu, None):
+        u = np.zeros((n, m)) if strong is None else strong
+        k = drawn.astype(np.float64)
+        want, want_sat = digitise(det, k + u, (f - 1.0) * k + f * u, z)
+        got, got_sat = digitise_drawn(det, drawn.ravel(), strong, z)
+        assert got.tobytes() == want.tobytes()
+        assert np.array_equal(got_sat, want_sat)
+        if strong is not None:
+            assert want_sat[:3].all()  # the clipped rows are there
+        assert (got == 0.0).any()  # and the floor
