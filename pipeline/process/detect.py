@@ -61,6 +61,7 @@ from pipeline.process.detect_settings import DetectSettings
 from pipeline.process.detect_timing import parabolic_peak
 from pipeline.process.flank_trend import flank_trend
 from pipeline.process.returns import DetectorFlag
+from pipeline.process.row_kernels import gaussian_rows, gaussian_weights
 from pipeline.process.surface_echo_null import null_shifts
 from pipeline.process.surface_step import ECHO_FIELDS, surface_step_fit
 
@@ -244,7 +245,8 @@ def _detect_block(
     # is: :mod:`pipeline.process.detect_noise`), then through the filter's own discrete kernel
     noise = difference_noise_sigma(y)
     baseline, baseline_sigma = window_baseline(y, k, noise)
-    filt = gaussian_filter1d(y - baseline[:, None], sigma_samples, axis=1, mode="nearest")
+    # gaussian_filter1d(y - baseline, σ, axis=1, mode="nearest"), compiled (row_kernels)
+    filt = gaussian_rows(y, baseline, gaussian_weights(float(sigma_samples)))
     impulse = np.zeros(int(8 * sigma_samples) * 2 + 3)
     impulse[impulse.size // 2] = 1.0
     kernel = gaussian_filter1d(impulse, sigma_samples, mode="constant")

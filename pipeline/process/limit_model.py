@@ -12,11 +12,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
 
 from pipeline.constants import FWHM_TO_SIGMA
 from pipeline.optics import SPEED_OF_LIGHT_M_S
 from pipeline.process.no_bottom_settings import NoBottomSettings
+from pipeline.process.row_kernels import gaussian_rows, gaussian_weights
 
 __all__ = [
     "DetectorModel",
@@ -72,11 +72,14 @@ def filtered_waveforms(samples: np.ndarray, det: DetectorModel) -> np.ndarray:
     The baseline is each pulse's median of its leading noise samples; the filter the system's
     Gaussian (the detector's matched filter) over ``samples`` (n, m).
     """
-    y = np.asarray(samples, dtype=np.float64)
+    y = np.asarray(samples)
+    if y.dtype not in (np.float32, np.float64):
+        y = y.astype(np.float64)
     m = y.shape[1]
     k = min(max(int(det.noise_samples), 4), max(m - 1, 1))
-    base = np.median(y[:, :k], axis=1)[:, None]
-    return gaussian_filter1d(y - base, det.sigma_samples, axis=1, mode="nearest")
+    base = np.median(np.asarray(y[:, :k], dtype=np.float64), axis=1)
+    # gaussian_filter1d(y - base, σ, axis=1, mode="nearest"), compiled (row_kernels)
+    return gaussian_rows(y, base, gaussian_weights(float(det.sigma_samples)))
 
 
 def threshold_level(

@@ -12,12 +12,20 @@ values, so the same median.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numba
 import numpy as np
 
-__all__ = ["pairwise_sum", "median_of", "counted_median", "COUNT_HALF"]
+__all__ = [
+    "pairwise_sum",
+    "median_of",
+    "counted_median",
+    "COUNT_HALF",
+    "gaussian_weights",
+    "gaussian_rows",
+]
 
 #: numpy's block below which a row is added with 8 partial sums (``PW_BLOCKSIZE``)
 _BLOCK = 128
@@ -193,3 +201,60 @@ def counted_median(buf: np.ndarray, m: int, counts: np.ndarray) -> float:
     if m % 2 == 1:
         return upper
     return (lower + upper) / 2.0
+
+
+@functools.lru_cache(maxsize=16)
+def gaussian_weights(sigma: float, truncate: float = 4.0) -> np.ndarray:
+    """The weights ``scipy.ndimage.gaussian_filter1d`` correlates with, to the bit.
+
+    Filtering a unit impulse returns them exactly (each output is ``1 · w`` plus zeros).
+    """
+    from scipy.ndimage import gaussian_filter1d
+
+    half = int(truncate * float(sigma) + 0.5)
+    impulse = np.zeros(2 * half + 1)
+    impulse[half] = 1.0
+    weights = gaussian_filter1d(impulse, sigma, mode="constant", truncate=truncate)
+    weights.setflags(write=False)  # cached: shared by every caller
+    return weights
+
+
+@numba.njit(cache=True, nogil=True)
+def gaussian_rows(y, base, weights):
+    """``gaussian_filter1d(y - base[:, None], σ, axis=1, mode="nearest")``, to the bit.
+
+    Parameters
+    ----------
+    y : (n, m) float32 or float64
+        Rows.
+    base : (n,) float64
+        Subtracted from each row first.
+    weights : (2 r + 1,) float64
+        :func:`gaussian_weights` (symmetric).
+
+    Notes
+    -----
+    scipy's symmetric correlation (``NI_Correlate1D``): ``w_0 x_i`` plus, from the outermost
+    tap in, ``(x_{i-j} + x_{i+j}) w_j``; the row extended by its end samples ("nearest").
+    """
+    n, m = y.shape
+    r = (weights.size - 1) // 2
+    line = np.empty(m + 2 * r)
+    out = np.empty((n, m))
+    for p in range(n):
+        acc = out[p]
+        for c in range(m):
+            line[r + c] = np.float64(y[p, c]) - base[p]
+        for c in range(r):
+            line[c] = line[r]
+            line[r + m + c] = line[r + m - 1]
+        # tap by tap over the whole row (each output's sum in scipy's order; the compiler
+        # vectorises the inner loop)
+        w0 = weights[r]
+        for i in range(m):
+            acc[i] = line[r + i] * w0
+        for j in range(r, 0, -1):
+            wj = weights[r - j]
+            for i in range(m):
+                acc[i] += (line[r + i - j] + line[r + i + j]) * wj
+    return out
