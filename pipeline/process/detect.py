@@ -48,8 +48,10 @@ from scipy.ndimage import gaussian_filter1d
 from pipeline.constants import FWHM_TO_SIGMA
 from pipeline.process.detect_candidates import (
     bottom_candidates,
+    first_strong_peak,
     local_variance,
     pick_bottom,
+    row_abs_max,
     strongest_before,
 )
 from pipeline.process.detect_clipped import clipped_bottom, clipped_echoes
@@ -253,17 +255,13 @@ def _detect_block(
     kernel_sq = float(np.sum(kernel**2))
     noise_f = noise * math.sqrt(kernel_sq)
     # a noise-free waveform still needs a finite threshold: a tiny fraction of its peak
-    noise_f = np.maximum(noise_f, 1e-9 * np.max(np.abs(filt), axis=1) + 1e-300)
+    noise_f = np.maximum(noise_f, 1e-9 * row_abs_max(filt) + 1e-300)
     # the surface stands on the baseline, whose own error shifts every filtered sample alike
     # (~0.4 σ with a 15-sample pre-trigger): it adds to the threshold (bottoms are measured on
     # the residual to a local trend and do not see it)
     thr = s.threshold_sigma * np.sqrt(noise_f**2 + baseline_sigma**2)
-    peak = np.zeros_like(filt, dtype=bool)
-    peak[:, 1:-1] = (filt[:, 1:-1] >= filt[:, :-2]) & (filt[:, 1:-1] > filt[:, 2:])
-    strong = peak & (filt > thr[:, None])
-    strong[:, :k] = False  # the noise window holds no return by construction
-    has_s = strong.any(axis=1)
-    i_s = np.where(has_s, np.argmax(strong, axis=1), 0)
+    # the first peak above it, past the noise window (which holds no return by construction)
+    has_s, i_s = first_strong_peak(filt, thr, k)
     t_idx_s, amp_s, width_s = parabolic_peak(filt, i_s)
     sep = s.min_separation_fwhm * pulse_fwhm_s / dt_s
     fwhm_samples = pulse_fwhm_s / dt_s

@@ -17,7 +17,14 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["bottom_candidates", "pick_bottom", "strongest_before", "local_variance"]
+__all__ = [
+    "bottom_candidates",
+    "pick_bottom",
+    "strongest_before",
+    "local_variance",
+    "first_strong_peak",
+    "row_abs_max",
+]
 
 
 def local_variance(filt, resid, noise_f, shot_noise_counts: float, kernel_sq: float):
@@ -154,4 +161,41 @@ def strongest_before(cand, resid, stop):
                 break
             if cand[p, c] and (not has[p] or resid[p, c] > best):
                 best, idx[p], has[p] = resid[p, c], c, True
+    return has, idx
+
+
+@numba.njit(cache=True, nogil=True)
+def row_abs_max(x):
+    """``np.max(np.abs(x), axis=1)`` of ``(n, m)`` rows, ``m >= 1`` (NaN where a row has one)."""
+    n, m = x.shape
+    out = np.empty(n)
+    for p in range(n):
+        top = abs(x[p, 0])
+        for c in range(1, m):
+            v = abs(x[p, c])
+            if v > top or v != v:
+                top = v
+                if v != v:
+                    break
+        out[p] = top
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def first_strong_peak(filt, thr, k):
+    """Each row's first peak above its threshold, past the noise window.
+
+    A peak: ``>=`` the sample before, ``>`` the one after (never the first or last sample);
+    strong: above ``thr`` ``(n,)``; from sample ``k`` on. Returns ``has`` ``(n,)`` bool and
+    the sample ``(n,)`` int64 (0 without one).
+    """
+    n, m = filt.shape
+    has = np.zeros(n, np.bool_)
+    idx = np.zeros(n, np.int64)
+    for p in range(n):
+        for c in range(max(k, 1), m - 1):
+            v = filt[p, c]
+            if v >= filt[p, c - 1] and v > filt[p, c + 1] and v > thr[p]:
+                has[p], idx[p] = True, c
+                break
     return has, idx

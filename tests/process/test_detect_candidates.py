@@ -103,3 +103,24 @@ def test_equal_residuals_pick_the_first():
     assert i[0] == 5
     has, i = strongest_before(cand, resid, np.array([5.0]))
     assert has[0] and i[0] == 2
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_first_strong_peak_and_row_max_are_the_array_expressions(seed):
+    from pipeline.process.detect_candidates import first_strong_peak, row_abs_max
+
+    _, filt, _, noise_f, _, _, _ = _waveforms(seed)
+    n, m = filt.shape
+    thr = 3.0 * noise_f + np.where(np.arange(n) % 5 == 0, 30.0, 0.0)  # some rows: none
+    k = 4 + seed
+    peak = np.zeros((n, m), dtype=bool)
+    peak[:, 1:-1] = (filt[:, 1:-1] >= filt[:, :-2]) & (filt[:, 1:-1] > filt[:, 2:])
+    strong = peak & (filt > thr[:, None])
+    strong[:, :k] = False
+    has, i = first_strong_peak(filt, thr, k)
+    assert np.array_equal(has, strong.any(axis=1))
+    assert np.array_equal(i, np.where(has, np.argmax(strong, axis=1), 0))
+    assert has.any() and (~has).any()
+    x = filt.copy()
+    x[3, 7] = np.nan
+    assert np.array_equal(row_abs_max(x), np.max(np.abs(x), axis=1), equal_nan=True)
