@@ -101,7 +101,8 @@ def difference_noise_sigma(y: np.ndarray) -> np.ndarray:
         raise ValueError(f"difference_noise_sigma needs rows of >= 2 samples; got {y.shape}")
     # (the constant is passed, not read by the kernel: a cached kernel keeps the values it
     # was compiled with, and numba checks only this file's date)
-    med, quantum, s = _difference_start(y, MAD_TO_SIGMA)
+    counts = np.zeros(2 * COUNT_HALF + 1, np.int64)  # the counted medians' band
+    med, quantum, s = _difference_start(y, MAD_TO_SIGMA, counts)
     for _ in range(N_ITER):
         # never clip a one-quantum step: at σ under a count it is most of the noise
         lim = np.maximum(CLIP_SIGMA * s, 1.5 * quantum)
@@ -113,11 +114,12 @@ def difference_noise_sigma(y: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def _difference_start(y, mad_to_sigma):
+def _difference_start(y, mad_to_sigma, counts):
     """Per row: the differences' median, their quantum and the MAD start of σ, each ``(n,)``.
 
     The quantum is the smallest non-zero centred difference (integer codes: 1; 0 without
     any); the start ``max(MAD_TO_SIGMA · MAD, quantum)``. A row holding a NaN gives NaN.
+    ``counts``: :func:`~pipeline.process.row_kernels.counted_median`'s zeroed band.
     """
     n, m = y.shape
     k = m - 1
@@ -126,7 +128,6 @@ def _difference_start(y, mad_to_sigma):
     start = np.empty(n)
     buf = np.empty(k)
     twice = np.empty(k)
-    counts = np.zeros(2 * COUNT_HALF + 1, np.int64)
     for p in range(n):
         nan = False
         for c in range(k):

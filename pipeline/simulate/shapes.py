@@ -209,6 +209,11 @@ def add_column_bins(out, rows, scale, x0_s, dt: float, rate_per_s, width_s, sigm
     m = out.shape[1]
     rows = np.asarray(rows, dtype=np.int64)
     scale = np.asarray(scale, dtype=np.float64)
+    bad = ~np.isfinite(scale)
+    if bad.any():
+        # (the whole-row product made these rows NaN: the receiver's finiteness check reports
+        # them, where only the column's block would show an infinite count, clipped)
+        out[rows[bad]] = np.nan
     x0, r, w, s = (np.asarray(a, dtype=np.float64) for a in (x0_s, rate_per_s, width_s, sigma_s))
     special = (w < 1e-6 * s) | (r * w < 5e-8)
     if np.any(special):

@@ -32,3 +32,33 @@ def test_fast_ndtr_one_is_the_tables_value_bit_for_bit():
     z = np.random.default_rng(1).uniform(-12.0, 12.0, 5000)
     got = np.array([fast_ndtr_one(v, _TAB, _TAB_Z, _TAB_N) for v in z])
     assert got.tobytes() == fast_ndtr(z).tobytes()
+
+
+def test_add_column_bins_adds_scaled_bins_to_their_rows_only():
+    from pipeline.simulate.shapes import add_column_bins, column_cdf
+
+    rng = np.random.default_rng(4)
+    n, m, dt, k = 50, 200, 1e-9, 20
+    rows = rng.choice(n, k, replace=False)
+    r = 10 ** rng.uniform(6, 10, k)
+    w = 10 ** rng.uniform(-9, -6.8, k)
+    w[:3] = 1e-16  # a point-like column: the special path
+    s = 10 ** rng.uniform(-10, -8.7, k)
+    x0 = rng.uniform(-40, 0, k) * dt
+    scale = rng.uniform(0.5, 500.0, k)
+    start = rng.uniform(0.0, 3.0, (n, m))
+    out = start.copy()
+    add_column_bins(out, rows, scale, x0, dt, r, w, s)
+    edges = x0[:, None] + dt * np.arange(m + 1)
+    bins = np.diff(column_cdf(edges, r[:, None], w[:, None], s[:, None]), axis=1)
+    want = start.copy()
+    want[rows] += scale[:, None] * bins
+    # 1e-8 of the count: both forms lose eps/(r w) near the uniform limit
+    np.testing.assert_allclose(out, want, rtol=0.0, atol=1e-8 * scale.max())
+    others = np.setdiff1d(np.arange(n), rows)
+    assert np.array_equal(out[others], start[others])  # untouched, to the bit
+    # an infinite count is not clipped away: its row turns NaN (the receiver reports it)
+    scale[5] = np.inf
+    out = start.copy()
+    add_column_bins(out, rows, scale, x0, dt, r, w, s)
+    assert np.isnan(out[rows[5]]).all() and np.isfinite(np.delete(out, rows[5], 0)).all()
