@@ -31,6 +31,7 @@ import numpy as np
 
 from pipeline.evaluate import cell_truth, error_stats, truth_at
 from pipeline.process.classify import SEABED_CLASSES, SUBMERGED_OBJECT
+from pipeline.process.grid_axes import held_index
 
 __all__ = [
     "OBJECT_MARGIN_M",
@@ -59,6 +60,13 @@ def _grid_shows(grid, f) -> tuple[bool, float | None, float | None]:
     r = grid.resolution_m
     col, row = math.floor((f.x_m - w) / r), math.floor((n - f.y_m) / r)
     ny, nx = grid.shape
+    if getattr(grid, "rows", None) is not None:
+        # a grid of some rows and columns: the cube's cell among them (its ring is held too:
+        # grid_axes.MARGIN_CELLS around every cell holding a point)
+        (row,), r_ok = held_index([row], grid.rows)
+        (col,), c_ok = held_index([col], grid.cols)
+        if not (r_ok[0] and c_ok[0]):
+            return False, None, None
     if not (0 <= row < ny and 0 <= col < nx) or grid.count[row, col] == 0:
         return False, None, None
     ring = grid.depth_m[max(row - 1, 0) : row + 2, max(col - 1, 0) : col + 2].copy()

@@ -19,7 +19,7 @@ from pipeline.memory_budget import (
     MEMORY_SHARE,
     machine_memory_bytes,
 )
-from pipeline.outputs.grid_tiles import GridFrame, GridTiles
+from pipeline.outputs.grid_tiles import GridFrame, GridTiles, Overlay
 from pipeline.outputs.las_fields import LineEnds
 from pipeline.parallel import Executor
 from pipeline.process.classify import (
@@ -190,7 +190,8 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
         f"{len(sample_returns)} of its {n_pulses} pulses (run.sample_pulses)"
     )
     # the sample, processed as a survey of its own: the survey-wide figures
-    made = process_survey(sample_returns, scene, plan, ctx, layout, clock, log)
+    # its grid and cells: only the rows and columns of the survey's grid its points are in
+    made = process_survey(sample_returns, scene, plan, ctx, layout, clock, log, held_axes=True)
     with clock.stage("blocks"):
         # streamed: the beams' reach at the sample's level, the lines' ends and axes
         reach, lines, sums = 0.0, LineEnds(), LineSums()
@@ -288,11 +289,13 @@ def run_blocked(scene, plan, out, clock, log, progress, executor, store, sim, ct
 
         def deliver(unc, _grid):
             # the points are written; the survey's grid with its cells' TPU, and in the cells
-            # where the sample's posteriors ran, the sample's cells (module notes)
+            # where the sample's posteriors ran, the sample's cells (module notes), which hold
+            # some of the grid's rows and columns
+            overlay = Overlay(unc.cells, made.grid.rows, made.grid.cols)
             files = {
                 "points": out / "points.laz",
-                "grid": tiles.write_tif(out / "grid.tif", unc.cells),
-                "grid_nc": tiles.write_nc(out / "grid.nc", unc.cells),
+                "grid": tiles.write_tif(out / "grid.tif", overlay),
+                "grid_nc": tiles.write_nc(out / "grid.nc", overlay),
             }
             # the views' points in the order a points file of the sample would hold them
             order, _ = points_tile_order(made.processed.points, sample_returns, layout, air)

@@ -18,6 +18,7 @@ import numpy as np
 
 from pipeline.process.context import ProcessingContext
 from pipeline.process.grid import Grid
+from pipeline.process.grid_axes import occupied_axes
 from pipeline.process.refraction import ProcessedPoints
 from pipeline.process.returns import DetectedReturns
 from pipeline.stages import Plan, StageClock, trim_heap
@@ -58,7 +59,8 @@ class SurveyProducts:
         Points with their TPU, objects (class 43) and rejections (class 7).
     unc : SurveyUncertainty
     grid : Grid
-        On the layout's bounds, the rejected points left out, objects designated.
+        On the layout's bounds (or some of its rows and columns: ``process_survey``'s
+        ``held_axes``), the rejected points left out, objects designated.
     datum : Datum
     n_objects : int
     rejected : dict of str to int
@@ -86,6 +88,7 @@ def process_survey(
     figures: SurveyFigures | None = None,
     tpu_keep=None,
     process_at: tuple[np.ndarray, np.ndarray] | None = None,
+    held_axes: bool = False,
 ) -> SurveyProducts:
     """Process, grid and propagate the TPU of ``returns`` (``bathy run``'s stages, in order).
 
@@ -113,6 +116,12 @@ def process_survey(
         The pulses whose local planes and whose kriged sea are made (a block's,
         :func:`~pipeline.survey_block_reach.processing_rows`: every pulse whose points or
         surface what the block keeps reads); needs ``figures``. Default: all.
+    held_axes : bool
+        Grid only the rows and columns of the layout's grid that hold a point
+        (:func:`~pipeline.process.grid_axes.occupied_axes`, of every processed point): a
+        blocked survey's sample, whose blocks are spread over the survey's bounds. Its
+        grid and its cells are then bounded by the sample, not the survey's area; where
+        they have a cell it is the whole grid's.
     """
     from pipeline.process.datum import survey_datum
     from pipeline.process.seabed_outliers import water_surface_range_m
@@ -152,9 +161,14 @@ def process_survey(
         # one datum for the grid (the user's water level, else the mean measured surface):
         # depth below the local fitted surface would carry the wave heights into the grid
         datum = fig.datum if fig.datum is not None else survey_datum(processed.points, ps.datum)
+        axes = None
+        if held_axes:
+            # once, of every point: the regridding without the rejected keeps these axes
+            xy = processed.points.xyz_m
+            axes = occupied_axes(xy[:, 0], xy[:, 1], layout.bounds_m, layout.resolution_m)
 
         def make_grid(points):
-            return grid_by_tiles(points, layout, origin, fr.crs, datum.water_level_m, ps)
+            return grid_by_tiles(points, layout, origin, fr.crs, datum.water_level_m, ps, axes)
 
         grid = make_grid(processed.points)
     with clock.stage("tpu"):

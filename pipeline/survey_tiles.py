@@ -47,6 +47,7 @@ from pipeline.process.grid import (
     grid_from_statistics,
     seabed_values,
 )
+from pipeline.process.grid_axes import held_index
 
 __all__ = [
     "snap_tile_m",
@@ -177,13 +178,16 @@ class GridAccumulator:
     the grid is the one :func:`~pipeline.process.grid.grid_points` makes of all points at once
     (the points of a cell must come in the same order for the sums to match to the bit: pulse
     order, as the processing makes them).
+
+    ``axes``: ``(rows, cols)``, only these rows and columns of the layout's grid are held
+    (:mod:`pipeline.process.grid_axes`); points in the others are ignored.
     """
 
-    def __init__(self, layout: TileLayout, origin_m, crs, statistic: str) -> None:
-        self.layout = layout
+    def __init__(self, layout: TileLayout, origin_m, crs, statistic: str, axes=None) -> None:
+        self.layout, self.axes = layout, axes
         self.origin_m, self.crs, self.statistic = origin_m, crs, statistic
         ny, nx = layout.grid_shape
-        size = nx * ny
+        size = nx * ny if axes is None else axes[0].size * axes[1].size
         self.stats = {k: np.zeros(size) for k in ("mean", "zmean", "spread", "median", "zmedian")}
         self.stats["count"] = np.zeros(size, dtype=np.int64)
 
@@ -195,6 +199,10 @@ class GridAccumulator:
         k = lay.cells_per_tile
         row, col = np.divmod(cell, nx)
         mine = inside & ((row // k) * lay.shape[1] + col // k == tile)
+        if self.axes is not None:
+            r, r_ok = held_index(row, self.axes[0])
+            c, c_ok = held_index(col, self.axes[1])
+            cell, mine = r * self.axes[1].size + c, mine & r_ok & c_ok
         if not mine.any():
             return
         cells, local = np.unique(cell[mine], return_inverse=True)
@@ -208,7 +216,13 @@ class GridAccumulator:
         """The accumulated grid."""
         lay = self.layout
         return grid_from_statistics(
-            self.stats, lay.bounds_m, lay.resolution_m, self.origin_m, self.crs, self.statistic
+            self.stats,
+            lay.bounds_m,
+            lay.resolution_m,
+            self.origin_m,
+            self.crs,
+            self.statistic,
+            self.axes,
         )
 
 
@@ -219,13 +233,14 @@ def tile_layout(scene, bounds_m: np.ndarray) -> TileLayout:
     return TileLayout(bounds_m, r, snap_tile_m(scene.run.tile_m, r, max(e - w, n - s)))
 
 
-def grid_by_tiles(points, layout: TileLayout, origin_m, crs, datum_m, ps) -> Grid:
+def grid_by_tiles(points, layout: TileLayout, origin_m, crs, datum_m, ps, axes=None) -> Grid:
     """:func:`~pipeline.process.grid.grid_seabed` of ``points``, accumulated tile by tile.
 
     ``ps``: the process settings (grid statistic). The same grid for any tile size.
+    ``axes``: ``(rows, cols)``, the grid holds only these (:class:`GridAccumulator`).
     """
     xyz, depth = seabed_values(points, datum_m=datum_m)
-    acc = GridAccumulator(layout, origin_m, crs, ps.grid_statistic)
+    acc = GridAccumulator(layout, origin_m, crs, ps.grid_statistic, axes)
     tiles = layout.tile_of_xy(xyz[:, 0], xyz[:, 1])
     for t in np.unique(tiles):
         sel = tiles == t  # keeps the points' order (pulse order): the cells' sums match

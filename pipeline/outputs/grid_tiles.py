@@ -41,9 +41,10 @@ import pyproj
 from pipeline.iho import NO_DATA
 from pipeline.outputs.atomic import _anonymous_file as anonymous_file
 from pipeline.outputs.atomic import atomic_path
+from pipeline.outputs.grid_overlay import Overlay
 from pipeline.process.grid import Grid, cell_centres_m
 
-__all__ = ["TILE", "GridFrame", "GridTiles", "cell_records"]
+__all__ = ["TILE", "GridFrame", "GridTiles", "Overlay", "cell_records"]
 
 #: Side of the windows written (cells): the COG's tiles and ``grid.nc``'s chunks.
 TILE = 256
@@ -259,9 +260,10 @@ class GridTiles:
         name : str
             A key of :func:`~pipeline.outputs.raster.grid_layers`.
         rows, cols : slice
-        overlay : CellUncertainty, optional
-            Cells of the whole grid whose ``tvu95_m``, ``thu95_m`` and ``order`` replace the
-            stored ones where their ``n_posterior > 0`` (the sample's posterior cells).
+        overlay : Overlay or CellUncertainty, optional
+            Cells (of the whole grid, or of some of its rows and columns: :class:`Overlay`)
+            whose ``tvu95_m``, ``thu95_m`` and ``order`` replace the stored ones where their
+            ``n_posterior > 0`` (the sample's posterior cells).
 
         Returns
         -------
@@ -270,12 +272,9 @@ class GridTiles:
         """
         a = self._pread(rows, cols)[name]
         if overlay is not None and _SOURCES[name][0] == "cells":
-            if overlay.order.shape != self.frame.shape:
-                raise ValueError(
-                    f"`overlay` has shape {overlay.order.shape}; the grid's {self.frame.shape}"
-                )
-            sampled = overlay.n_posterior[rows, cols] > 0
-            a = np.where(sampled, getattr(overlay, _SOURCES[name][1])[rows, cols], a)
+            ov = overlay if isinstance(overlay, Overlay) else Overlay(overlay)
+            sampled, values = ov.window(_SOURCES[name][1], rows, cols, self.frame.shape)
+            a = np.where(sampled, values, a)
         a = a.astype(np.float64)
         return np.where(a < 0, np.nan, a) if name == "iho_order" else a
 

@@ -29,6 +29,8 @@ from pipeline.outputs.report_view3d import view3d_section
 from pipeline.outputs.report_waveforms import posterior_system, waveform_section
 from pipeline.outputs.sweep_report import run_report_section
 from pipeline.process.classify import BATHYMETRIC_POINT, NO_BOTTOM_FOUND_AT
+from pipeline.process.grid import cell_centres_m
+from pipeline.process.grid_axes import held_index
 
 __all__ = ["write_survey_report", "depth_bands"]
 
@@ -92,7 +94,7 @@ def write_survey_report(
     truth, pts = sim.truth, processed.points
     level_m = scene.water_surface.level_m
     fl, res = scene.flight, grid.resolution_m
-    gx, gy = grid.x_m, grid.y_m
+    gx, gy, shown = map_cells(grid)
     s = []
     info = [
         ["scene", scene.scene.name],
@@ -132,7 +134,9 @@ def write_survey_report(
     s.append("<h2 id='coverage'>2. Coverage</h2>")
     s.append(
         img(
-            F.coverage_map(gx, gy, res, grid.count, fl.area_m, evaluation["area_covered"]),
+            F.coverage_map(
+                gx, gy, res, shown(grid.count, 0), fl.area_m, evaluation["area_covered"]
+            ),
             "coverage",
         )
     )
@@ -152,11 +156,12 @@ def write_survey_report(
         ("tvu", unc.cells.tvu95_m, "TVU at 95 % (m)", "Propagated TVU (95 %) per cell", "magma_r"),
     ):
         heading = "4. Depth" if sec == "depth" else "5. Total vertical uncertainty"
-        fig = F.grid_map(gx, gy, res, values, fl.area_m, label, title, cmap=cmap)
+        fig = F.grid_map(gx, gy, res, shown(values, np.nan), fl.area_m, label, title, cmap=cmap)
         s.append(f"<h2 id='{sec}'>{heading}</h2>" + img(fig, f"{sec} map"))
     s.append("<h2 id='iho'>6. IHO S-44 orders</h2>")
     labels = list(unc.summary["orders"])
-    s.append(img(F.order_map(gx, gy, res, unc.cells.order, labels, fl.area_m), "IHO order map"))
+    codes = shown(unc.cells.order, -1)
+    s.append(img(F.order_map(gx, gy, res, codes, labels, fl.area_m), "IHO order map"))
     iho_truth = evaluation["error"].get("iho_grid") or {}
     rows = []
     for lab, v in unc.summary["orders"].items():
@@ -192,12 +197,35 @@ def write_survey_report(
     return Path(path)
 
 
+def map_cells(grid):
+    """What a map of ``grid`` shows: ``x_m (m,)``, ``y_m (k,)`` and ``shown(values, empty)``.
+
+    At most :data:`~pipeline.outputs.report_figures.MAP_CELLS` cells a side of the whole grid
+    (nearest, :func:`~pipeline.outputs.report_figures.nearest_cells`); ``shown`` gives a
+    field ``(ny, nx)`` of ``grid`` on them ``(k, m)``, ``empty`` in the cells a grid of some
+    rows and columns (a blocked survey's sample) does not hold.
+    """
+    if getattr(grid, "rows", None) is None:
+        ri, ci = (F.nearest_cells(n) for n in grid.shape)
+        return grid.x_m[ci], grid.y_m[ri], lambda values, empty: np.asarray(values)[np.ix_(ri, ci)]
+    x_m, y_m = cell_centres_m(grid.bounds_m, grid.resolution_m)
+    ri, ci = F.nearest_cells(y_m.size), F.nearest_cells(x_m.size)
+    (r, r_ok), (c, c_ok) = held_index(ri, grid.rows), held_index(ci, grid.cols)
+    held = r_ok[:, None] & c_ok[None, :]
+
+    def shown(values, empty):
+        return np.where(held, np.asarray(values)[np.ix_(r, c)], empty)
+
+    return x_m[ci], y_m[ri], shown
+
+
 def _error_section(truth, pts, grid, level_m, area_m, evaluation) -> str:
     is40 = pts.select(pts.classification == BATHYMETRIC_POINT)
     err, true_d = point_errors_m(is40, truth_depth_m=truth.depth_at_pulses_m)
     gerr, _ = grid_errors_m(grid, truth_depth_m=lambda x, y: level_m - truth.seabed.height_m(x, y))
     bands = depth_bands(true_d, err)
-    fig = F.error_figure(grid.x_m, grid.y_m, grid.resolution_m, gerr, area_m, err, true_d, bands)
+    gx, gy, shown = map_cells(grid)
+    fig = F.error_figure(gx, gy, grid.resolution_m, shown(gerr, np.nan), area_m, err, true_d, bands)
     ev = evaluation["error"]
     rows = [
         [name, st["n"], st["bias_m"], st["std_m"], st["rmse_m"], st["p95_abs_m"], st["max_abs_m"]]

@@ -19,6 +19,8 @@ from matplotlib.patches import Rectangle
 
 __all__ = [
     "png",
+    "MAP_CELLS",
+    "nearest_cells",
     "coverage_map",
     "waveforms",
     "grid_map",
@@ -46,11 +48,34 @@ def png(fig: Figure) -> bytes:
     return buf.getvalue()
 
 
+#: Cells a map shows along each axis, at most: a map is a few hundred pixels wide, and
+#: matplotlib's image pipeline holds ~100 B a cell (a blocked survey's sample is gridded over
+#: the whole survey's bounds: a million cells cost ~100 MiB a map).
+MAP_CELLS = 1024
+
+
+def nearest_cells(n: int) -> np.ndarray:
+    """Rows (or columns) of ``n`` shown: all, or :data:`MAP_CELLS` picked at even spacing.
+
+    Each picked index is the cell under the centre of its share of the axis, as
+    nearest-neighbour drawing picks a cell under each pixel: the map keeps its extent.
+    """
+    if n <= MAP_CELLS:
+        return np.arange(n)
+    return ((np.arange(MAP_CELLS) + 0.5) * (n / MAP_CELLS)).astype(np.int64)
+
+
 def _show(ax, values, x_m, y_m, res_m: float, **kw):
-    """Show a cell-centred grid north up, whichever way its rows run (GeoTIFF: north first)."""
+    """Show a cell-centred grid north up, whichever way its rows run (GeoTIFF: north first).
+
+    At most :data:`MAP_CELLS` cells a side are drawn (:func:`nearest_cells`).
+    """
     h = 0.5 * res_m
     extent = (x_m.min() - h, x_m.max() + h, y_m.min() - h, y_m.max() + h)
     origin = "upper" if y_m.size > 1 and y_m[0] > y_m[-1] else "lower"
+    values = np.asarray(values)
+    if max(values.shape) > MAP_CELLS:
+        values = values[np.ix_(nearest_cells(values.shape[0]), nearest_cells(values.shape[1]))]
     return ax.imshow(values, origin=origin, extent=extent, interpolation="nearest", **kw)
 
 

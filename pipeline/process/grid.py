@@ -44,6 +44,7 @@ import pyproj
 from affine import Affine
 
 from pipeline.process.classify import BATHYMETRIC_POINT, SUBMERGED_OBJECT
+from pipeline.process.grid_axes import held_cells
 from pipeline.process.returns import Points
 
 __all__ = [
@@ -53,6 +54,7 @@ __all__ = [
     "cell_index",
     "cell_statistics",
     "designate_objects",
+    "grid_cell_index",
     "grid_from_statistics",
     "grid_points",
     "grid_seabed",
@@ -96,6 +98,11 @@ class Grid:
     designated : (ny, nx) bool or None
         Cells whose ``depth_m`` and ``z_m`` are a designated sounding, the least depth of the
         submerged objects in them (:func:`designate_objects`); None: none designated.
+    rows, cols : (ny,), (nx,) int64 or None
+        The rows and columns of the grid of ``bounds_m`` this grid holds, increasing
+        (:mod:`pipeline.process.grid_axes`: a blocked survey's sample); ``x_m`` and ``y_m``
+        are theirs. None: every one (the grid of the whole bounds). A grid of some rows and
+        columns has no affine transform and is never written to a file.
     """
 
     depth_m: np.ndarray
@@ -113,6 +120,8 @@ class Grid:
     mean_depth_m: np.ndarray | None = None
     statistic: str = "median"
     designated: np.ndarray | None = None
+    rows: np.ndarray | None = None
+    cols: np.ndarray | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -122,15 +131,23 @@ class Grid:
     @property
     def local_transform(self) -> Affine:
         """Affine from (col, row) of cell corners to local (x, y)."""
+        _whole(self)
         w, _, _, n = self.bounds_m
         return Affine(self.resolution_m, 0.0, w, 0.0, -self.resolution_m, n)
 
     @property
     def transform(self) -> Affine:
         """Affine from (col, row) of cell corners to world (easting, northing)."""
+        _whole(self)
         w, _, _, n = self.bounds_m
         e0, n0 = self.origin_m[0], self.origin_m[1]
         return Affine(self.resolution_m, 0.0, w + e0, 0.0, -self.resolution_m, n + n0)
+
+
+def _whole(grid) -> None:
+    """Refuse a grid of some rows and columns what needs the whole grid (an affine transform)."""
+    if getattr(grid, "rows", None) is not None or getattr(grid, "cols", None) is not None:
+        raise ValueError("a grid of some rows and columns has no affine transform")
 
 
 def snap_bounds_m(
@@ -230,19 +247,30 @@ def cell_centres_m(bounds_m, resolution_m: float) -> tuple[np.ndarray, np.ndarra
 
 
 def grid_from_statistics(
-    st: dict, bounds_m: np.ndarray, resolution_m: float, origin_m, crs, statistic: str
+    st: dict,
+    bounds_m: np.ndarray,
+    resolution_m: float,
+    origin_m,
+    crs,
+    statistic: str,
+    axes: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Grid:
-    """The :class:`Grid` of :func:`cell_statistics` over every cell of ``bounds_m``."""
-    w, e, s, n = bounds_m
+    """The :class:`Grid` of :func:`cell_statistics` over every cell of ``bounds_m``.
+
+    ``axes``: ``(rows, cols)``, the grid holds only these (:class:`Grid`'s ``rows, cols``);
+    ``st`` is then over their ``rows.size * cols.size`` cells.
+    """
     r = resolution_m
-    nx, ny = int(round((e - w) / r)), int(round((n - s) / r))
+    x_m, y_m = cell_centres_m(bounds_m, r)
+    if axes is not None:
+        x_m, y_m = x_m[axes[1]], y_m[axes[0]]
+    nx, ny = x_m.size, y_m.size
 
     def shaped(a, ok):
         return np.where(ok, a, np.nan).reshape(ny, nx)
 
     count, has = st["count"], st["count"] > 0
     robust = statistic == "median"
-    x_m, y_m = cell_centres_m(bounds_m, r)
     return Grid(
         depth_m=shaped(st["median"] if robust else st["mean"], has),
         median_depth_m=shaped(st["median"], has),
@@ -257,7 +285,19 @@ def grid_from_statistics(
         bounds_m=np.asarray(bounds_m, dtype=np.float64),
         origin_m=np.asarray(origin_m, dtype=np.float64),
         crs=None if crs is None else pyproj.CRS.from_user_input(crs),
+        rows=None if axes is None else np.asarray(axes[0], dtype=np.int64),
+        cols=None if axes is None else np.asarray(axes[1], dtype=np.int64),
     )
+
+
+def grid_cell_index(grid: Grid, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Flat cell of each point in ``grid`` (``row * nx + col`` of its arrays) and if inside.
+
+    For a grid of some rows and columns, inside means in a cell it holds.
+    """
+    if getattr(grid, "rows", None) is None:
+        return cell_index(x, y, grid.bounds_m, grid.resolution_m)
+    return held_cells(x, y, grid.bounds_m, grid.resolution_m, grid.rows, grid.cols)
 
 
 def cell_index(
@@ -380,7 +420,7 @@ def designate_objects(grid: Grid, points: Points, datum_m: float | None = None) 
     obj = points.classification == SUBMERGED_OBJECT
     xyz = points.xyz_m[obj]
     ny, nx = grid.shape
-    cell, inside = cell_index(xyz[:, 0], xyz[:, 1], grid.bounds_m, grid.resolution_m)
+    cell, inside = grid_cell_index(grid, xyz[:, 0], xyz[:, 1])
     if not inside.any():
         return grid
     z = xyz[inside, 2]

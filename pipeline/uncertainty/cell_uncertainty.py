@@ -40,7 +40,8 @@ from pipeline.iho import (
     tvu95_m,
     tvu_allowance_m,
 )
-from pipeline.process.grid import Grid
+from pipeline.process.grid import Grid, grid_cell_index
+from pipeline.process.grid_axes import full_shape
 from pipeline.uncertainty.tpu import PointTpu
 
 __all__ = [
@@ -82,8 +83,15 @@ class CellUncertainty:
 
 
 def cell_index(grid: Grid, x_m: Any, y_m: Any) -> np.ndarray:
-    """Flat cell index ``row * nx + col`` of points (the grid's registration); -1 outside."""
+    """Flat cell index ``row * nx + col`` of points (the grid's registration); -1 outside.
+
+    For a grid of some rows and columns (:class:`~pipeline.process.grid.Grid`'s ``rows``,
+    ``cols``): the cell among those it holds, -1 outside them.
+    """
     x, y = np.asarray(x_m, dtype=np.float64), np.asarray(y_m, dtype=np.float64)
+    if getattr(grid, "rows", None) is not None:
+        cell, inside = grid_cell_index(grid, x, y)
+        return np.where(inside, cell, -1)
     w, _, _, n = grid.bounds_m
     r = grid.resolution_m
     ny, nx = grid.shape
@@ -163,6 +171,36 @@ def cell_uncertainty(
     )
 
 
+#: Numbers drawn at a time by :func:`uniform_at`.
+RANDOM_BLOCK = 1 << 20
+
+
+def uniform_at(rng: np.random.Generator, n: int, at: np.ndarray) -> np.ndarray:
+    """``rng.random(n)[at]``, drawn :data:`RANDOM_BLOCK` at a time: the same numbers, bounded.
+
+    ``at`` ``(k,)`` int64 in ``0 .. n-1``; ``rng`` moves on by ``n`` numbers, as one call.
+    """
+    at = np.asarray(at, dtype=np.int64)
+    out = np.empty(at.size)
+    order = np.argsort(at, kind="stable")
+    sorted_at = at[order]
+    for a in range(0, n, RANDOM_BLOCK):
+        u = rng.random(min(RANDOM_BLOCK, n - a))
+        lo, hi = np.searchsorted(sorted_at, [a, a + u.size])
+        out[order[lo:hi]] = u[sorted_at[lo:hi] - a]
+    return out
+
+
+def _whole_cells(grid: Grid, cells: np.ndarray) -> tuple[int, np.ndarray]:
+    """The whole grid's cell count, and its flat index of ``grid``'s ``cells``."""
+    if getattr(grid, "rows", None) is None:
+        ny, nx = grid.shape
+        return ny * nx, cells
+    ny, nx = full_shape(grid.bounds_m, grid.resolution_m)
+    r, c = np.divmod(cells, grid.cols.size)
+    return ny * nx, grid.rows[r] * nx + grid.cols[c]
+
+
 def select_posterior_pulses(
     grid: Grid,
     cells: CellUncertainty,
@@ -215,7 +253,8 @@ def select_posterior_pulses(
     first = np.r_[True, cs[1:] != cs[:-1]]
     rank = pos - np.maximum.accumulate(np.where(first, pos, 0))
     idx, cs = idx[rank < k_per_cell], cs[rank < k_per_cell]
-    # cells in random order up to the cap
-    prio = rng.random(ny * nx)[cs]
+    # cells in random order up to the cap: a number per cell of the whole grid, so that a
+    # grid of some of its rows and columns (a blocked survey's sample) picks as it would
+    prio = uniform_at(rng, *_whole_cells(grid, cs))
     idx = idx[np.argsort(prio, kind="stable")][:max_pulses]
     return np.sort(idx).astype(np.int64)

@@ -167,3 +167,41 @@ def test_maps_are_drawn_north_up_whichever_way_the_rows_run(north_first):
     rgba = np.asarray(canvas.buffer_rgba())
     top, bottom = rgba[5, rgba.shape[1] // 2, 0], rgba[-5, rgba.shape[1] // 2, 0]
     assert top < 50 and bottom > 200, (top, bottom)
+
+
+def test_a_map_of_more_cells_than_it_shows_draws_the_same_picture_from_a_bounded_image():
+    # a 4000 x 1500 grid (a blocked survey's sample spread over a long survey's bounds):
+    # nearest-neighbour drawing of every cell against the bounded image _show hands matplotlib
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from pipeline.outputs import report_figures as F
+
+    ny, nx, res = 4000, 1500, 1.0
+    y, x = np.arange(ny) + 0.5, np.arange(nx) + 0.5
+    rng = np.random.default_rng(3)
+    values = np.full((ny, nx), np.nan)
+    for _ in range(12):  # blocks of soundings in empty space, like a sample's blocks
+        r, c = rng.integers(0, ny - 200), rng.integers(0, nx - 200)
+        values[r : r + 200, c : c + 200] = rng.uniform(0.0, 1.0)
+
+    def draw(show):
+        fig = Figure(figsize=(3, 4), dpi=100)
+        canvas = FigureCanvasAgg(fig)
+        ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
+        ax.set_axis_off()
+        im = show(ax)
+        canvas.draw()
+        return np.asarray(canvas.buffer_rgba())[..., :3].astype(int), im
+
+    full, _ = draw(
+        lambda ax: ax.imshow(
+            values, origin="lower", extent=(0, nx, 0, ny), interpolation="nearest",
+            cmap="viridis", vmin=0.0, vmax=1.0,
+        )
+    )  # fmt: skip
+    bounded, im = draw(lambda ax: F._show(ax, values, x, y, res, cmap="viridis", vmin=0, vmax=1))
+    assert max(im.get_array().shape) <= F.MAP_CELLS
+    same = np.all(np.abs(full - bounded) <= 2, axis=-1)
+    # the pixels that differ lie on the blocks' edges (a pixel's cell is picked a cell off)
+    assert same.mean() > 0.99, same.mean()

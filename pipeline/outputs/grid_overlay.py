@@ -1,0 +1,53 @@
+"""The sample's posterior cells laid over a blocked survey's grid (:mod:`.grid_tiles`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from pipeline.process.grid_axes import held_index
+
+__all__ = ["Overlay"]
+
+
+@dataclass(frozen=True)
+class Overlay:
+    """Cells laid over the stored ones where posteriors ran: :meth:`GridTiles.layer`'s.
+
+    Attributes
+    ----------
+    cells : CellUncertainty
+        On the whole grid, or on ``rows`` x ``cols`` of it.
+    rows, cols : (k,) int64 or None
+        The grid's rows and columns ``cells`` holds, increasing (a blocked survey's sample:
+        :class:`~pipeline.process.grid.Grid`'s ``rows``, ``cols``); None: all.
+    """
+
+    cells: Any
+    rows: np.ndarray | None = None
+    cols: np.ndarray | None = None
+
+    def window(self, field: str, rows: slice, cols: slice, shape) -> tuple:
+        """``(sampled (r, c) bool, values (r, c))`` of ``field`` over window ``rows, cols``.
+
+        ``shape``: the whole grid's ``(ny, nx)``.
+        """
+        c = self.cells
+        if self.rows is None:
+            if c.order.shape != tuple(shape):
+                raise ValueError(f"`overlay` has shape {c.order.shape}; the grid's {shape}")
+            return c.n_posterior[rows, cols] > 0, getattr(c, field)[rows, cols]
+        if c.order.shape != (self.rows.size, self.cols.size) or (
+            self.rows.size and (self.rows[-1] >= shape[0] or self.cols[-1] >= shape[1])
+        ):
+            raise ValueError(
+                f"`overlay` has shape {c.order.shape} on {self.rows.size} rows and"
+                f" {self.cols.size} columns of the grid's {shape}"
+            )
+        r, r_ok = held_index(np.arange(rows.start, rows.stop), self.rows)
+        k, k_ok = held_index(np.arange(cols.start, cols.stop), self.cols)
+        at = np.ix_(r, k)
+        sampled = r_ok[:, None] & k_ok[None, :] & (c.n_posterior[at] > 0)
+        return sampled, getattr(c, field)[at]
