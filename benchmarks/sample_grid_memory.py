@@ -3,11 +3,13 @@
 Usage: ``PYTHONPATH=. python benchmarks/sample_grid_memory.py PULSES [--sample PULSES]``.
 
 A blocked survey processes a sample of whole blocks as a survey of its own
-(:func:`~pipeline.survey_processing.process_survey`), gridded over the *whole survey's*
-bounds. This measures what that grid costs at the grid size a survey of ``PULSES`` pulses
-gives (the square grid of 5 m cells of ``benchmarks/grid_tiles_memory.py``: 1.3 pulses per
-square metre of the grid), against the same sample gridded block by block over each block
-grown by 4 cells (a beam reach: what a grid of the sample's own blocks would hold).
+(:func:`~pipeline.survey_processing.process_survey`). Until 053f084 it was gridded over the
+*whole survey's* bounds; now only on the rows and columns of that grid its points are in
+(:mod:`pipeline.process.grid_axes`). This measures what the grid costs, both ways, at the
+grid size a survey of ``PULSES`` pulses gives (the square grid of 5 m cells of
+``benchmarks/grid_tiles_memory.py``: 1.3 pulses per square metre of the grid), against the
+same sample gridded block by block over each block grown by 4 cells (a beam reach: what a
+grid of the sample's own blocks would hold).
 
 The sample: ``--sample`` pulses (default 500 000, ``run.sample_pulses``) in blocks of an eighth
 of it each, chosen by :func:`~pipeline.survey_blocks.sample_blocks` from a layout of equal
@@ -49,12 +51,15 @@ def _phase(fn):
     return out, tracemalloc.get_traced_memory()[1] - start
 
 
-def grid_cells(bounds_m, x, y, depth):
+def grid_cells(bounds_m, x, y, depth, held_axes=False):
     """The grid, its cells and the evaluation's errors of soundings ``x, y, depth`` on ``bounds_m``.
+
+    ``held_axes``: only the rows and columns the soundings are in (``bathy run``'s sample).
 
     Returns ``{phase: (traced peak B, held B)}``.
     """
     from pipeline.evaluate import grid_errors_m
+    from pipeline.process.grid_axes import occupied_axes
     from pipeline.survey_tiles import GridAccumulator, TileLayout, snap_tile_m
     from pipeline.uncertainty.cell_uncertainty import cell_uncertainty
 
@@ -64,7 +69,8 @@ def grid_cells(bounds_m, x, y, depth):
     )
 
     def make_grid():
-        acc = GridAccumulator(layout, (0.0, 0.0, 0.0), None, "median")
+        axes = occupied_axes(x, y, layout.bounds_m, RES) if held_axes else None
+        acc = GridAccumulator(layout, (0.0, 0.0, 0.0), None, "median", axes)
         tiles = layout.tile_of_xy(x, y)
         for t in np.unique(tiles):
             sel = tiles == t
@@ -120,7 +126,10 @@ def main() -> None:
         f"{picked.size} blocks of {block} x {block} cells, {x.size} soundings"
     )
     tracemalloc.start()
-    rows = {"whole survey's bounds (now)": grid_cells(whole, x, y, depth)}
+    rows = {
+        "whole survey's bounds (before 053f084)": grid_cells(whole, x, y, depth),
+        "its rows and columns (grid_axes, now)": grid_cells(whole, x, y, depth, True),
+    }
     own = {}
     for x0, x1, y0, y1 in boxes:
         sel = (x >= x0) & (x < x1) & (y > y0) & (y <= y1)

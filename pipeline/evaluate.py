@@ -245,9 +245,9 @@ def cell_truth(grid: Grid, fn: TruthFn, shoal=np.minimum) -> np.ndarray:
     shoalest truth.
 
     Only cells holding soundings (``grid.count > 0``, or designated) are evaluated, by
-    :func:`truth_at`'s bounded blocks: a blocked survey's sample is gridded over the whole
-    survey's bounds, and a truth holds a few hundred bytes a point while it is evaluated
-    (all cells at once cost ~700 MiB on a grid of a million cells, mostly empty).
+    :func:`truth_at`'s bounded blocks: a truth holds a few hundred bytes a point while it is
+    evaluated (:data:`TRUTH_BLOCK`), and a survey's grid can have millions of cells, most of
+    them empty where its soundings are sparse.
     """
     des = getattr(grid, "designated", None)
     has_des = des is not None and bool(np.any(des))

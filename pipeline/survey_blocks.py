@@ -34,8 +34,9 @@ After the chunk loop it runs in four passes, each holding a bounded part of the 
 
 What stays in memory across blocks: the coverage's cells (one byte per grid cell, sized by
 the area), the sample's products (set aside on disk while the blocks run; its own grid and
-cells span the survey's bounds), the kept waveforms (bounded by the posterior budget) and at
-most as many blocks' own points as blocks run at once.
+cells hold only the rows and columns of the survey's grid its points are in,
+:mod:`pipeline.process.grid_axes`), the kept waveforms (bounded by the posterior budget) and
+at most as many blocks' own points as blocks run at once.
 
 **Exact where the searches stay in the halo.** With every block in the sample, the figures
 are the whole survey's, and each block's own points, cells and TPU are the whole survey's

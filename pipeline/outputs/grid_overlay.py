@@ -39,15 +39,22 @@ class Overlay:
             if c.order.shape != tuple(shape):
                 raise ValueError(f"`overlay` has shape {c.order.shape}; the grid's {shape}")
             return c.n_posterior[rows, cols] > 0, getattr(c, field)[rows, cols]
-        if c.order.shape != (self.rows.size, self.cols.size) or (
-            self.rows.size and (self.rows[-1] >= shape[0] or self.cols[-1] >= shape[1])
+        if (
+            c.order.shape != (self.rows.size, self.cols.size)
+            or (self.rows.size and self.rows[-1] >= shape[0])
+            or (self.cols.size and self.cols[-1] >= shape[1])
         ):
             raise ValueError(
                 f"`overlay` has shape {c.order.shape} on {self.rows.size} rows and"
                 f" {self.cols.size} columns of the grid's {shape}"
             )
-        r, r_ok = held_index(np.arange(rows.start, rows.stop), self.rows)
-        k, k_ok = held_index(np.arange(cols.start, cols.stop), self.cols)
+        r0, r1, _ = rows.indices(shape[0])
+        k0, k1, _ = cols.indices(shape[1])
+        values = getattr(c, field)
+        if values.size == 0:  # no cell held
+            return np.zeros((r1 - r0, k1 - k0), dtype=bool), np.zeros((r1 - r0, k1 - k0))
+        r, r_ok = held_index(np.arange(r0, r1), self.rows)
+        k, k_ok = held_index(np.arange(k0, k1), self.cols)
         at = np.ix_(r, k)
         sampled = r_ok[:, None] & k_ok[None, :] & (c.n_posterior[at] > 0)
-        return sampled, getattr(c, field)[at]
+        return sampled, values[at]

@@ -42,7 +42,7 @@ from pipeline.iho import NO_DATA
 from pipeline.outputs.atomic import _anonymous_file as anonymous_file
 from pipeline.outputs.atomic import atomic_path
 from pipeline.outputs.grid_overlay import Overlay
-from pipeline.process.grid import Grid, cell_centres_m
+from pipeline.process.grid import Grid, cell_centres_m, require_whole
 
 __all__ = ["TILE", "GridFrame", "GridTiles", "Overlay", "cell_records"]
 
@@ -146,6 +146,7 @@ def cell_records(grid, cells, src: tuple[slice, slice]) -> np.ndarray:
     -------
     (rows, cols) structured ndarray
     """
+    require_whole(grid, "its cells' place in the survey's grid")
     first = getattr(grid, next(iter(_SOURCES.values()))[1])[src]
     out = np.empty(first.shape, dtype=_CELL)
     for name, (where, field) in _SOURCES.items():

@@ -40,7 +40,7 @@ import pyproj
 from pipeline.iho import CLASSIFIED_ORDERS, NO_DATA, NO_ORDER
 from pipeline.outputs.atomic import atomic_path
 from pipeline.outputs.raster import NODATA, depth_reference, grid_layers
-from pipeline.process.grid import Grid
+from pipeline.process.grid import Grid, require_whole
 from pipeline.uncertainty.cell_uncertainty import CellUncertainty
 
 __all__ = [
@@ -244,5 +244,6 @@ def write_grid_nc(path: str | Path, grid: Grid, cells: CellUncertainty | None = 
     Path
         ``path``.
     """
+    require_whole(grid, "a file of its own (its x and y would not be regular)")
     layers = grid_layers(grid, cells)
     return save_grid_nc(path, grid_dataset(grid, {k: nc_variable(k, layers) for k in NC_VARIABLES}))

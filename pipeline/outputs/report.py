@@ -135,7 +135,13 @@ def write_survey_report(
     s.append(
         img(
             F.coverage_map(
-                gx, gy, res, shown(grid.count, 0), fl.area_m, evaluation["area_covered"]
+                gx,
+                gy,
+                res,
+                shown(grid.count, 0),
+                fl.area_m,
+                evaluation["area_covered"],
+                colour_limits(np.where(grid.count > 0, grid.count / res**2, np.nan)),
             ),
             "coverage",
         )
@@ -156,7 +162,10 @@ def write_survey_report(
         ("tvu", unc.cells.tvu95_m, "TVU at 95 % (m)", "Propagated TVU (95 %) per cell", "magma_r"),
     ):
         heading = "4. Depth" if sec == "depth" else "5. Total vertical uncertainty"
-        fig = F.grid_map(gx, gy, res, shown(values, np.nan), fl.area_m, label, title, cmap=cmap)
+        fig = F.grid_map(
+            gx, gy, res, shown(values, np.nan), fl.area_m, label, title, cmap,
+            colour_limits(values),
+        )  # fmt: skip
         s.append(f"<h2 id='{sec}'>{heading}</h2>" + img(fig, f"{sec} map"))
     s.append("<h2 id='iho'>6. IHO S-44 orders</h2>")
     labels = list(unc.summary["orders"])
@@ -198,25 +207,36 @@ def write_survey_report(
 
 
 def map_cells(grid):
-    """What a map of ``grid`` shows: ``x_m (m,)``, ``y_m (k,)`` and ``shown(values, empty)``.
+    """What a map of ``grid`` shows: ``x_m (nx,)``, ``y_m (ny,)`` and ``shown(values, empty)``.
 
-    At most :data:`~pipeline.outputs.report_figures.MAP_CELLS` cells a side of the whole grid
-    (nearest, :func:`~pipeline.outputs.report_figures.nearest_cells`); ``shown`` gives a
-    field ``(ny, nx)`` of ``grid`` on them ``(k, m)``, ``empty`` in the cells a grid of some
-    rows and columns (a blocked survey's sample) does not hold.
+    ``x_m``, ``y_m``: the whole grid's cell centres (the map's extent). ``shown`` gives a field
+    ``(ny, nx)`` of ``grid`` at most :data:`~pipeline.outputs.report_figures.MAP_CELLS` cells
+    a side of the whole grid (nearest, :func:`~pipeline.outputs.report_figures.nearest_cells`),
+    ``empty`` in the cells a grid of some rows and columns (a blocked survey's sample) does not
+    hold.
     """
     if getattr(grid, "rows", None) is None:
         ri, ci = (F.nearest_cells(n) for n in grid.shape)
-        return grid.x_m[ci], grid.y_m[ri], lambda values, empty: np.asarray(values)[np.ix_(ri, ci)]
+        return grid.x_m, grid.y_m, lambda values, empty: np.asarray(values)[np.ix_(ri, ci)]
     x_m, y_m = cell_centres_m(grid.bounds_m, grid.resolution_m)
     ri, ci = F.nearest_cells(y_m.size), F.nearest_cells(x_m.size)
     (r, r_ok), (c, c_ok) = held_index(ri, grid.rows), held_index(ci, grid.cols)
     held = r_ok[:, None] & c_ok[None, :]
 
     def shown(values, empty):
-        return np.where(held, np.asarray(values)[np.ix_(r, c)], empty)
+        values = np.asarray(values)
+        if values.size == 0:  # no cell held: nothing to index
+            return np.full(held.shape, empty, dtype=np.result_type(values, type(empty)))
+        return np.where(held, values[np.ix_(r, c)], empty)
 
-    return x_m[ci], y_m[ri], shown
+    return x_m, y_m, shown
+
+
+def colour_limits(values) -> tuple[float | None, float | None]:
+    """``(min, max)`` of the finite ``values`` (all of a field's cells, not those a map shows)."""
+    v = np.asarray(values, dtype=np.float64)
+    ok = np.isfinite(v)
+    return (float(v[ok].min()), float(v[ok].max())) if ok.any() else (None, None)
 
 
 def _error_section(truth, pts, grid, level_m, area_m, evaluation) -> str:
@@ -225,7 +245,10 @@ def _error_section(truth, pts, grid, level_m, area_m, evaluation) -> str:
     gerr, _ = grid_errors_m(grid, truth_depth_m=lambda x, y: level_m - truth.seabed.height_m(x, y))
     bands = depth_bands(true_d, err)
     gx, gy, shown = map_cells(grid)
-    fig = F.error_figure(gx, gy, grid.resolution_m, shown(gerr, np.nan), area_m, err, true_d, bands)
+    lim = float(np.nanpercentile(np.abs(gerr), 98)) if np.isfinite(gerr).any() else 1.0
+    fig = F.error_figure(
+        gx, gy, grid.resolution_m, shown(gerr, np.nan), area_m, err, true_d, bands, lim
+    )
     ev = evaluation["error"]
     rows = [
         [name, st["n"], st["bias_m"], st["std_m"], st["rmse_m"], st["p95_abs_m"], st["max_abs_m"]]

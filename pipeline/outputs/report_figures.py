@@ -49,8 +49,8 @@ def png(fig: Figure) -> bytes:
 
 
 #: Cells a map shows along each axis, at most: a map is a few hundred pixels wide, and
-#: matplotlib's image pipeline holds ~100 B a cell (a blocked survey's sample is gridded over
-#: the whole survey's bounds: a million cells cost ~100 MiB a map).
+#: matplotlib's image pipeline holds ~100 B a cell (``error_figure`` of a million cells:
+#: 106 MiB traced, against 6 MiB for ten thousand).
 MAP_CELLS = 1024
 
 
@@ -58,7 +58,7 @@ def nearest_cells(n: int) -> np.ndarray:
     """Rows (or columns) of ``n`` shown: all, or :data:`MAP_CELLS` picked at even spacing.
 
     Each picked index is the cell under the centre of its share of the axis, as
-    nearest-neighbour drawing picks a cell under each pixel: the map keeps its extent.
+    nearest-neighbour drawing picks a cell under each pixel.
     """
     if n <= MAP_CELLS:
         return np.arange(n)
@@ -68,7 +68,9 @@ def nearest_cells(n: int) -> np.ndarray:
 def _show(ax, values, x_m, y_m, res_m: float, **kw):
     """Show a cell-centred grid north up, whichever way its rows run (GeoTIFF: north first).
 
-    At most :data:`MAP_CELLS` cells a side are drawn (:func:`nearest_cells`).
+    ``x_m``, ``y_m``: the whole grid's cell centres (its extent). At most :data:`MAP_CELLS`
+    cells a side are drawn (:func:`nearest_cells`): ``values`` is the whole grid's, or the
+    cells those pick (:func:`pipeline.outputs.report.map_cells`), stretched over the extent.
     """
     h = 0.5 * res_m
     extent = (x_m.min() - h, x_m.max() + h, y_m.min() - h, y_m.max() + h)
@@ -93,15 +95,18 @@ def _map_axes(ax, title: str) -> None:
     ax.set_title(title)
 
 
-def coverage_map(x_m, y_m, res_m, count, area_m, covered: float | None) -> bytes:
+def coverage_map(
+    x_m, y_m, res_m, count, area_m, covered: float | None, limits=(None, None)
+) -> bytes:
     """Density of the gridded (class-40) points per cell, points/m², the asked area outlined.
 
-    ``covered``: share of the asked area with a point of any class (the run's coverage figure).
+    ``covered``: share of the asked area with a point of any class (the run's coverage figure);
+    ``limits``: the colour scale's ``(vmin, vmax)`` (default: those of ``count``'s cells).
     """
     fig = _figure()
     ax = fig.add_subplot()
     dens = np.where(count > 0, count / res_m**2, np.nan)
-    im = _show(ax, dens, x_m, y_m, res_m, cmap="viridis")
+    im = _show(ax, dens, x_m, y_m, res_m, cmap="viridis", vmin=limits[0], vmax=limits[1])
     fig.colorbar(im, ax=ax, label="class-40 soundings per m²")
     _area(ax, area_m)
     cov = "" if covered is None else f"\n{covered:.0%} of the asked area has any point"
@@ -144,11 +149,13 @@ def waveforms(
     return png(fig)
 
 
-def grid_map(x_m, y_m, res_m, values, area_m, label: str, title: str, cmap="viridis_r") -> bytes:
-    """One grid quantity as a map (NaN cells blank)."""
+def grid_map(
+    x_m, y_m, res_m, values, area_m, label: str, title: str, cmap="viridis_r", limits=(None, None)
+) -> bytes:
+    """One grid quantity as a map (NaN cells blank); ``limits``: the colour scale's."""
     fig = _figure()
     ax = fig.add_subplot()
-    im = _show(ax, values, x_m, y_m, res_m, cmap=cmap)
+    im = _show(ax, values, x_m, y_m, res_m, cmap=cmap, vmin=limits[0], vmax=limits[1])
     fig.colorbar(im, ax=ax, label=label)
     _area(ax, area_m)
     _map_axes(ax, title)
@@ -174,12 +181,27 @@ def order_map(x_m, y_m, res_m, codes, labels: Sequence[str], area_m) -> bytes:
 
 
 def error_figure(
-    x_m, y_m, res_m, grid_err_m, area_m, point_err_m, point_depth_m, bands: list[dict]
+    x_m,
+    y_m,
+    res_m,
+    grid_err_m,
+    area_m,
+    point_err_m,
+    point_depth_m,
+    bands: list[dict],
+    err_limit_m: float | None = None,
 ) -> bytes:
-    """Grid error map, point error histogram, and bias / RMSE / IHO allowance per depth band."""
+    """Grid error map, point error histogram, and bias / RMSE / IHO allowance per depth band.
+
+    ``err_limit_m``: the error scale's half-width (default: the 98th percentile of the
+    cells' ``|grid_err_m|``).
+    """
     fig = _figure(11.0, 4.2)
     a, b, c = fig.subplots(1, 3)
-    lim = float(np.nanpercentile(np.abs(grid_err_m), 98)) if np.isfinite(grid_err_m).any() else 1
+    lim = err_limit_m
+    if lim is None:  # the 98th percentile of the cells' |error|
+        finite = np.isfinite(grid_err_m).any()
+        lim = float(np.nanpercentile(np.abs(grid_err_m), 98)) if finite else 1
     im = _show(
         a,
         grid_err_m,

@@ -58,6 +58,7 @@ __all__ = [
     "grid_from_statistics",
     "grid_points",
     "grid_seabed",
+    "require_whole",
     "seabed_values",
     "snap_bounds_m",
 ]
@@ -131,23 +132,29 @@ class Grid:
     @property
     def local_transform(self) -> Affine:
         """Affine from (col, row) of cell corners to local (x, y)."""
-        _whole(self)
+        require_whole(self)
         w, _, _, n = self.bounds_m
         return Affine(self.resolution_m, 0.0, w, 0.0, -self.resolution_m, n)
 
     @property
     def transform(self) -> Affine:
         """Affine from (col, row) of cell corners to world (easting, northing)."""
-        _whole(self)
+        require_whole(self)
         w, _, _, n = self.bounds_m
         e0, n0 = self.origin_m[0], self.origin_m[1]
         return Affine(self.resolution_m, 0.0, w + e0, 0.0, -self.resolution_m, n + n0)
 
 
-def _whole(grid) -> None:
-    """Refuse a grid of some rows and columns what needs the whole grid (an affine transform)."""
+def require_whole(grid, what: str = "an affine transform") -> None:
+    """Refuse a grid of some rows and columns ``what`` needs the whole grid for.
+
+    Raises
+    ------
+    ValueError
+        ``grid`` holds some rows and columns only (:class:`Grid`'s ``rows``, ``cols``).
+    """
     if getattr(grid, "rows", None) is not None or getattr(grid, "cols", None) is not None:
-        raise ValueError("a grid of some rows and columns has no affine transform")
+        raise ValueError(f"a grid of some rows and columns cannot give {what}")
 
 
 def snap_bounds_m(

@@ -68,7 +68,7 @@ def test_the_sample_grid_holds_the_whole_grids_cells_and_every_sounding(seed):
     rows = np.flatnonzero(whole.count.sum(axis=1))
     for d in range(-MARGIN_CELLS, MARGIN_CELLS + 1):
         assert np.isin(np.clip(rows + d, 0, whole.shape[0] - 1), part.rows).all()
-    with pytest.raises(ValueError, match="no affine transform"):
+    with pytest.raises(ValueError, match="some rows and columns cannot give an affine transform"):
         _ = part.transform
 
 
@@ -174,6 +174,40 @@ def test_the_reports_maps_show_the_sample_grid_as_the_whole(bounds):
     (xw, yw, show_w), (xp, yp, show_p) = map_cells(whole), map_cells(part)
     np.testing.assert_array_equal(xp, xw)
     np.testing.assert_array_equal(yp, yw)
-    assert max(yw.size, xw.size) <= MAP_CELLS
+    np.testing.assert_array_equal(xw, whole.x_m)  # the extent: the whole grid's
+    np.testing.assert_array_equal(yw, whole.y_m)
+    assert max(show_w(whole.count, 0).shape) == min(MAP_CELLS, max(whole.shape))
     np.testing.assert_array_equal(show_p(part.depth_m, np.nan), show_w(whole.depth_m, np.nan))
     np.testing.assert_array_equal(show_p(part.count, 0), show_w(whole.count, 0))
+
+
+def test_a_sample_with_no_point_in_the_grid_holds_no_cell_and_draws_and_overlays_nothing():
+    pts = SimpleNamespace(
+        xyz_m=np.array([[500.0, 500.0, -4.0]]),
+        depth_m=np.array([4.0]),
+        classification=np.array([BATHYMETRIC_POINT], dtype=np.uint8),
+    )
+    whole, part = _grids(pts)
+    assert part.count.shape == (0, 0) and whole.count.sum() == 0
+    ny, nx = whole.shape
+    x, y, shown = map_cells(part)
+    assert np.isnan(shown(part.depth_m, np.nan)).all()
+    assert (shown(part.count, 0) == 0).all() and x.size == nx and y.size == ny
+    cells = SimpleNamespace(
+        n_posterior=np.zeros((0, 0), int), tvu95_m=np.zeros((0, 0)), order=np.zeros((0, 0))
+    )
+    overlay = Overlay(cells, part.rows, part.cols)
+    sampled, _ = overlay.window("tvu95_m", slice(0, 5), slice(None), (ny, nx))
+    assert sampled.shape == (5, nx) and not sampled.any()
+
+
+def test_a_sample_grid_is_never_written_as_a_file_of_its_own(tmp_path):
+    from pipeline.outputs.grid_tiles import cell_records
+    from pipeline.outputs.netcdf import write_grid_nc
+
+    _, part = _grids(_sample(11))
+    with pytest.raises(ValueError, match="some rows and columns"):
+        write_grid_nc(tmp_path / "g.nc", part)
+    with pytest.raises(ValueError, match="some rows and columns"):
+        cell_records(part, None, (slice(0, 2), slice(0, 2)))
+    assert not (tmp_path / "g.nc").exists()
