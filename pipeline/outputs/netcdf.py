@@ -221,10 +221,37 @@ def save_grid_nc(path: str | Path, ds) -> Path:
     # atomically (a run killed meanwhile leaves the output folder clean)
     with tempfile.TemporaryDirectory(prefix="bathy-nc-") as d:
         staged = Path(d) / "grid.nc"
-        ds.to_netcdf(staged, format="NETCDF4", engine="netcdf4", encoding=encoding)
+        if any(ds[k].chunks is not None for k in ds.data_vars):
+            _to_netcdf_in_order(ds, staged, encoding)
+        else:
+            ds.to_netcdf(staged, format="NETCDF4", engine="netcdf4", encoding=encoding)
         with atomic_path(path) as tmp, open(staged, "rb") as src, open(tmp, "wb") as dst:
             shutil.copyfileobj(src, dst, 1 << 20)  # by pieces: the file can be large
     return path
+
+
+def _to_netcdf_in_order(ds, path: Path, encoding: dict) -> None:
+    """``ds.to_netcdf`` (NetCDF-4), its dask variables stored one after another, in chunk order.
+
+    One store of every variable runs their chunks in an order that their tasks' keys set, and
+    those hold random tokens; HDF5 lays the chunks out as they come, so the same content would
+    give other bytes on every run. xarray's ``multifile`` writer (what ``save_mfdataset`` uses)
+    hands back the writer with its dask sources still to store: stored here one at a time, a
+    variable's chunks go in their own order and the file is the same on every run.
+    """
+    import dask.array as da
+    from xarray.backends.writers import to_netcdf
+
+    writer, store = to_netcdf(
+        ds, path, format="NETCDF4", engine="netcdf4", encoding=encoding, multifile=True
+    )
+    try:
+        for source, target, region in zip(
+            writer.sources, writer.targets, writer.regions, strict=True
+        ):
+            da.store(source, target, lock=writer.lock, flush=True, regions=region)
+    finally:
+        store.close()
 
 
 def write_grid_nc(path: str | Path, grid: Grid, cells: CellUncertainty | None = None) -> Path:
