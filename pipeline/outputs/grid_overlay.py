@@ -48,8 +48,10 @@ class Overlay:
                 f"`overlay` has shape {c.order.shape} on {self.rows.size} rows and"
                 f" {self.cols.size} columns of the grid's {shape}"
             )
-        r0, r1, _ = rows.indices(shape[0])
-        k0, k1, _ = cols.indices(shape[1])
+        r0, r1, r_step = rows.indices(shape[0])
+        k0, k1, k_step = cols.indices(shape[1])
+        if r_step != 1 or k_step != 1:
+            raise ValueError(f"a window is a block of cells (step 1); got {rows}, {cols}")
         values = getattr(c, field)
         if values.size == 0:  # no cell held
             return np.zeros((r1 - r0, k1 - k0), dtype=bool), np.zeros((r1 - r0, k1 - k0))

@@ -240,7 +240,11 @@ def _to_netcdf_in_order(ds, path: Path, encoding: dict) -> None:
     variable's chunks go in their own order and the file is the same on every run.
     """
     import dask.array as da
-    from xarray.backends.writers import to_netcdf
+
+    try:
+        from xarray.backends.writers import to_netcdf
+    except ImportError:  # xarray before 2025.09 kept it here
+        from xarray.backends.api import to_netcdf
 
     writer, store = to_netcdf(
         ds, path, format="NETCDF4", engine="netcdf4", encoding=encoding, multifile=True
@@ -249,7 +253,11 @@ def _to_netcdf_in_order(ds, path: Path, encoding: dict) -> None:
         for source, target, region in zip(
             writer.sources, writer.targets, writer.regions, strict=True
         ):
-            da.store(source, target, lock=writer.lock, flush=True, regions=region)
+            # one thread: a variable's chunks are laid out in their order
+            da.store(
+                source, target, lock=writer.lock, flush=True, regions=region,
+                scheduler="synchronous",
+            )  # fmt: skip
     finally:
         store.close()
 

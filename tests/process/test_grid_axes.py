@@ -129,6 +129,8 @@ def test_the_overlay_of_a_sample_grid_lays_the_whole_grids_cells():
             np.testing.assert_array_equal(vp[sp], vw[sw])
     with pytest.raises(ValueError, match="overlay"):
         Overlay(held, part.rows, part.cols[:-1]).window("order", rows, cols, (ny, nx))
+    with pytest.raises(ValueError, match="step 1"):
+        Overlay(held, part.rows, part.cols).window("order", slice(0, 4, 2), cols, (ny, nx))
 
 
 def test_cube_detection_and_cell_truth_read_the_sample_grid_as_the_whole():
