@@ -44,7 +44,7 @@ import pyproj
 from affine import Affine
 
 from pipeline.process.classify import BATHYMETRIC_POINT, SUBMERGED_OBJECT
-from pipeline.process.grid_axes import held_cells
+from pipeline.process.grid_axes import full_shape, held_cells, row_col
 from pipeline.process.returns import Points
 
 __all__ = [
@@ -311,12 +311,8 @@ def cell_index(
     x: np.ndarray, y: np.ndarray, bounds_m: np.ndarray, resolution_m: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """Flat cell ``row * nx + col`` of each point, ``(n,)`` int64, and whether it is inside."""
-    w, e, s, n = bounds_m
-    nx, ny = int(round((e - w) / resolution_m)), int(round((n - s) / resolution_m))
-    col = np.floor((x - w) / resolution_m).astype(np.int64)
-    row = np.floor((n - y) / resolution_m).astype(np.int64)
-    inside = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
-    return row * nx + col, inside
+    row, col, inside = row_col(x, y, bounds_m, resolution_m)
+    return row * full_shape(bounds_m, resolution_m)[1] + col, inside
 
 
 def cell_statistics(cell: np.ndarray, v: np.ndarray, z: np.ndarray, size: int) -> dict:
