@@ -14,7 +14,7 @@ from collections.abc import Callable
 import numpy as np
 
 from pipeline.process.grid import Grid, designate_objects
-from pipeline.process.objects import classify_objects
+from pipeline.process.objects import classify_objects_fit
 from pipeline.process.seabed_outliers import REJECTED, reject_seabed_outliers
 from pipeline.uncertainty.survey_uncertainty import without_points
 
@@ -71,9 +71,12 @@ def objects_and_rejections(
     # class-43 test and TVU rule: their own TPU). That chain ends there, so the points whose
     # TPU a block propagates (`tpu_points`: the kept ones and those within that reach of
     # them) are the ones both tests need at (pipeline.survey_blocks)
-    pts, n_obj = classify_objects(processed.points, ps.objects, tested)
-    # gross errors: class 7, withheld; the grid and the cells again without them
-    pts, rejected = reject_seabed_outliers(pts, ps.outliers, ps.objects, surface_range_m, tested)
+    pts, n_obj, fitted = classify_objects_fit(processed.points, ps.objects, tested)
+    # gross errors: class 7, withheld; the grid and the cells again without them (the far-below
+    # test reads the objects' planes where it tests the same points)
+    pts, rejected = reject_seabed_outliers(
+        pts, ps.outliers, ps.objects, surface_range_m, tested, fitted
+    )
     processed = dataclasses.replace(processed, points=pts)
     if sum(rejected.values()):
         grid = make_grid(processed.points)

@@ -48,7 +48,14 @@ from pipeline.process.classify import BATHYMETRIC_POINT, SUBMERGED_OBJECT
 from pipeline.process.returns import Points, ReturnKind
 from pipeline.process.row_kernels import median_of
 
-__all__ = ["ObjectSettings", "ObjectDetections", "detect_objects", "classify_objects"]
+__all__ = [
+    "ObjectSettings",
+    "ObjectDetections",
+    "SeabedFit",
+    "detect_objects",
+    "classify_objects",
+    "classify_objects_fit",
+]
 
 #: Tukey biweight tuning constant (95 % efficiency at the normal distribution)
 _TUKEY_C = 4.685
@@ -295,13 +302,66 @@ def classify_objects(points: Points, settings: ObjectSettings, tested=None) -> t
     ``(n_points,)`` bool: the points tested (default: all); every class-40 bottom is still a
     reference point (:func:`detect_objects`), the others keep their class.
     """
+    out, n, _ = classify_objects_fit(points, settings, tested)
+    return out, n
+
+
+@dataclass(frozen=True)
+class SeabedFit:
+    """The object test's local seabed fits, kept for the far-below test of the same points.
+
+    The rejection test (:func:`pipeline.process.seabed_outliers.reject_seabed_outliers`)
+    fits the same robust planes to the class-40 bottoms left after the objects and its
+    first two rules: where those are the very points fitted here (no object found, none
+    rejected before), at the same positions, TPU and tested rows, its fit would be this one
+    to the bit, and it reads this one instead (the fit is half of processing's class tests).
+
+    Attributes
+    ----------
+    rows : (m,) int ndarray
+        The fitted points (class-40 bottoms), indices into the classified points.
+    xyz_m, sigma_z_m : (m, 3), (m,) ndarray
+        Their positions and vertical TPU as fitted.
+    tested : (m,) bool ndarray or None
+        The rows tested (None: all).
+    settings : ObjectSettings
+    found : ObjectDetections
+        Per row.
+    """
+
+    rows: np.ndarray
+    xyz_m: np.ndarray
+    sigma_z_m: np.ndarray
+    tested: np.ndarray | None
+    settings: ObjectSettings
+    found: ObjectDetections
+
+    def reads(self, xyz_m, sigma_z_m, tested, settings: ObjectSettings) -> bool:
+        """Whether a fit of these rows' positions, TPU, tested rows and settings is this one."""
+        if (self.tested is None) != (tested is None):
+            return False
+        if tested is not None and not np.array_equal(self.tested, tested):
+            return False
+        return (
+            settings == self.settings
+            and np.array_equal(self.xyz_m, xyz_m)
+            and np.array_equal(self.sigma_z_m, sigma_z_m, equal_nan=True)
+        )
+
+
+def classify_objects_fit(
+    points: Points, settings: ObjectSettings, tested=None
+) -> tuple[Points, int, SeabedFit | None]:
+    """:func:`classify_objects`, and its seabed fits for the rejection test (None: no fit)."""
     sea = (points.classification == BATHYMETRIC_POINT) & (points.kind == ReturnKind.BOTTOM)
     if not settings.enabled or not sea.any():
-        return points, 0
+        return points, 0, None
     idx = np.flatnonzero(sea)
     xyz = points.xyz_m[idx]
+    sig = points.uncertainty_v_m[idx]
     test = None if tested is None else np.asarray(tested, dtype=bool)[idx]
-    found = detect_objects(xyz[:, :2], xyz[:, 2], points.uncertainty_v_m[idx], settings, test)
+    found = detect_objects(xyz[:, :2], xyz[:, 2], sig, settings, test)
     cls = points.classification.copy()
     cls[idx[found.is_object]] = SUBMERGED_OBJECT
-    return points.replace(classification=cls), int(found.is_object.sum())
+    fit = SeabedFit(idx, xyz, sig, test, settings, found)
+    return points.replace(classification=cls), int(found.is_object.sum()), fit

@@ -54,7 +54,7 @@ import numpy as np
 from pipeline import iho
 from pipeline.config import setting
 from pipeline.process.classify import BATHYMETRIC_POINT, LOW_NOISE, WATER_SURFACE
-from pipeline.process.objects import ObjectSettings, detect_objects
+from pipeline.process.objects import ObjectDetections, ObjectSettings, SeabedFit, detect_objects
 from pipeline.process.returns import PointFlag, Points, ReturnKind
 
 __all__ = [
@@ -167,7 +167,11 @@ def seabed_outliers(
         Height above the local seabed fit and the test's sigma (NaN: too few neighbours,
         not tested).
     """
-    found = detect_objects(xy_m, z_m, sigma_z_m, fit, tested)
+    return _below(detect_objects(xy_m, z_m, sigma_z_m, fit, tested), settings)
+
+
+def _below(found: ObjectDetections, settings: OutlierSettings):
+    """:func:`seabed_outliers`' verdict on the fits ``found``: ``(outlier, height, sigma)``."""
     h, s = found.height_m, found.sigma_m
     with np.errstate(invalid="ignore"):
         out = (h < -settings.k_sigma * s) & (-h >= settings.min_offset_m)
@@ -180,6 +184,7 @@ def reject_seabed_outliers(
     fit: ObjectSettings,
     surface_range_m: tuple[float, float] | None = None,
     tested=None,
+    fitted: SeabedFit | None = None,
 ) -> tuple[Points, dict[str, int]]:
     """Class-40 bottom points either rule rejects set to class 7 and flagged; counts.
 
@@ -198,6 +203,11 @@ def reject_seabed_outliers(
         survey tests the points whose class it keeps (:mod:`pipeline.survey_blocks`). Every
         class-40 point the rules before keep is still a reference point of its plane; the
         other rules are per point and test all.
+    fitted : SeabedFit, optional
+        The object test's fits of these points
+        (:func:`~pipeline.process.objects.classify_objects_fit`): read instead of fitting
+        again where rule 3 tests the very points they fitted, at the same positions, TPU,
+        tested rows and ``fit`` (the same planes to the bit); otherwise fitted again.
 
     Returns
     -------
@@ -233,7 +243,14 @@ def reject_seabed_outliers(
         xyz = points.xyz_m[idx]
         sig = points.uncertainty_v_m[idx]
         test = None if tested is None else np.asarray(tested, dtype=bool)[idx]
-        out, _, _ = seabed_outliers(xyz[:, :2], xyz[:, 2], sig, settings, fit, test)
+        if (
+            fitted is not None
+            and np.array_equal(fitted.rows, idx)
+            and fitted.reads(xyz, sig, test, fit)
+        ):
+            out, _, _ = _below(fitted.found, settings)
+        else:
+            out, _, _ = seabed_outliers(xyz[:, :2], xyz[:, 2], sig, settings, fit, test)
         flags[idx[out]] |= np.uint16(PointFlag.SEABED_OUTLIER)
         counts["seabed_outlier"] = int(out.sum())
     rejected = (flags & np.uint16(REJECTED)) != 0

@@ -261,3 +261,52 @@ def test_a_block_tests_its_points_and_those_their_rejection_reads():
     # the cube on the edge: untested, its points outside stay class 40 and enter the planes
     _, h_alone = cleaned(kept)
     assert not np.array_equal(h_alone[kept], h_whole[kept], equal_nan=True)
+
+
+@pytest.mark.parametrize("tested_half", [False, True])
+def test_the_objects_fits_are_read_again_only_where_they_are_the_same_fits(
+    tested_half, monkeypatch
+):
+    """The far-below test reads the object test's planes (``classify_objects_fit``) where it
+    tests the very points they fitted: its flags are those of fitting again, and the fit is
+    made once. Where an object or a rule-1 point leaves the class-40 set, it fits again
+    (the fit is then another one: a cube's points are no longer its neighbours)."""
+    import pipeline.process.seabed_outliers as so
+    from pipeline.process.objects import classify_objects_fit
+
+    rng = np.random.default_rng(31)
+    x, y, z, sig = cloud(rng)
+    blunders = rng.choice(x.size, 30, replace=False)
+    z[blunders] -= rng.uniform(1.0, 8.0, blunders.size)
+    tested = (x < 4.0) if tested_half else None
+    calls = []
+    real = so.detect_objects
+    monkeypatch.setattr(so, "detect_objects", lambda *a, **k: calls.append(1) or real(*a, **k))
+    obj, out = ObjectSettings(), OutlierSettings()
+
+    def both(pts):
+        found, n_obj, fitted = classify_objects_fit(pts, obj, tested)
+        calls.clear()
+        again, c_again = reject_seabed_outliers(found, out, obj, tested=tested)
+        fit_again = len(calls)
+        calls.clear()
+        read, c_read = reject_seabed_outliers(found, out, obj, tested=tested, fitted=fitted)
+        np.testing.assert_array_equal(read.flags, again.flags)
+        np.testing.assert_array_equal(read.classification, again.classification)
+        assert c_read == c_again
+        return n_obj, fit_again, len(calls), c_read
+
+    n_obj, fit_again, fit_read, counts = both(points(x, y, z, sig))
+    assert (n_obj, fit_again, fit_read) == (0, 1, 0)
+    assert counts["seabed_outlier"] > 0
+    # a cube: its points become class 43, so the far-below test fits the others again
+    on = (np.abs(x - 2.0) <= 1.0) & (np.abs(y - 2.0) <= 1.0)
+    z2 = z.copy()
+    z2[on] += 2.0
+    n_obj, fit_again, fit_read, _ = both(points(x, y, z2, sig))
+    assert n_obj > 0 and (fit_again, fit_read) == (1, 1)
+    # a point beyond order 2's TVU (rule 1) leaves the set too
+    sig2 = sig.copy()
+    sig2[5] = 5.0
+    n_obj, fit_again, fit_read, counts = both(points(x, y, z, sig2))
+    assert counts["tvu_exceeded"] == 1 and (n_obj, fit_read) == (0, 1)
