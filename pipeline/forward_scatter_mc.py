@@ -197,7 +197,7 @@ def _trilinear(h, ia, wa, ft, fr):
     Cell indices and weights from the fractional grid positions ``ft``, ``fr`` and the alpha
     cell ``ia`` (weight ``wa``); every product and sum in the order the whole-array numpy
     expression made them, so the same figures to the bit, without its ~30 gathered
-    temporaries per call (the TPU calls it in each of its ~35 refraction passes).
+    temporaries per call (the TPU calls it in each of its ~25 refraction passes).
     """
     n = ft.size
     n_tau, n_rho = h.shape[2], h.shape[3]

@@ -247,7 +247,7 @@ def survey_uncertainty(
     # survey-wide: the amplitude a return without one is weighted as
     fill = amplitude_fill(returns) if wide is None else wide.amplitude_fill
     detector = returns  # the detector's own timing sigmas, before the scatter raises them
-    returns = timing_from_scatter(
+    returns, derivatives = timing_from_scatter(
         returns,
         processed.surface,
         refr,
@@ -259,6 +259,7 @@ def survey_uncertainty(
         raise_only=returns.t_bottom_sigma_s is not None,
         amplitude_fill=fill,
         scatter_column=Z if by_height else DEPTH,
+        return_derivatives=True,  # the TPU below reads them: the same pulses' points
     )
     # the surface as its returns measure it: their height variogram's nugget (the ranging
     # error of a surface point, e.g. a calm-water onset) raises each surface timing sigma
@@ -284,7 +285,9 @@ def survey_uncertainty(
         seabed_gradient=grad,
         surface_tilt_sigma_rad=tilt,
         wave_sigma_m=pooled_wave(every_bottom, processed.surface, vg, st),
+        derivatives=derivatives,
     )
+    del derivatives
     # what the scatter and the variogram added to the detector's sigmas is not the
     # waveform's: a posterior of the waveform replaces only the detector's share
     tpu = split_timing_excess(tpu, detector, returns)

@@ -2,8 +2,9 @@
 
 Every input error is propagated through the processing's own georeferencing,
 :func:`pipeline.process.refraction.seabed_points`, by central differences (vectorised: one call
-per perturbed input for all points), except the rigid motions, whose effect is exact and
-analytic. One-sigma terms are independent and add in quadrature per coordinate.
+per perturbed input for all points; one derivative per input moved, shared by the terms that
+move it and with :func:`timing_from_scatter`'s pass), except the rigid motions, whose effect
+is exact and analytic. One-sigma terms are independent and add in quadrature per coordinate.
 
 Each term is a one-sigma change of four numbers: the point's ``x``, ``y``, ``z`` and its
 **depth below the measured water surface at the measured (x, y)**, ``depth_m - g . (dx, dy)``,
@@ -106,6 +107,7 @@ term not finite) are left out and counted, never fatal (:mod:`pipeline.uncertain
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -113,6 +115,7 @@ import numpy as np
 from pipeline.process.refraction import RefractionSettings
 from pipeline.process.returns import DetectedReturns
 from pipeline.process.surface_fit import WaterSurface
+from pipeline.uncertainty.tpu_derivatives import Derivatives
 from pipeline.uncertainty.tpu_monte_carlo import monte_carlo_points
 from pipeline.uncertainty.tpu_neighbours import (
     pair_scatter,
@@ -171,6 +174,7 @@ def point_tpu(
     seabed_gradient: Any = None,
     surface_tilt_sigma_rad: Any = None,
     wave_sigma_m: Any = None,
+    derivatives: Derivatives | None = None,
 ) -> PointTpu:
     """First-order propagated uncertainty of the refraction-corrected bottom points.
 
@@ -195,6 +199,10 @@ def point_tpu(
         The sea each pulse's plane cannot follow
         (:func:`~pipeline.uncertainty.wave_pool.surface_wave_sigma_m`). Default: pooled from
         ``returns`` and ``surface`` themselves.
+    derivatives : Derivatives, optional
+        The points and derivatives :func:`timing_from_scatter` made of these pulses
+        (``return_derivatives``): read where they are of the same bottom pulses, surface and
+        refraction (:meth:`~pipeline.uncertainty.tpu_terms.Derivatives.of`), else ignored.
 
     Returns
     -------
@@ -208,6 +216,8 @@ def point_tpu(
     st = settings or TpuSettings()
     rst = refraction_settings or RefractionSettings()
     inp = _inputs(returns, surface, rst, st, seabed_gradient, surface_tilt_sigma_rad, wave_sigma_m)
+    if derivatives is not None:
+        inp = dataclasses.replace(inp, derivatives=derivatives.of(inp, surface, st))
     code = timing_unresolved(inp.ret, inp.sig_ts, inp.sig_tb)
     out = code >= 0
     left = LeftOut(inp.ret.pulse_id[out], code[out])

@@ -18,6 +18,7 @@ from pipeline.process.returns import DetectedReturns
 from pipeline.process.surface_fit import WaterSurface
 from pipeline.uncertainty.pair_scatter import pair_scatter
 from pipeline.uncertainty.seabed_gradient import seabed_gradient
+from pipeline.uncertainty.tpu_derivatives import Derivatives
 from pipeline.uncertainty.tpu_settings import (
     DEPTH,
     RANDOM_TERMS,
@@ -195,7 +196,8 @@ def timing_from_scatter(
     raise_only: bool = False,
     amplitude_fill: tuple[float, float] | None = None,
     scatter_column: int = DEPTH,
-) -> DetectedReturns:
+    return_derivatives: bool = False,
+):
     """``returns`` with the per-return timing sigmas that the measured depth scatter implies.
 
     For a detector that reports no timing sigma: the timing terms' depth variance is set to the
@@ -239,6 +241,16 @@ def timing_from_scatter(
         (no sea between soundings). Its excess over the other random terms' height parts is
         ranging, carried to the depth by the bottom timing's depth-to-height ratio and split
         as a depth excess (not compared at the measured position: ~7 % off at 15° of slope).
+    return_derivatives : bool, optional
+        Also return the bottom pulses' points and their derivatives this pass made
+        (:class:`~pipeline.uncertainty.tpu_terms.Derivatives`), for :func:`point_tpu` of the
+        same pulses to read.
+
+    Returns
+    -------
+    DetectedReturns
+        And the :class:`~pipeline.uncertainty.tpu_terms.Derivatives` with
+        ``return_derivatives``.
     """
     st = settings or TpuSettings()
     rst = refraction_settings or RefractionSettings()
@@ -253,7 +265,9 @@ def timing_from_scatter(
     scatter = np.asarray(depth_scatter_m, dtype=np.float64).ravel()
     if scatter.shape != (n,):
         raise ValueError(f"`depth_scatter_m` must be (n_bottom,) = ({n},); got {scatter.shape}")
-    _, terms = _terms(inp, st_unit, RANDOM_TERMS)
+    _, terms, moves = _terms(inp, st_unit, RANDOM_TERMS, keep_moves=True)
+    derivatives = Derivatives(inp.row, moves, inp.ret, surface, rst, st.pointing_jitter_deg)
+    del moves
     if scatter_column not in (DEPTH, Z):
         raise ValueError(f"`scatter_column` must be DEPTH or Z; got {scatter_column!r}")
     col = scatter_column
@@ -312,7 +326,8 @@ def timing_from_scatter(
         sig_s[rows] = np.where(hs[use], np.clip(np.sqrt(ws * c)[use], floor, max_sigma_s), 0.0)
     sig_s = np.where(returns.has_surface, np.maximum(sig_s, floor), 0.0)
     sig_b = np.where(returns.has_bottom, np.maximum(sig_b, floor), 0.0)
-    return dataclasses.replace(returns, t_surface_sigma_s=sig_s, t_bottom_sigma_s=sig_b)
+    out = dataclasses.replace(returns, t_surface_sigma_s=sig_s, t_bottom_sigma_s=sig_b)
+    return (out, derivatives) if return_derivatives else out
 
 
 def amplitude_fill(returns: DetectedReturns) -> tuple[float, float]:

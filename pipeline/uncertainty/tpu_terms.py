@@ -23,7 +23,6 @@ from pipeline.uncertainty.tpu_settings import (
     CORRELATED_TERMS,
     DEPTH,
     RANDOM_TERMS,
-    TIMING_TERMS,
     TpuSettings,
     index_derivatives,
 )
@@ -73,14 +72,19 @@ class _Inputs:
     wave_h: np.ndarray
     row: np.ndarray
     grad: np.ndarray
+    #: derivatives already made of these rows (``moves`` of
+    #: :class:`~pipeline.uncertainty.tpu_derivatives.Derivatives`), or None
+    derivatives: dict | None = None
 
 
 def _take_inputs(inp: _Inputs, keep: np.ndarray) -> _Inputs:
     """The rows ``keep`` (bool over the bottom rows, or their indices) of every per-pulse input."""
+    known = inp.derivatives
     return dataclasses.replace(
         inp,
         ret=inp.ret.select(keep),
         surf=_take_surface(inp.surf, keep),
+        derivatives=None if known is None else {k: v[keep] for k, v in known.items()},
         **{k: getattr(inp, k)[keep] for k in ("sig_ts", "sig_tb", "wave_h", "row", "grad")},
     )
 
@@ -184,20 +188,60 @@ def _with_plane(inp, dh, tilt_axis=None, tilt=None):
     )
 
 
-def _white_evaluations(inp: _Inputs, st: TpuSettings):
-    """``(name, sigma, f)`` of every term that goes through ``seabed_points``.
+#: The central differences' steps of the inputs the terms move (:func:`_moves`): steps of
+#: the input, not of a term's sigma, so that one derivative serves every term moving that
+#: input (the fit's and the waves' plane terms) and both TPU passes
+#: (:func:`~pipeline.uncertainty.tpu_neighbours.timing_from_scatter`'s, then
+#: :func:`~pipeline.uncertainty.tpu.point_tpu`'s: :mod:`pipeline.uncertainty.tpu_derivatives`).
+#: Each is ~1/100 of its input's usual sigma (a timing of 0.1 ns, a plane height of 0.1 m,
+#: a tilt of 1 mrad), as the steps of 1/100 of each term's sigma before them: the tangent,
+#: far above the points' rounding (1e-11 m at 100 km). The terms moved from those steps'
+#: by at most 4e-4 of themselves, a median of 1e-10 (``benchmarks/RESULTS_e2e.md``,
+#: session 41).
+TIMING_STEP_S = 1e-12
+PLANE_STEP_M = 1e-3
+TILT_STEP_RAD = 1e-5
 
-    ``sigma`` is (n,); ``f`` maps a signed perturbation (n,) to the points and depths (n, 4).
+
+def _white_terms(inp: _Inputs, st: TpuSettings):
+    """``(name, move, sigma)`` of every term that goes through ``seabed_points``.
+
+    ``move`` names the input the term moves (:func:`_moves`); ``sigma`` is (n,).
+    """
+    n = len(inp.row)
+    water = inp.surf.is_water
+    fit_tilt = np.where(water, inp.surf.normal_sigma_rad / math.sqrt(2.0), 0.0)
+    wave_tilt = np.where(water, st.wave_slope_sigma_rad, 0.0)
+    jitter = np.full(n, np.radians(st.pointing_jitter_deg))
+    return [
+        ("timing_surface", "t_surface", inp.sig_ts),
+        ("timing_bottom", "t_bottom", inp.sig_tb),
+        ("pointing_a", "pointing_a", jitter),
+        ("pointing_b", "pointing_b", jitter),
+        ("wave_height", "plane_height", inp.wave_h),
+        ("wave_slope_x", "plane_tilt_x", wave_tilt),
+        ("wave_slope_y", "plane_tilt_y", wave_tilt),
+        ("surface_height", "plane_height", np.where(water, inp.surf.height_sigma_m, 0.0)),
+        ("surface_tilt_x", "plane_tilt_x", fit_tilt),
+        ("surface_tilt_y", "plane_tilt_y", fit_tilt),
+    ]
+
+
+def _moves(inp: _Inputs, st: TpuSettings):
+    """``{move: (step, f)}``: each input the white terms move, its step ``(n,)`` and ``f``.
+
+    ``f`` maps a signed step ``(n,)`` to the points and depths ``(n, 4)``. The steps are the
+    input's (:data:`TIMING_STEP_S`, :data:`PLANE_STEP_M`, :data:`TILT_STEP_RAD`; the pointing
+    jitter's 1/100, a setting), never past the surface-bottom gap for a time (the depth is
+    linear in it there).
     """
     n = len(inp.row)
     zeros = np.zeros(n)
     ex, ey = np.tile([1.0, 0.0, 0.0], (n, 1)), np.tile([0.0, 1.0, 0.0], (n, 1))
     pa, pb = _perp_axes(inp.ret.direction_meas)
     d = inp.ret.direction_meas
-    water = inp.surf.is_water
-    jitter = np.radians(st.pointing_jitter_deg)
-    fit_tilt = np.where(water, inp.surf.normal_sigma_rad / math.sqrt(2.0), 0.0)
-    wave_tilt = np.where(water, st.wave_slope_sigma_rad, 0.0)
+    cap = max_timing_step_s(inp.ret) if n else zeros
+    t_step = np.minimum(TIMING_STEP_S, cap)
 
     def turn(axis):
         def f(a):
@@ -207,26 +251,21 @@ def _white_evaluations(inp: _Inputs, st: TpuSettings):
 
         return f
 
-    def bottom_time(a):
-        return _xyzd(inp, ret=_with_times(inp, zeros, a))
-
     def plane(axis=None):
         if axis is None:
             return lambda a: _xyzd(inp, surf=_with_plane(inp, a))
         return lambda a: _xyzd(inp, surf=_with_plane(inp, zeros, axis, a))
 
-    return [
-        ("timing_surface", inp.sig_ts, lambda a: _xyzd(inp, ret=_with_times(inp, a, zeros))),
-        ("timing_bottom", inp.sig_tb, bottom_time),
-        ("pointing_a", np.full(n, jitter), turn(pa)),
-        ("pointing_b", np.full(n, jitter), turn(pb)),
-        ("wave_height", inp.wave_h, plane()),
-        ("wave_slope_x", wave_tilt, plane(ex)),
-        ("wave_slope_y", wave_tilt, plane(ey)),
-        ("surface_height", np.where(water, inp.surf.height_sigma_m, 0.0), plane()),
-        ("surface_tilt_x", fit_tilt, plane(ex)),
-        ("surface_tilt_y", fit_tilt, plane(ey)),
-    ]
+    point_step = np.full(n, 0.01 * np.radians(st.pointing_jitter_deg))
+    return {
+        "t_surface": (t_step, lambda a: _xyzd(inp, ret=_with_times(inp, a, zeros))),
+        "t_bottom": (t_step, lambda a: _xyzd(inp, ret=_with_times(inp, zeros, a))),
+        "pointing_a": (point_step, turn(pa)),
+        "pointing_b": (point_step, turn(pb)),
+        "plane_height": (np.full(n, PLANE_STEP_M), plane()),
+        "plane_tilt_x": (np.full(n, TILT_STEP_RAD), plane(ex)),
+        "plane_tilt_y": (np.full(n, TILT_STEP_RAD), plane(ey)),
+    }
 
 
 def _footprint(inp: _Inputs, xyz: np.ndarray, st: TpuSettings) -> np.ndarray:
@@ -256,49 +295,69 @@ def _forward_scatter_term(inp: _Inputs, n: int) -> np.ndarray:
     return _at_measured((scaled(1.0) - scaled(-1.0)) / (2.0 * h) * fs.relative_sigma, inp.grad)
 
 
-#: Bottom rows per block of :func:`_terms`: the ~35 refraction passes' temporaries stay
+#: Bottom rows per block of :func:`_terms`: the ~25 refraction passes' temporaries stay
 #: bounded (~60 arrays of the block's rows each) and the blocks run on the stage's threads.
 TERMS_BLOCK = 16384
 
 
 def _terms(
-    inp: _Inputs, st: TpuSettings, names=None, block: int | None = None
-) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    inp: _Inputs, st: TpuSettings, names=None, block: int | None = None, keep_moves: bool = False
+):
     """The nominal points ``(n, 4)`` and the one-sigma term rows ``(n, 4)`` asked for.
 
     Every row's terms are its own (each pass recomputes each point from its own inputs), so
     the rows go in blocks of ``block`` (default :data:`TERMS_BLOCK`), side by side on
     :func:`~pipeline.parallel.thread_map`'s threads: the same values for any block size and
-    thread count (``tests/uncertainty/test_tpu_survey_wide.py``).
+    thread count (``tests/uncertainty/test_tpu_survey_wide.py``). The derivatives of
+    ``inp.derivatives`` are read, not made again.
+
+    Returns
+    -------
+    xyzd0, terms
+        And with ``keep_moves``, the derivatives made or read third (``moves`` of
+        :class:`~pipeline.uncertainty.tpu_derivatives.Derivatives`).
     """
     n, block = len(inp.row), TERMS_BLOCK if block is None else block
     if n <= block:
-        return _terms_rows(inp, st, names)
-    parts = thread_map(
-        lambda lo: _terms_rows(_take_inputs(inp, np.arange(lo, min(lo + block, n))), st, names),
-        range(0, n, block),
-    )
-    xyzd0 = np.concatenate([p[0] for p in parts])
-    return xyzd0, {k: np.concatenate([p[1][k] for p in parts]) for k in parts[0][1]}
+        out = _terms_rows(inp, st, names)
+    else:
+        parts = thread_map(
+            lambda lo: _terms_rows(_take_inputs(inp, np.arange(lo, min(lo + block, n))), st, names),
+            range(0, n, block),
+        )
+        terms = {k: np.concatenate([p[1][k] for p in parts]) for k in parts[0][1]}
+        # a block whose rows have no sigma of a move's terms made no derivative of it
+        made = set.intersection(*(set(p[2]) for p in parts))
+        moves = {k: np.concatenate([p[2][k] for p in parts]) for k in sorted(made)}
+        out = (np.concatenate([p[0] for p in parts]), terms, moves)
+    return out if keep_moves else out[:2]
 
 
 def _terms_rows(inp: _Inputs, st: TpuSettings, names=None):
     """:func:`_terms` of all of ``inp``'s rows at once."""
     n = len(inp.row)
-    xyzd0 = _xyzd(inp) if n else np.zeros((0, 4))
+    known = {} if inp.derivatives is None else inp.derivatives
+    xyzd0 = known.get("xyzd") if "xyzd" in known else (_xyzd(inp) if n else np.zeros((0, 4)))
+    made = {"xyzd": xyzd0}
     want = set(RANDOM_TERMS + CORRELATED_TERMS) if names is None else set(names)
     terms: dict[str, np.ndarray] = {}
-    for name, sigma, f in _white_evaluations(inp, st):
+    moves = None
+    for name, move, sigma in _white_terms(inp, st):
         if name not in want:
             continue
-        h = 0.01 * sigma  # a small fraction of the sigma: the tangent, not a secant
-        if name in TIMING_TERMS:  # never past the surface-bottom gap (depth is linear in it)
-            h = np.minimum(h, max_timing_step_s(inp.ret))
-        if n == 0 or not np.any(h > 0):
+        if n == 0 or not np.any(sigma > 0):
             terms[name] = np.zeros((n, 4))
             continue
-        jac = (f(h) - f(-h)) / np.where(h > 0, 2.0 * h, 1.0)[:, None]
-        terms[name] = _at_measured(jac * sigma[:, None], inp.grad)
+        jac = made.get(move, known.get(move))
+        if jac is None:
+            moves = _moves(inp, st) if moves is None else moves
+            h, f = moves[move]
+            jac = (f(h) - f(-h)) / np.where(h > 0, 2.0 * h, 1.0)[:, None]
+        made[move] = jac
+        # a row without the term (sigma 0) has none, whatever its derivative
+        terms[name] = _at_measured(
+            np.where(sigma[:, None] > 0, jac * sigma[:, None], 0.0), inp.grad
+        )
     for name, (dp, dg) in index_derivatives(st).items():
         if name not in want:
             continue
@@ -345,4 +404,4 @@ def _terms_rows(inp: _Inputs, st: TpuSettings, names=None):
         fp = _footprint(inp, xyzd0[:, :3], st) if n else np.zeros(0)
         slope = math.tan(math.radians(st.seabed_slope_deg))
         terms["footprint"] = np.column_stack([fp, fp, fp * slope, np.zeros(n)])
-    return xyzd0, terms
+    return xyzd0, terms, made

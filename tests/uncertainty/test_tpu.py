@@ -602,3 +602,53 @@ def test_pair_scatter_leaves_out_the_seabed_relief_between_the_pairs():
     relief = np.sqrt(0.3**2 * (1.0 - np.cos(k * h)) / 2.0)
     assert relief > 3.0 * sigma  # the relief would dominate
     assert np.median(est) == pytest.approx(sigma, rel=0.25)
+
+
+def test_the_tpu_reads_the_derivatives_the_scatter_pass_made(monkeypatch):
+    """``timing_from_scatter`` moves the times, the beam and the plane's height of every
+    bottom pulse; ``point_tpu`` of the same pulses reads those derivatives and its figures
+    are those it makes without them, to the bit (the steps are the inputs', not the terms'
+    sigmas). Another surface object, or other times, and it makes them itself."""
+    import pipeline.uncertainty.tpu_terms as tt
+
+    ret, _ = survey(n_side=10, wave_m=0.05, seed=3)
+    n = len(ret)
+    ret = dataclasses.replace(ret, t_surface_sigma_s=np.full(n, 1e-10), t_bottom_sigma_s=None)
+    surf = fit_water_surface(ret, FIT)
+    st = TpuSettings(wave_slope_sigma_rad=0.02)
+    g = np.tile(GRAD, (n, 1))
+    scatter = np.linspace(0.01, 0.04, n)
+    passes = []
+    real = tt.seabed_xyz_depth
+    monkeypatch.setattr(tt, "seabed_xyz_depth", lambda *a: passes.append(1) or real(*a))
+    out, der = timing_from_scatter(
+        ret, surf, RST, st, depth_scatter_m=scatter, seabed_gradient=g, return_derivatives=True
+    )
+    # the points, and the two times, the two pointing turns, the plane's height and its two
+    # tilts (the waves' slopes are random terms), each moved both ways
+    moves = ["t_surface", "t_bottom", "pointing_a", "pointing_b", "plane_height"]
+    moves += ["plane_tilt_x", "plane_tilt_y"]
+    assert sorted(der.moves) == sorted(["xyzd", *moves])
+    assert len(passes) == 1 + 2 * len(moves)
+
+    def tpu(**k):
+        passes.clear()
+        got = point_tpu(out, surf, RST, st, seabed_gradient=g, **k)
+        return got, len(passes)
+
+    alone, n_alone = tpu()
+    read, n_read = tpu(derivatives=der)
+    assert n_read == n_alone - (1 + 2 * len(moves))
+    for name, v in alone.terms.items():
+        np.testing.assert_array_equal(read.terms[name], v, err_msg=name)
+    np.testing.assert_array_equal(read.sigma_depth_m, alone.sigma_depth_m)
+    # another surface (equal, but not the one the derivatives were made on): not read
+    other = dataclasses.replace(surf)
+    passes.clear()
+    point_tpu(out, other, RST, st, seabed_gradient=g, derivatives=der)
+    assert len(passes) == n_alone
+    # other times: not read
+    moved = dataclasses.replace(out, t_bottom_s=out.t_bottom_s + 1e-12)
+    passes.clear()
+    point_tpu(moved, surf, RST, st, seabed_gradient=g, derivatives=der)
+    assert len(passes) == n_alone

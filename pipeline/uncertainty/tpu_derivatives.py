@@ -1,0 +1,70 @@
+"""The TPU's derivatives of one pass, kept for the next: the points moved along each input.
+
+:func:`~pipeline.uncertainty.tpu_neighbours.timing_from_scatter` and
+:func:`~pipeline.uncertainty.tpu.point_tpu` move the same inputs of the same bottom pulses
+(the return times, the beam, the local plane's height and tilt) by the same steps
+(:data:`~pipeline.uncertainty.tpu_terms.TIMING_STEP_S`): the first's derivatives serve the
+second to the bit, and are passed on rather than made again.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.process.refraction import RefractionSettings
+from pipeline.process.returns import DetectedReturns
+from pipeline.process.surface_fit import WaterSurface
+
+__all__ = ["Derivatives"]
+
+
+@dataclass(frozen=True)
+class Derivatives:
+    """The nominal points and their derivatives along each input moved, kept for another pass.
+
+    :func:`~pipeline.uncertainty.tpu_neighbours.timing_from_scatter` makes the random terms'
+    (times, pointing, the plane's height and tilts) of every bottom pulse;
+    :func:`~pipeline.uncertainty.tpu.point_tpu` of the same pulses, surface and indices reads
+    them instead of making them again (module notes).
+
+    Attributes
+    ----------
+    row : (n,) int ndarray
+        The bottom pulses (rows of the returns).
+    moves : dict of str to ndarray
+        ``"xyzd"``: the points and depths ``(n, 4)``; each input moved
+        (:func:`~pipeline.uncertainty.tpu_terms._moves`): their derivative ``(n, 4)`` per
+        unit of it.
+    """
+
+    row: np.ndarray
+    moves: dict
+    returns: DetectedReturns
+    surface: WaterSurface
+    refraction: RefractionSettings
+    pointing_jitter_deg: float
+
+    def of(self, inp, surface: WaterSurface, st) -> dict | None:
+        """The moves, where ``inp`` are these rows of the same pulses and inputs; else None.
+
+        ``inp``: the TPU's inputs (:func:`~pipeline.uncertainty.tpu_terms._inputs`), ``st``
+        its settings, ``surface`` the whole surface ``inp`` was taken from. Checked: the same
+        rows, the same surface and refraction objects, the same pointing jitter, and the
+        rows' times, origins and beams equal (the timing sigmas may differ: no derivative
+        reads them).
+        """
+        r = self.returns
+        same = (
+            surface is self.surface
+            and inp.rst is self.refraction
+            and st.pointing_jitter_deg == self.pointing_jitter_deg
+            and np.array_equal(inp.row, self.row)
+        )
+        if not same:
+            return None
+        for name in ("t_surface_s", "t_bottom_s", "origin_meas_m", "direction_meas", "has_surface"):
+            if not np.array_equal(getattr(inp.ret, name), getattr(r, name)):
+                return None
+        return self.moves
