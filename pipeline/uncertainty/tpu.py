@@ -221,7 +221,8 @@ def point_tpu(
     code = timing_unresolved(inp.ret, inp.sig_ts, inp.sig_tb)
     out = code >= 0
     left = LeftOut(inp.ret.pulse_id[out], code[out])
-    inp = _take_inputs(inp, ~out)
+    if out.any():  # (else the inputs as they are: no copy of them, nor of the derivatives)
+        inp = _take_inputs(inp, ~out)
     xyzd0, terms = _terms(inp, st)
     finite = np.all(np.isfinite(xyzd0), axis=1)
     for v in terms.values():

@@ -266,7 +266,7 @@ def timing_from_scatter(
     if scatter.shape != (n,):
         raise ValueError(f"`depth_scatter_m` must be (n_bottom,) = ({n},); got {scatter.shape}")
     _, terms, moves = _terms(inp, st_unit, RANDOM_TERMS, keep_moves=True)
-    derivatives = Derivatives(inp.row, moves, inp.ret, surface, rst, st.pointing_jitter_deg)
+    derivatives = Derivatives.made(inp, moves, surface, st)
     del moves
     if scatter_column not in (DEPTH, Z):
         raise ValueError(f"`scatter_column` must be DEPTH or Z; got {scatter_column!r}")

@@ -319,22 +319,26 @@ def _terms(
     """
     n, block = len(inp.row), TERMS_BLOCK if block is None else block
     if n <= block:
-        out = _terms_rows(inp, st, names)
+        out = _terms_rows(inp, st, names, keep_moves)
     else:
         parts = thread_map(
-            lambda lo: _terms_rows(_take_inputs(inp, np.arange(lo, min(lo + block, n))), st, names),
+            lambda lo: _terms_rows(
+                _take_inputs(inp, np.arange(lo, min(lo + block, n))), st, names, keep_moves
+            ),
             range(0, n, block),
         )
         terms = {k: np.concatenate([p[1][k] for p in parts]) for k in parts[0][1]}
-        # a block whose rows have no sigma of a move's terms made no derivative of it
-        made = set.intersection(*(set(p[2]) for p in parts))
-        moves = {k: np.concatenate([p[2][k] for p in parts]) for k in sorted(made)}
+        moves = None
+        if keep_moves:
+            # a block whose rows have no sigma of a move's terms made no derivative of it
+            made = set.intersection(*(set(p[2]) for p in parts))
+            moves = {k: np.concatenate([p[2][k] for p in parts]) for k in sorted(made)}
         out = (np.concatenate([p[0] for p in parts]), terms, moves)
     return out if keep_moves else out[:2]
 
 
-def _terms_rows(inp: _Inputs, st: TpuSettings, names=None):
-    """:func:`_terms` of all of ``inp``'s rows at once."""
+def _terms_rows(inp: _Inputs, st: TpuSettings, names=None, keep_moves: bool = False):
+    """:func:`_terms` of all of ``inp``'s rows at once (the moves third: None unless kept)."""
     n = len(inp.row)
     known = {} if inp.derivatives is None else inp.derivatives
     xyzd0 = known.get("xyzd") if "xyzd" in known else (_xyzd(inp) if n else np.zeros((0, 4)))
@@ -404,4 +408,4 @@ def _terms_rows(inp: _Inputs, st: TpuSettings, names=None):
         fp = _footprint(inp, xyzd0[:, :3], st) if n else np.zeros(0)
         slope = math.tan(math.radians(st.seabed_slope_deg))
         terms["footprint"] = np.column_stack([fp, fp, fp * slope, np.zeros(n)])
-    return xyzd0, terms, made
+    return xyzd0, terms, made if keep_moves else None
