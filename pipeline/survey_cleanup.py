@@ -77,6 +77,7 @@ def objects_and_rejections(
     pts, rejected = reject_seabed_outliers(
         pts, ps.outliers, ps.objects, surface_range_m, tested, fitted
     )
+    del fitted  # (~58 B a sounding, not read again)
     processed = dataclasses.replace(processed, points=pts)
     if sum(rejected.values()):
         grid = make_grid(processed.points)

@@ -306,7 +306,7 @@ def classify_objects(points: Points, settings: ObjectSettings, tested=None) -> t
     return out, n
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class SeabedFit:
     """The object test's local seabed fits, kept for the far-below test of the same points.
 
@@ -363,5 +363,6 @@ def classify_objects_fit(
     found = detect_objects(xyz[:, :2], xyz[:, 2], sig, settings, test)
     cls = points.classification.copy()
     cls[idx[found.is_object]] = SUBMERGED_OBJECT
-    fit = SeabedFit(idx, xyz, sig, test, settings, found)
+    # an object leaves the class-40 points the rejection test fits: never read then
+    fit = None if found.is_object.any() else SeabedFit(idx, xyz, sig, test, settings, found)
     return points.replace(classification=cls), int(found.is_object.sum()), fit

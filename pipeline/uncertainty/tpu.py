@@ -202,7 +202,7 @@ def point_tpu(
     derivatives : Derivatives, optional
         The points and derivatives :func:`timing_from_scatter` made of these pulses
         (``return_derivatives``): read where they are of the same bottom pulses, surface and
-        refraction (:meth:`~pipeline.uncertainty.tpu_terms.Derivatives.of`), else ignored.
+        refraction (:meth:`~pipeline.uncertainty.tpu_derivatives.Derivatives.of`), else ignored.
 
     Returns
     -------
@@ -224,6 +224,7 @@ def point_tpu(
     if out.any():  # (else the inputs as they are: no copy of them, nor of the derivatives)
         inp = _take_inputs(inp, ~out)
     xyzd0, terms = _terms(inp, st)
+    inp = dataclasses.replace(inp, derivatives=None)  # not read again: not copied below
     finite = np.all(np.isfinite(xyzd0), axis=1)
     for v in terms.values():
         finite &= np.all(np.isfinite(v), axis=1)

@@ -20,14 +20,15 @@ from pipeline.process.surface_fit import WaterSurface
 __all__ = ["Derivatives"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Derivatives:
     """The nominal points and their derivatives along each input moved, kept for another pass.
 
-    :func:`~pipeline.uncertainty.tpu_neighbours.timing_from_scatter` makes the random terms'
-    (times, pointing, the plane's height and tilts) of every bottom pulse;
-    :func:`~pipeline.uncertainty.tpu.point_tpu` of the same pulses, surface and indices reads
-    them instead of making them again (module notes).
+    :func:`~pipeline.uncertainty.tpu_neighbours.timing_from_scatter` makes its random terms'
+    (the times, the pointing, the plane's height; its tilts where the waves' slope sigma is
+    not 0), every move that some block of rows of its pass needed (:func:`~pipeline.
+    uncertainty.tpu_terms._terms`); :func:`~pipeline.uncertainty.tpu.point_tpu` of the same
+    pulses, surface and indices reads them and makes the others (module notes).
 
     Attributes
     ----------
@@ -37,6 +38,12 @@ class Derivatives:
         ``"xyzd"``: the points and depths ``(n, 4)``; each input moved
         (:func:`~pipeline.uncertainty.tpu_terms._moves`): their derivative ``(n, 4)`` per
         unit of it.
+    inputs_digest : bytes
+        BLAKE2b of the rows' times, origins and beams (:func:`_digest`).
+    surface, refraction : WaterSurface, RefractionSettings
+        The objects the moves were made with (compared by identity).
+    pointing_jitter_deg : float
+        The pointing steps' setting.
     """
 
     row: np.ndarray
@@ -71,14 +78,22 @@ class Derivatives:
 
 
 #: The returns' fields the derivatives read besides the surface (the bottom rows').
-_READ = ("t_surface_s", "t_bottom_s", "origin_meas_m", "direction_meas", "has_surface")
+_READ = ("t_surface_s", "t_bottom_s", "origin_meas_m", "direction_meas", "has_surface", "t_emit_s")
 
 
 def _digest(ret) -> bytes:
-    """BLAKE2b of :data:`_READ`'s bytes (a copy of them would hold ~65 B a pulse)."""
+    """BLAKE2b of :data:`_READ`'s bytes (a copy of them would hold ~70 B a pulse).
+
+    ``t_emit_s``: the kriged sea above a sounding is read at the pulse's time where the
+    surface's sea is not held (:func:`~pipeline.process.refraction.seabed_points`).
+    """
     h = hashlib.blake2b(digest_size=32)
     for name in _READ:
-        a = np.ascontiguousarray(getattr(ret, name))
+        v = getattr(ret, name)
+        if v is None:  # (t_emit_s: the sea is not kriged at the pulses' times)
+            h.update(f"{name}None".encode())
+            continue
+        a = np.ascontiguousarray(v)
         h.update(f"{name}{a.dtype.str}{a.shape}".encode())
         h.update(a.data)
     return h.digest()

@@ -243,13 +243,13 @@ def timing_from_scatter(
         as a depth excess (not compared at the measured position: ~7 % off at 15° of slope).
     return_derivatives : bool, optional
         Also return the bottom pulses' points and their derivatives this pass made
-        (:class:`~pipeline.uncertainty.tpu_terms.Derivatives`), for :func:`point_tpu` of the
+        (:class:`~pipeline.uncertainty.tpu_derivatives.Derivatives`), for :func:`point_tpu` of the
         same pulses to read.
 
     Returns
     -------
     DetectedReturns
-        And the :class:`~pipeline.uncertainty.tpu_terms.Derivatives` with
+        And the :class:`~pipeline.uncertainty.tpu_derivatives.Derivatives` with
         ``return_derivatives``.
     """
     st = settings or TpuSettings()
@@ -265,9 +265,12 @@ def timing_from_scatter(
     scatter = np.asarray(depth_scatter_m, dtype=np.float64).ravel()
     if scatter.shape != (n,):
         raise ValueError(f"`depth_scatter_m` must be (n_bottom,) = ({n},); got {scatter.shape}")
-    _, terms, moves = _terms(inp, st_unit, RANDOM_TERMS, keep_moves=True)
-    derivatives = Derivatives.made(inp, moves, surface, st)
-    del moves
+    if return_derivatives:
+        _, terms, moves = _terms(inp, st_unit, RANDOM_TERMS, keep_moves=True)
+        derivatives = Derivatives.made(inp, moves, surface, st)
+        del moves
+    else:
+        _, terms = _terms(inp, st_unit, RANDOM_TERMS)
     if scatter_column not in (DEPTH, Z):
         raise ValueError(f"`scatter_column` must be DEPTH or Z; got {scatter_column!r}")
     col = scatter_column

@@ -1,4 +1,4 @@
-"""The TPU's perturbation machinery: each input moved by its sigma, the points recomputed.
+"""The TPU's perturbation machinery: each input moved by a small step, the points recomputed.
 
 Private to :mod:`pipeline.uncertainty.tpu` and its siblings: :func:`_terms` gives each
 uncertainty term's effect on x, y, z and the depth at the measured position.
@@ -349,7 +349,7 @@ def _terms_rows(inp: _Inputs, st: TpuSettings, names=None, keep_moves: bool = Fa
     for name, move, sigma in _white_terms(inp, st):
         if name not in want:
             continue
-        if n == 0 or not np.any(sigma > 0):
+        if n == 0 or not np.any(sigma != 0):
             terms[name] = np.zeros((n, 4))
             continue
         jac = made.get(move, known.get(move))
@@ -358,10 +358,10 @@ def _terms_rows(inp: _Inputs, st: TpuSettings, names=None, keep_moves: bool = Fa
             h, f = moves[move]
             jac = (f(h) - f(-h)) / np.where(h > 0, 2.0 * h, 1.0)[:, None]
         made[move] = jac
-        # a row without the term (sigma 0) has none, whatever its derivative
-        terms[name] = _at_measured(
-            np.where(sigma[:, None] > 0, jac * sigma[:, None], 0.0), inp.grad
-        )
+        # a row without the term (sigma 0) has none, whatever its derivative; a NaN sigma
+        # gives a NaN term: the pulse is left out (TERM_NOT_FINITE), not understated
+        term = np.where(sigma[:, None] == 0, 0.0, jac * sigma[:, None])
+        terms[name] = _at_measured(term, inp.grad)
     for name, (dp, dg) in index_derivatives(st).items():
         if name not in want:
             continue

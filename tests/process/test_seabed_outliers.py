@@ -310,3 +310,14 @@ def test_the_objects_fits_are_read_again_only_where_they_are_the_same_fits(
     sig2[5] = 5.0
     n_obj, fit_again, fit_read, counts = both(points(x, y, z, sig2))
     assert counts["tvu_exceeded"] == 1 and (n_obj, fit_read) == (0, 1)
+    # fits of other settings or of other TPU are not read, though they are of the same rows
+    pts = points(x, y, z, sig)
+    _, _, fitted = classify_objects_fit(pts, ObjectSettings(neighbours=24), tested)
+    sig3 = sig * 1.5
+    _, _, fitted_sig = classify_objects_fit(points(x, y, z, sig3), obj, tested)
+    for stale in (fitted, fitted_sig):
+        calls.clear()
+        got, _ = reject_seabed_outliers(pts, out, obj, tested=tested, fitted=stale)
+        assert len(calls) == 1
+        fresh, _ = reject_seabed_outliers(pts, out, obj, tested=tested)
+        np.testing.assert_array_equal(got.flags, fresh.flags)

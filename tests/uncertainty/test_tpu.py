@@ -642,6 +642,20 @@ def test_the_tpu_reads_the_derivatives_the_scatter_pass_made(monkeypatch):
     for name, v in alone.terms.items():
         np.testing.assert_array_equal(read.terms[name], v, err_msg=name)
     np.testing.assert_array_equal(read.sigma_depth_m, alone.sigma_depth_m)
+    # in blocks of rows on threads (both passes), the same figures and the same saving
+    n_block = tt.TERMS_BLOCK
+    monkeypatch.setattr(tt, "TERMS_BLOCK", 16)
+    out16, der16 = timing_from_scatter(
+        ret, surf, RST, st, depth_scatter_m=scatter, seabed_gradient=g, return_derivatives=True
+    )
+    np.testing.assert_array_equal(out16.t_bottom_sigma_s, out.t_bottom_sigma_s)
+    for k, v in der.moves.items():
+        np.testing.assert_array_equal(der16.moves[k], v, err_msg=k)
+    read16, n_read16 = tpu(derivatives=der16)
+    assert n_read16 == -(-len(alone.row) // 16) * n_read  # each block: only what is not read
+    for name, v in alone.terms.items():
+        np.testing.assert_array_equal(read16.terms[name], v, err_msg=name)
+    monkeypatch.setattr(tt, "TERMS_BLOCK", n_block)
     # another surface (equal, but not the one the derivatives were made on): not read
     other = dataclasses.replace(surf)
     passes.clear()
